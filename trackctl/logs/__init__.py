@@ -1,0 +1,56 @@
+"""MCAP I/O: typed messages, codecs, a streaming reader and an atomic writer."""
+
+from trackctl.logs.codecs import Codec, codec_for, codec_for_type, known_schemas, register
+from trackctl.logs.messages import (
+    BBox,
+    CameraModel,
+    Detection,
+    Detections,
+    GroundTruth,
+    GroundTruthEntity,
+    Imu,
+    MetricReport,
+    Pose2D,
+    Quat,
+    RssiReading,
+    RssiScan,
+    Track,
+    Tracks,
+    TrackState,
+    Transform,
+    Vec3,
+    WheelOdometry,
+)
+from trackctl.logs.reader import LogMessage, LogReader, RawMessage, TopicInfo
+from trackctl.logs.writer import LogWriter
+
+__all__ = [
+    "BBox",
+    "CameraModel",
+    "Codec",
+    "Detection",
+    "Detections",
+    "GroundTruth",
+    "GroundTruthEntity",
+    "Imu",
+    "LogMessage",
+    "LogReader",
+    "LogWriter",
+    "MetricReport",
+    "Pose2D",
+    "Quat",
+    "RawMessage",
+    "RssiReading",
+    "RssiScan",
+    "TopicInfo",
+    "Track",
+    "TrackState",
+    "Tracks",
+    "Transform",
+    "Vec3",
+    "WheelOdometry",
+    "codec_for",
+    "codec_for_type",
+    "known_schemas",
+    "register",
+]

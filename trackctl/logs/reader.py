@@ -1,0 +1,332 @@
+"""Streaming MCAP reader with typed decoding.
+
+:class:`LogReader` iterates a log chunk by chunk (memory bounded by the chunks that overlap in
+time, not by the log's length), in log-time order, filtered by topic and time range, and decodes
+each message with the codec registered for its schema.
+
+A log without a footer (a recording that was killed, a copy cut short) is read sequentially as far
+as it goes; the reader warns with :class:`~trackctl.errors.TruncatedLogWarning` and keeps what it
+could read. Such a log is iterated in file order, which trackctl's writer keeps in time order.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import warnings
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+from mcap.exceptions import McapError
+from mcap.reader import NonSeekingReader, SeekingReader
+from mcap.records import Channel, Message, MessageIndex, Schema, Statistics
+from mcap.summary import Summary
+from mcap.stream_reader import StreamReader
+
+from trackctl.errors import LogError, MissingTopicError, NotAFileError, NotAnMcapError
+from trackctl.errors import TruncatedLogWarning
+from trackctl.logs.codecs import Codec, codec_for
+
+__all__ = ["LogReader", "RawMessage", "LogMessage", "TopicInfo", "MCAP_MAGIC"]
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+@dataclass(frozen=True, slots=True)
+class RawMessage:
+    """One message as stored: channel and schema facts plus the encoded bytes."""
+
+    topic: str
+    schema_name: str
+    schema_encoding: str
+    schema_data: bytes
+    message_encoding: str
+    log_time_ns: int
+    publish_time_ns: int
+    data: bytes
+    channel_metadata: Mapping[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class LogMessage:
+    """One decoded message: a trackctl dataclass, a protobuf message or a plain dict."""
+
+    topic: str
+    log_time_ns: int
+    schema_name: str
+    message: Any
+
+
+@dataclass(frozen=True, slots=True)
+class TopicInfo:
+    """What a log holds on one topic."""
+
+    topic: str
+    schema_name: str
+    message_encoding: str
+    count: int
+    first_ns: int | None
+    last_ns: int | None
+
+    @property
+    def rate_hz(self) -> float:
+        """Mean message rate over the topic's own span (0 for fewer than two messages)."""
+        if self.count < 2 or self.first_ns is None or self.last_ns is None:
+            return 0.0
+        span = self.last_ns - self.first_ns
+        return (self.count - 1) * 1e9 / span if span > 0 else 0.0
+
+
+_READ_ERRORS = (McapError, EOFError, ValueError, OSError, KeyError, IndexError)
+
+
+def _is_damage(err: BaseException) -> bool:
+    """True for errors that mean "the bytes end or break here" (zstd/lz4 raise their own types)."""
+    return isinstance(err, _READ_ERRORS) or type(err).__module__.split(".")[0] in (
+        "zstandard", "lz4", "struct",
+    ) or type(err).__name__ in ("ZstdError", "error")
+
+
+class LogReader:
+    """Reads an MCAP log lazily.
+
+    Args:
+        path: the log file.
+
+    Raises:
+        NotAFileError: the path is missing or not a regular file.
+        NotAnMcapError: the file does not start with the MCAP magic.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        if not self.path.exists():
+            raise NotAFileError(f"{self.path}: no such file")
+        if not self.path.is_file():
+            raise NotAFileError(f"{self.path}: not a regular file")
+        with self.path.open("rb") as f:
+            head = f.read(len(MCAP_MAGIC))
+        if head != MCAP_MAGIC:
+            raise NotAnMcapError(
+                f"{self.path}: not an MCAP file (it does not start with the MCAP magic bytes)"
+            )
+        self.warnings: list[str] = []
+        self._summary: Summary | None = None
+        self.truncated = False
+        try:
+            with self.path.open("rb") as f:
+                self._summary = SeekingReader(f).get_summary()
+        except Exception as err:  # noqa: BLE001 - any failure here means the footer is unusable
+            if not _is_damage(err):
+                raise
+            self.truncated = True
+            self._warn(
+                f"{self.path}: no valid footer or summary (unfinished recording or cut copy); "
+                "reading it sequentially as far as it goes"
+            )
+        self._stats_cache: dict[str, TopicInfo] | None = None
+        self._codecs: dict[int, Codec] = {}
+
+    # -- warnings -----------------------------------------------------------------------------
+    def _warn(self, text: str) -> None:
+        if text not in self.warnings:
+            self.warnings.append(text)
+            warnings.warn(text, TruncatedLogWarning, stacklevel=3)
+
+    # -- iteration ----------------------------------------------------------------------------
+    def _iter_records(
+        self, f: IO[bytes], topics: list[str] | None, start_ns: int | None, end_ns: int | None,
+    ) -> Iterator[tuple[Schema | None, Channel, Message]]:
+        if not self.truncated:
+            try:
+                yield from SeekingReader(f).iter_messages(
+                    topics=topics, start_time=start_ns, end_time=end_ns, log_time_order=True
+                )
+            except McapError as err:
+                raise LogError(f"{self.path}: corrupt log: {err}") from err
+            return
+        f.seek(0, io.SEEK_SET)
+        count = 0
+        try:
+            for item in NonSeekingReader(f).iter_messages(
+                topics=topics, start_time=start_ns, end_time=end_ns, log_time_order=False
+            ):
+                count += 1
+                yield item
+        except Exception as err:  # noqa: BLE001
+            if not _is_damage(err):
+                raise
+            self._warn(
+                f"{self.path}: log ends early at byte {f.tell()} ({type(err).__name__}); "
+                f"read {count} messages before the damage, the rest is lost"
+            )
+
+    def raw(
+        self,
+        topics: Iterable[str] | None = None,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+    ) -> Iterator[RawMessage]:
+        """Encoded messages in log-time order, ``start_ns <= log_time < end_ns``."""
+        topic_list = None if topics is None else list(topics)
+        with self.path.open("rb") as f:
+            for schema, channel, message in self._iter_records(f, topic_list, start_ns, end_ns):
+                yield RawMessage(
+                    topic=channel.topic,
+                    schema_name=schema.name if schema else "",
+                    schema_encoding=schema.encoding if schema else "",
+                    schema_data=schema.data if schema else b"",
+                    message_encoding=channel.message_encoding,
+                    log_time_ns=message.log_time,
+                    publish_time_ns=message.publish_time,
+                    data=message.data,
+                    channel_metadata=channel.metadata,
+                )
+
+    def codec(self, raw: RawMessage) -> Codec:
+        """The codec that decodes ``raw``'s channel."""
+        return codec_for(raw.schema_name, raw.message_encoding, raw.schema_encoding,
+                         raw.schema_data)
+
+    def messages(
+        self,
+        topics: Iterable[str] | None = None,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+    ) -> Iterator[LogMessage]:
+        """Decoded messages in log-time order (see :meth:`raw` for the filters)."""
+        codecs: dict[tuple[str, str, bytes], Codec] = {}
+        for raw in self.raw(topics, start_ns, end_ns):
+            key = (raw.schema_name, raw.message_encoding, raw.schema_data)
+            codec = codecs.get(key)
+            if codec is None:
+                codec = codecs[key] = self.codec(raw)
+            try:
+                decoded = codec.decode(raw.data)
+            except Exception as err:
+                raise LogError(
+                    f"{self.path}: {raw.topic} at {raw.log_time_ns} ns: cannot decode "
+                    f"{raw.schema_name}: {err}"
+                ) from err
+            yield LogMessage(raw.topic, raw.log_time_ns, raw.schema_name, decoded)
+
+    # -- summary ------------------------------------------------------------------------------
+    def topics(self) -> dict[str, TopicInfo]:
+        """Per-topic schema, encoding, count and time span (from the index when there is one)."""
+        if self._stats_cache is None:
+            stats = None
+            if self._summary is not None and self._summary.statistics is not None:
+                stats = self._topics_from_summary(self._summary)
+            self._stats_cache = stats if stats is not None else self._topics_by_scan()
+        return self._stats_cache
+
+    def _topics_from_summary(self, summary: Summary) -> dict[str, TopicInfo] | None:
+        statistics: Statistics = summary.statistics  # type: ignore[assignment]
+        first: dict[int, int] = {}
+        last: dict[int, int] = {}
+        with self.path.open("rb") as f:
+            for chunk_index in summary.chunk_indexes:
+                for channel_id, offset in chunk_index.message_index_offsets.items():
+                    f.seek(offset)
+                    record = next(StreamReader(f, skip_magic=True).records, None)
+                    if not isinstance(record, MessageIndex) or not record.records:
+                        continue
+                    times = [t for t, _ in record.records]
+                    first[channel_id] = min(first.get(channel_id, times[0]), min(times))
+                    last[channel_id] = max(last.get(channel_id, times[0]), max(times))
+        if summary.chunk_indexes and not first and statistics.message_count:
+            return None  # no message indexes: count by scanning instead
+        out: dict[str, TopicInfo] = {}
+        for channel_id, channel in summary.channels.items():
+            schema = summary.schemas.get(channel.schema_id)
+            out[channel.topic] = TopicInfo(
+                topic=channel.topic,
+                schema_name=schema.name if schema else "",
+                message_encoding=channel.message_encoding,
+                count=statistics.channel_message_counts.get(channel_id, 0),
+                first_ns=first.get(channel_id),
+                last_ns=last.get(channel_id),
+            )
+        return out
+
+    def _topics_by_scan(self) -> dict[str, TopicInfo]:
+        counts: dict[str, list[Any]] = {}
+        for raw in self.raw():
+            entry = counts.get(raw.topic)
+            if entry is None:
+                counts[raw.topic] = [raw.schema_name, raw.message_encoding, 1,
+                                     raw.log_time_ns, raw.log_time_ns]
+            else:
+                entry[2] += 1
+                entry[3] = min(entry[3], raw.log_time_ns)
+                entry[4] = max(entry[4], raw.log_time_ns)
+        return {
+            topic: TopicInfo(topic, e[0], e[1], e[2], e[3], e[4]) for topic, e in counts.items()
+        }
+
+    @property
+    def start_ns(self) -> int | None:
+        """Log time of the first message, or None for an empty log."""
+        firsts = [t.first_ns for t in self.topics().values() if t.first_ns is not None]
+        return min(firsts) if firsts else None
+
+    @property
+    def end_ns(self) -> int | None:
+        """Log time of the last message, or None for an empty log."""
+        lasts = [t.last_ns for t in self.topics().values() if t.last_ns is not None]
+        return max(lasts) if lasts else None
+
+    @property
+    def message_count(self) -> int:
+        """Total number of messages (readable ones, for a truncated log)."""
+        return sum(t.count for t in self.topics().values())
+
+    def metadata(self) -> dict[str, dict[str, str]]:
+        """Metadata records by name (a later record of the same name wins)."""
+        out: dict[str, dict[str, str]] = {}
+        with self.path.open("rb") as f:
+            try:
+                if self.truncated:
+                    for record in self._damaged_records(f):
+                        if type(record).__name__ == "Metadata":
+                            out[record.name] = dict(record.metadata)
+                else:
+                    for md in SeekingReader(f).iter_metadata():
+                        out[md.name] = dict(md.metadata)
+            except McapError as err:
+                raise LogError(f"{self.path}: cannot read metadata: {err}") from err
+        return out
+
+    def attachments(self) -> dict[str, tuple[str, bytes]]:
+        """Attachments by name: (media type, data)."""
+        out: dict[str, tuple[str, bytes]] = {}
+        with self.path.open("rb") as f:
+            if self.truncated:
+                for record in self._damaged_records(f):
+                    if type(record).__name__ == "Attachment":
+                        out[record.name] = (record.media_type, record.data)
+            else:
+                for att in SeekingReader(f).iter_attachments():
+                    out[att.name] = (att.media_type, att.data)
+        return out
+
+    def _damaged_records(self, f: IO[bytes]) -> Iterator[Any]:
+        f.seek(0)
+        try:
+            yield from StreamReader(f).records
+        except Exception as err:  # noqa: BLE001
+            if not _is_damage(err):
+                raise
+
+    def require(self, topics: Iterable[str], needed_by: str, why: str = "") -> None:
+        """Raise :class:`MissingTopicError` naming the first absent topic and who needs it."""
+        present = self.topics()
+        for topic in topics:
+            if topic not in present:
+                reason = f" ({why})" if why else ""
+                raise MissingTopicError(
+                    f"{self.path}: topic {topic} is missing; {needed_by} needs it{reason}. "
+                    f"The log has: {', '.join(sorted(present)) or 'no topics'}"
+                )
