@@ -1,0 +1,109 @@
+"""Shared CLI plumbing: the one error catch point, warnings, JSON output, progress bars."""
+
+from __future__ import annotations
+
+import json
+import sys
+import warnings
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any
+
+import click
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from typer.core import TyperGroup
+
+from trackctl.errors import TrackctlError
+from trackctl.logs.messages import MetricReport
+from trackctl.metrics.report import failed_conditions, jsonable_metrics, parse_fail_if
+
+__all__ = ["TrackctlGroup", "stderr", "print_json", "progress", "split_csv", "apply_fail_if",
+           "report_dict", "EXIT_BAD_INPUT", "EXIT_GATE"]
+
+EXIT_BAD_INPUT = 2
+EXIT_GATE = 1
+
+stderr = Console(stderr=True, highlight=False, soft_wrap=True)
+
+
+def _show_warning(message: Any, category: type[Warning], filename: str, lineno: int,
+                  file: Any = None, line: str | None = None) -> None:
+    stderr.print(f"[yellow]warning:[/] {message}", markup=True)
+
+
+class TrackctlGroup(TyperGroup):
+    """Root command group: the single place where :class:`TrackctlError` becomes exit code 2."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        previous = warnings.showwarning
+        warnings.showwarning = _show_warning
+        try:
+            return super().invoke(ctx)
+        except TrackctlError as err:
+            stderr.print(f"[red]error:[/] {err}", markup=True)
+            raise typer.Exit(EXIT_BAD_INPUT) from None
+        except KeyboardInterrupt:
+            stderr.print("interrupted")
+            raise typer.Exit(130) from None
+        finally:
+            warnings.showwarning = previous
+
+
+def print_json(obj: Any) -> None:
+    """Print exactly one JSON object on stdout."""
+    sys.stdout.write(json.dumps(obj, separators=(",", ":"), default=str) + "\n")
+    sys.stdout.flush()
+
+
+def show_progress(quiet: bool) -> bool:
+    """Progress bars only on an interactive terminal and without --quiet."""
+    return not quiet and stderr.is_terminal and sys.stdout.isatty()
+
+
+@contextmanager
+def progress(description: str, quiet: bool) -> Iterator[Callable[[int, int | None], None]]:
+    """A ``(done, total)`` callback drawing a rich progress bar on a TTY, or doing nothing."""
+    if not show_progress(quiet):
+        yield lambda done, total: None
+        return
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=stderr, transient=True) as bar:
+        task = bar.add_task(description, total=None)
+
+        def update(done: int, total: int | None) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield update
+
+
+def split_csv(values: Sequence[str] | None) -> list[str] | None:
+    """``["a,b", "c"]`` -> ``["a", "b", "c"]``; None stays None."""
+    if not values:
+        return None
+    return [v.strip() for value in values for v in value.split(",") if v.strip()]
+
+
+def report_dict(report: MetricReport) -> dict[str, Any]:
+    """A report as the ``--json`` object of one processor run."""
+    return {"processor": report.processor, "t_ns": report.t_ns,
+            "metrics": jsonable_metrics(report.metrics), "params": jsonable_metrics(report.params)}
+
+
+def apply_fail_if(expr: str | None, reports: Sequence[MetricReport]) -> None:
+    """Exit 1 (after printing why) when any ``--fail-if`` condition holds on the reports.
+
+    Keys are plain metric names (the last report that has it wins) or ``processor.metric``.
+    """
+    if not expr:
+        return
+    conditions = parse_fail_if(expr)
+    merged: dict[str, Any] = {}
+    for rep in reports:
+        merged.update(rep.metrics)
+        merged.update({f"{rep.processor}.{k}": v for k, v in rep.metrics.items()})
+    failed = failed_conditions(merged, conditions)
+    if failed:
+        stderr.print("[red]fail-if:[/] " + "; ".join(failed), markup=True)
+        raise typer.Exit(EXIT_GATE)

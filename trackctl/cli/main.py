@@ -1,0 +1,53 @@
+"""The ``trackctl`` command: a thin Typer layer over the library."""
+
+from __future__ import annotations
+
+import typer
+
+from trackctl import __version__
+from trackctl.cli.common import TrackctlGroup
+from trackctl.cli.info import info
+from trackctl.cli.process import process, report
+from trackctl.cli.record import record
+from trackctl.cli.replay import replay
+from trackctl.cli.simulate import simulate_app
+
+app = typer.Typer(
+    cls=TrackctlGroup,
+    name="trackctl",
+    help="Offline indoor tracking and robot localization over MCAP sensor logs.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"trackctl {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                 help="Print the version and exit."),
+) -> None:
+    """Offline indoor tracking and robot localization over MCAP sensor logs."""
+
+
+app.command()(info)
+app.command()(record)
+app.command()(replay)
+app.command()(process)
+app.command()(report)
+app.add_typer(simulate_app, name="simulate")
+
+
+def main() -> None:
+    """Console-script entry point."""
+    app()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,95 @@
+"""``trackctl replay``."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.live import Live
+from rich.table import Table
+
+from trackctl.cli.common import split_csv, stderr
+from trackctl.logs.reader import LogReader
+from trackctl.logs.replay import RateMeter, UdpSink, parse_host_port, replay_jsonl
+
+
+class Format(StrEnum):
+    jsonl = "jsonl"
+    table = "table"
+
+
+def _table(meter: RateMeter, title: str) -> Table:
+    table = Table(title=title, show_edge=False)
+    for col in ("topic", "schema", "count", "rate Hz", "log time s"):
+        table.add_column(col, justify="left" if col in ("topic", "schema") else "right")
+    for topic, schema, count, rate, last in meter.rows():
+        table.add_row(topic, schema, str(count), f"{rate:.1f}", f"{last / 1e9:.3f}")
+    return table
+
+
+def replay(
+    log: Annotated[Path, typer.Argument(help="MCAP log to play back.")],
+    topics: Annotated[list[str] | None, typer.Option(
+        "--topics", help="Topics to play (repeat or comma-separate); default all.")] = None,
+    start: Annotated[float | None, typer.Option(
+        help="Start, seconds after the log's first message.")] = None,
+    end: Annotated[float | None, typer.Option(
+        help="End, seconds after the log's first message.")] = None,
+    speed: Annotated[float, typer.Option(
+        help="Playback speed: 1.0 real time, 2.0 twice as fast, 0 as fast as possible.")] = 1.0,
+    fmt: Annotated[Format, typer.Option("--format", help="jsonl on stdout, or a live table.")
+                   ] = Format.jsonl,
+    udp: Annotated[str | None, typer.Option(
+        "--udp", metavar="HOST:PORT", help="Also send each JSON line as a UDP datagram.")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No notes on stderr.")] = False,
+) -> None:
+    """Play a log back in log-time order, paced or as fast as possible."""
+    reader = LogReader(log)
+    origin = reader.start_ns or 0
+    start_ns = None if start is None else origin + int(round(start * 1e9))
+    end_ns = None if end is None else origin + int(round(end * 1e9))
+    sink = UdpSink(*parse_host_port(udp)) if udp else None
+    stream = replay_jsonl(reader, split_csv(topics), start_ns, end_ns, speed)
+    n = 0
+    try:
+        if fmt is Format.jsonl:
+            write = sys.stdout.write
+            for _, line in stream:
+                write(line)
+                write("\n")
+                if sink is not None:
+                    sink.send(line)
+                n += 1
+            sys.stdout.flush()
+        else:
+            meter = RateMeter()
+            console = Console()
+            last_draw = 0.0
+            with Live(_table(meter, str(log)), console=console, refresh_per_second=4,
+                      transient=False) as live:
+                for raw, line in stream:
+                    meter.add(raw)
+                    if sink is not None:
+                        sink.send(line)
+                    n += 1
+                    now = time.monotonic()
+                    if now - last_draw > 0.2:
+                        live.update(_table(meter, str(log)))
+                        last_draw = now
+                live.update(_table(meter, str(log)))
+    except BrokenPipeError:
+        # `replay | head`: the reader went away; stop quietly like other Unix tools.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return
+    finally:
+        if sink is not None:
+            sink.close()
+    if sink is not None and sink.skipped and not quiet:
+        stderr.print(f"[yellow]warning:[/] {sink.skipped} messages larger than a UDP datagram "
+                     "were not sent", markup=True)

@@ -1,0 +1,97 @@
+"""Pinhole cameras in the world frame (right-handed, z up; camera optical frame x right, y down,
+z forward)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from trackctl.logs.messages import CameraModel, Quat, Transform, Vec3
+
+__all__ = ["PinholeCamera", "look_at"]
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray | None = None) -> Transform:
+    """Pose world <- camera of a camera at ``eye`` looking at ``target`` (optical frame)."""
+    eye = np.asarray(eye, float)
+    target = np.asarray(target, float)
+    up = np.array([0.0, 0.0, 1.0]) if up is None else np.asarray(up, float)
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:
+        raise ValueError("look_at: viewing direction is parallel to 'up'")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    rot = np.column_stack([x, y, z])  # columns: camera axes in world coordinates
+    q = Rotation.from_matrix(rot).as_quat()
+    return Transform(Vec3(*map(float, eye)), Quat(*map(float, q)))
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    """A calibrated camera with a world pose; projection goes through OpenCV."""
+
+    model: CameraModel
+
+    def __post_init__(self) -> None:
+        if self.model.world_from_camera is None:
+            raise ValueError(f"camera {self.model.camera!r} has no world pose (world_from_camera)")
+
+    @property
+    def K(self) -> np.ndarray:  # noqa: N802 - the conventional name
+        m = self.model
+        return np.array([[m.fx_px, 0, m.cx_px], [0, m.fy_px, m.cy_px], [0, 0, 1.0]])
+
+    @property
+    def dist(self) -> np.ndarray:
+        return np.asarray(self.model.distortion or (0.0,) * 5, float)
+
+    @property
+    def world_R_cam(self) -> np.ndarray:  # noqa: N802
+        q = self.model.world_from_camera.rotation  # type: ignore[union-attr]
+        return Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+
+    @property
+    def position(self) -> np.ndarray:
+        t = self.model.world_from_camera.translation  # type: ignore[union-attr]
+        return np.array([t.x, t.y, t.z])
+
+    def to_camera(self, points_w: np.ndarray) -> np.ndarray:
+        """World points (N, 3) in the camera optical frame."""
+        return (np.asarray(points_w, float) - self.position) @ self.world_R_cam
+
+    def project(self, points_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels (N, 2) of world points and a mask of those in front of the camera."""
+        pts = np.asarray(points_w, float).reshape(-1, 3)
+        r_cw = self.world_R_cam.T
+        rvec, _ = cv2.Rodrigues(r_cw)
+        tvec = -r_cw @ self.position
+        px, _ = cv2.projectPoints(pts, rvec, tvec, self.K, self.dist)
+        depth = self.to_camera(pts)[:, 2]
+        return px.reshape(-1, 2), depth > 1e-6
+
+    def visible(self, points_w: np.ndarray) -> np.ndarray:
+        """Mask of world points that project inside the image, in front of the camera."""
+        px, front = self.project(points_w)
+        m = self.model
+        return front & (px[:, 0] >= 0) & (px[:, 0] < m.width_px) & (px[:, 1] >= 0) & (
+            px[:, 1] < m.height_px)
+
+    def ground_point(self, pixels: np.ndarray, ground_z: float = 0.0) -> np.ndarray:
+        """World points (N, 3) where the rays through ``pixels`` meet the plane z = ground_z.
+
+        Rays that do not meet the plane in front of the camera give NaN rows.
+        """
+        px = np.asarray(pixels, float).reshape(-1, 1, 2)
+        norm = cv2.undistortPoints(px, self.K, self.dist).reshape(-1, 2)
+        rays_c = np.column_stack([norm, np.ones(len(norm))])
+        rays_w = rays_c @ self.world_R_cam.T
+        origin = self.position
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (ground_z - origin[2]) / rays_w[:, 2]
+        s = np.where(s > 0, s, np.nan)
+        return origin + rays_w * s[:, None]

@@ -1,0 +1,211 @@
+"""``trackctl record``: files (CSV, video, calibration) and live JSON lines into one MCAP log."""
+
+from __future__ import annotations
+
+import heapq
+import socket
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from trackctl.errors import InputError, SchemaError
+from trackctl.ingest.calibration import read_calibration, to_foxglove_calibration
+from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv, seconds_to_ns
+from trackctl.ingest.video import read_frames
+from trackctl.logs import topics
+from trackctl.logs.jsonl import parse_jsonl
+from trackctl.logs.writer import LogWriter
+
+__all__ = ["RecordConfig", "record_files", "record_live", "LiveStats", "UdpSource",
+           "parse_named"]
+
+
+@dataclass(frozen=True, slots=True)
+class RecordConfig:
+    """What to ingest. Maps are ``NAME -> path``; topic names follow :mod:`trackctl.logs.topics`."""
+
+    imu: Mapping[str, Path] = field(default_factory=dict)
+    rssi: tuple[Path, ...] = ()
+    odom: Mapping[str, Path] = field(default_factory=dict)
+    video: Mapping[str, Path] = field(default_factory=dict)
+    calib: Mapping[str, Path] = field(default_factory=dict)
+    fps: float | None = None
+    video_start_s: float = 0.0
+    jpeg_quality: int = 90
+
+    @property
+    def empty(self) -> bool:
+        """True when no file source is given."""
+        return not (self.imu or self.rssi or self.odom or self.video or self.calib)
+
+
+def parse_named(values: Iterable[str], option: str) -> dict[str, Path]:
+    """Parse ``NAME=PATH`` option values.
+
+    Raises:
+        InputError: a value lacks ``=`` or repeats a name.
+    """
+    out: dict[str, Path] = {}
+    for value in values:
+        name, sep, path = value.partition("=")
+        if not sep or not name or not path:
+            raise InputError(f"{option} {value!r}: expected NAME=PATH (e.g. {option} cam0=lobby.mp4)")
+        if "/" in name or " " in name:
+            raise InputError(f"{option} {value!r}: NAME must not contain '/' or spaces")
+        if name in out:
+            raise InputError(f"{option}: name {name!r} given twice")
+        out[name] = Path(path)
+    return out
+
+
+Stamped = tuple[int, int, str, Any]  # (t_ns, tie-break, topic, message)
+
+
+def _stamped(source: Iterable[Any], topic: str, order: int) -> Iterator[Stamped]:
+    for msg in source:
+        yield (msg.t_ns, order, topic, msg)
+
+
+def _frames(path: Path, name: str, cfg: RecordConfig, order: int) -> Iterator[Stamped]:
+    for t_ns, img in read_frames(path, name, fps=cfg.fps, start_ns=seconds_to_ns(cfg.video_start_s),
+                                 jpeg_quality=cfg.jpeg_quality):
+        yield (t_ns, order, topics.image(name), img)
+
+
+def record_files(writer: LogWriter, cfg: RecordConfig,
+                 progress: Callable[[int], None] | None = None) -> Counter[str]:
+    """Write every file source of ``cfg`` into ``writer``, merged in time order.
+
+    Returns:
+        Message count per topic.
+    """
+    counts: Counter[str] = Counter()
+    unknown = set(cfg.calib) - set(cfg.video)
+    if unknown:
+        raise InputError(
+            f"--calib {sorted(unknown)[0]}=...: no --video with that camera name "
+            f"(cameras: {', '.join(sorted(cfg.video)) or 'none'})"
+        )
+    start_ns = seconds_to_ns(cfg.video_start_s)
+    for name, path in cfg.calib.items():
+        model = read_calibration(path, name)
+        model = replace(model, t_ns=start_ns)
+        writer.write(topics.calibration(name), to_foxglove_calibration(model), start_ns)
+        writer.write(topics.camera_model(name), model)
+        writer.add_attachment(f"calibration/{name}{path.suffix}", path.read_bytes(),
+                              "application/x-yaml", start_ns)
+        counts[topics.calibration(name)] += 1
+        counts[topics.camera_model(name)] += 1
+    streams: list[Iterator[Stamped]] = []
+    order = 0
+    for name, path in cfg.imu.items():
+        streams.append(_stamped(read_imu(path, name), topics.imu(name), order))
+        order += 1
+    for path in cfg.rssi:
+        streams.append(_stamped(read_rssi_csv(path), topics.RSSI, order))
+        order += 1
+    for name, path in cfg.odom.items():
+        streams.append(_stamped(read_odometry_csv(path, name), topics.odom(name), order))
+        order += 1
+    for name, path in cfg.video.items():
+        streams.append(_frames(path, name, cfg, order))
+        order += 1
+    n = 0
+    # heapq.merge keeps one pending message per source: memory does not grow with the files.
+    for t_ns, _, topic, msg in heapq.merge(*streams, key=lambda s: (s[0], s[1])):
+        writer.write(topic, msg, t_ns)
+        counts[topic] += 1
+        n += 1
+        if progress is not None and n % 1000 == 0:
+            progress(n)
+    return counts
+
+
+@dataclass
+class LiveStats:
+    """What a live recording received."""
+
+    counts: Counter[str] = field(default_factory=Counter)
+    rejected: int = 0
+    interrupted: bool = False
+
+
+class UdpSource:
+    """JSON lines from UDP datagrams on a local port (one or more lines per datagram)."""
+
+    def __init__(self, port: int, host: str = "127.0.0.1") -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        # A large receive buffer so bursts are not dropped while a message is being written.
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
+        try:
+            self.sock.bind((host, port))
+        except OSError as err:
+            self.sock.close()
+            raise InputError(f"--udp {port}: cannot bind {host}:{port} ({err.strerror})") from err
+        self.address = self.sock.getsockname()
+        self.where = f"udp:{self.address[1]}"
+        self._n = 0
+
+    def _lines(self, datagram: bytes) -> Iterator[tuple[bytes, str, int]]:
+        for line in datagram.splitlines():
+            if line.strip():
+                self._n += 1
+                yield line, self.where, self._n
+
+    def __iter__(self) -> Iterator[tuple[bytes, str, int]]:
+        while True:
+            datagram = self.sock.recv(65535)
+            yield from self._lines(datagram)
+
+    def drain(self) -> Iterator[tuple[bytes, str, int]]:
+        """Datagrams already received by the kernel but not yet read."""
+        self.sock.setblocking(False)
+        while True:
+            try:
+                datagram = self.sock.recv(65535)
+            except (BlockingIOError, InterruptedError):
+                return
+            yield from self._lines(datagram)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def record_live(
+    writer: LogWriter,
+    lines: Iterable[tuple[bytes | str, str, int]],
+    on_reject: Callable[[str], None] | None = None,
+    drain: Callable[[], Iterable[tuple[bytes | str, str, int]]] | None = None,
+) -> LiveStats:
+    """Write JSON lines as they arrive until the source ends or Ctrl-C (KeyboardInterrupt).
+
+    A bad line is rejected (reported through ``on_reject``) and recording goes on: a live sensor
+    stream must not be lost to one malformed message. On Ctrl-C, lines already received
+    (``drain``) are still written, and the caller closes ``writer`` into a valid log.
+    """
+    stats = LiveStats()
+
+    def take(line: bytes | str, where: str, lineno: int) -> None:
+        if not line.strip():
+            return
+        try:
+            rec = parse_jsonl(line, where, lineno)
+        except (InputError, SchemaError) as err:
+            stats.rejected += 1
+            if on_reject is not None:
+                on_reject(str(err))
+            return
+        writer.write_encoded(rec.topic, rec.codec, rec.data, rec.log_time_ns)
+        stats.counts[rec.topic] += 1
+
+    try:
+        for line, where, lineno in lines:
+            take(line, where, lineno)
+    except KeyboardInterrupt:
+        stats.interrupted = True
+        if drain is not None:
+            for line, where, lineno in drain():
+                take(line, where, lineno)
+    return stats

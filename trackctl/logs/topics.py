@@ -1,0 +1,44 @@
+"""Topic naming conventions (the contract other tools and pipelines rely on)."""
+
+from __future__ import annotations
+
+__all__ = ["RSSI", "GROUND_TRUTH", "imu", "odom", "image", "calibration", "camera_model",
+           "detections", "metrics"]
+
+RSSI = "/rssi"
+GROUND_TRUTH = "/ground_truth"
+
+
+def imu(phone: str) -> str:
+    """IMU of a phone: ``/phone/NAME/imu`` (trackctl.Imu)."""
+    return f"/phone/{phone}/imu"
+
+
+def odom(robot: str) -> str:
+    """Wheel odometry of a robot: ``/robot/NAME/odom`` (trackctl.WheelOdometry)."""
+    return f"/robot/{robot}/odom"
+
+
+def image(camera: str) -> str:
+    """Frames of a camera: ``/NAME/image`` (foxglove.CompressedImage)."""
+    return f"/{camera}/image"
+
+
+def calibration(camera: str) -> str:
+    """Intrinsics of a camera: ``/NAME/calibration`` (foxglove.CameraCalibration)."""
+    return f"/{camera}/calibration"
+
+
+def camera_model(camera: str) -> str:
+    """Intrinsics + world pose of a camera: ``/NAME/camera_model`` (trackctl.CameraModel)."""
+    return f"/{camera}/camera_model"
+
+
+def detections(camera: str) -> str:
+    """Detections of a camera: ``/NAME/detections`` (trackctl.Detections)."""
+    return f"/{camera}/detections"
+
+
+def metrics(processor: str) -> str:
+    """Metric report of a processor: ``/metrics/NAME`` (trackctl.MetricReport)."""
+    return f"/metrics/{processor}"

@@ -1,0 +1,109 @@
+"""Run processors over a log: copy the input, add each processor's channels and report."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+
+from trackctl.errors import OutputError
+from trackctl.logs.messages import MetricReport
+from trackctl.logs.reader import LogReader
+from trackctl.logs.writer import LogWriter
+from trackctl.metrics.report import METADATA_PREFIX, jsonable_metrics, report_topic
+from trackctl.processing.base import Processor, Progress
+
+__all__ = ["run_processors", "copy_log", "store_report"]
+
+
+def copy_log(reader: LogReader, writer: LogWriter, progress: Progress | None = None) -> int:
+    """Copy every message, metadata record and attachment of ``reader`` into ``writer``."""
+    total = reader.message_count
+    n = 0
+    for raw in reader.raw():
+        writer.write_raw(raw)
+        n += 1
+        if progress is not None and n % 2000 == 0:
+            progress(n, total)
+    for name, data in reader.metadata().items():
+        writer.add_metadata(name, data)
+    for name, (media_type, data) in reader.attachments().items():
+        writer.add_attachment(name, data, media_type)
+    return n
+
+
+def store_report(writer: LogWriter, report: MetricReport) -> None:
+    """Write a report as a ``/metrics/<processor>`` message and as ``metrics/<processor>`` metadata."""
+    clean = replace(report, metrics=jsonable_metrics(report.metrics),
+                    params=jsonable_metrics(report.params))
+    writer.write(report_topic(report.processor), clean)
+    flat = {k: json.dumps(v) for k, v in clean.metrics.items()}
+    flat["report"] = json.dumps(clean.to_json())
+    writer.add_metadata(METADATA_PREFIX + report.processor, flat)
+
+
+def _run_one(input_path: Path, out_path: Path, processor: Processor, inputs: Sequence[Path],
+             progress: Progress | None) -> MetricReport:
+    reader = LogReader(input_path)
+    with LogWriter(out_path, inputs=inputs) as writer:
+        copy_log(reader, writer)
+        started = time.perf_counter()
+        report = processor.run(reader, writer, progress)
+        metrics = dict(report.metrics)
+        metrics.setdefault("seconds", round(time.perf_counter() - started, 3))
+        report = replace(report, metrics=metrics)
+        if reader.warnings:
+            params = dict(report.params)
+            params["input_warnings"] = len(reader.warnings)
+            report = replace(report, params=params)
+        store_report(writer, report)
+    return report
+
+
+def run_processors(
+    input_path: str | os.PathLike[str],
+    out_path: str | os.PathLike[str],
+    chain: Sequence[Processor],
+    progress: Progress | None = None,
+) -> list[MetricReport]:
+    """Run ``chain`` in order; each processor sees the input plus what the earlier ones wrote.
+
+    The output is written atomically; intermediate logs live in temporary files beside it.
+
+    Raises:
+        OutputError: the output path is the input, or the chain is empty.
+    """
+    input_path, out_path = Path(input_path), Path(out_path)
+    if not chain:
+        raise OutputError("no processor given; pass --with NAME (see `trackctl process --list`)")
+    LogReader(input_path)  # fail early on a bad input, before creating anything
+    if out_path.resolve() == input_path.resolve():
+        raise OutputError(
+            f"{out_path}: output path is the input log; choose another --out "
+            "(trackctl never overwrites its input)"
+        )
+    reports: list[MetricReport] = []
+    current = input_path
+    temps: list[Path] = []
+    try:
+        for i, processor in enumerate(chain):
+            last = i == len(chain) - 1
+            if last:
+                target = out_path
+            else:
+                fd, tmp = tempfile.mkstemp(prefix=f".{out_path.name}.stage{i}.", suffix=".mcap",
+                                           dir=out_path.parent)
+                os.close(fd)
+                target = Path(tmp)
+                temps.append(target)
+            reports.append(_run_one(current, target, processor, [input_path, *temps[:-1]],
+                                    progress))
+            current = target
+    finally:
+        for tmp in temps:
+            tmp.unlink(missing_ok=True)
+    return reports
