@@ -9,7 +9,6 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
 
-import click
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -36,7 +35,7 @@ def _show_warning(message: Any, category: type[Warning], filename: str, lineno: 
 class TrackctlGroup(TyperGroup):
     """Root command group: the single place where :class:`TrackctlError` becomes exit code 2."""
 
-    def invoke(self, ctx: click.Context) -> Any:
+    def invoke(self, ctx: Any) -> Any:
         previous = warnings.showwarning
         warnings.showwarning = _show_warning
         try:

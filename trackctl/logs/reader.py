@@ -142,7 +142,7 @@ class LogReader:
         if not self.truncated:
             try:
                 yield from SeekingReader(f).iter_messages(
-                    topics=topics, start_time=start_ns, end_time=end_ns, log_time_order=True
+                    topics=topics, starting_at=start_ns, ending_before=end_ns, log_time_order=True
                 )
             except McapError as err:
                 raise LogError(f"{self.path}: corrupt log: {err}") from err
@@ -151,7 +151,7 @@ class LogReader:
         count = 0
         try:
             for item in NonSeekingReader(f).iter_messages(
-                topics=topics, start_time=start_ns, end_time=end_ns, log_time_order=False
+                topics=topics, starting_at=start_ns, ending_before=end_ns, log_time_order=False
             ):
                 count += 1
                 yield item

@@ -200,6 +200,10 @@ class LogWriter:
         self._stream.flush()
         os.fsync(self._stream.fileno())
         self._stream.close()
+        # mkstemp creates 0600 files; give the log the permissions a plain open() would.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(self._tmp_path, 0o666 & ~umask)
         os.replace(self._tmp_path, self.path)
         self._closed = True
         return self.path

@@ -1,0 +1,104 @@
+"""Shared fixtures: small sensor files and logs built in a temp dir."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLE_LOG = ROOT / "sample_logs" / "demo.mcap"
+
+
+def trackctl_exe() -> list[str]:
+    """The installed console script (how users and pipelines call trackctl)."""
+    exe = Path(sys.executable).parent / "trackctl"
+    if exe.exists():
+        return [str(exe)]
+    found = shutil.which("trackctl")
+    return [found] if found else [sys.executable, "-m", "trackctl.cli.main"]
+
+
+def run_cli(*args: str, input: bytes | None = None, timeout: float = 120,
+            check: bool = False) -> subprocess.CompletedProcess[bytes]:
+    """Run trackctl as a real subprocess."""
+    env = dict(os.environ, COLUMNS="200")
+    proc = subprocess.run([*trackctl_exe(), *args], input=input, capture_output=True,
+                          timeout=timeout, env=env)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"trackctl {' '.join(args)} exited {proc.returncode}: "
+                             f"{proc.stderr.decode()}")
+    return proc
+
+
+@pytest.fixture
+def imu_csv(tmp_path: Path) -> Path:
+    path = tmp_path / "IMU.csv"
+    t = np.arange(50) * 0.2
+    rows = ["t_s,ax,ay,az,gx,gy,gz,qw,qx,qy,qz,extra"]
+    for i, ti in enumerate(t):
+        rows.append(f"{ti:.3f},{0.1 * i:.3f},0.0,9.81,0.0,0.0,0.05,1,0,0,0,ignored")
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+@pytest.fixture
+def rssi_csv(tmp_path: Path) -> Path:
+    path = tmp_path / "RSSI.csv"
+    rows = ["t_s,observer,eid,rssi_dbm"]
+    for k in range(10):
+        rows.append(f"{k:.1f},ap1,aa:bb:cc:00:00:01,{-50 - k}")
+        rows.append(f"{k:.1f},ap1,aa:bb:cc:00:00:02,{-60 - k}")
+        rows.append(f"{k:.1f},ap2,aa:bb:cc:00:00:01,{-70 + k}")
+    path.write_text("\n".join(rows) + "\n")
+    return path  # 10 times x 2 observers = 20 scans
+
+
+@pytest.fixture
+def odom_csv(tmp_path: Path) -> Path:
+    path = tmp_path / "ODOM.csv"
+    rows = ["t_s,left_ticks,right_ticks"]
+    for k in range(40):
+        rows.append(f"{k * 0.04:.2f},{10 * k},{11 * k}")
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+@pytest.fixture
+def video_mp4(tmp_path: Path) -> Path:
+    """A 12-frame 10 fps mp4 written by OpenCV."""
+    path = tmp_path / "V.mp4"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 10.0, (64, 48))
+    assert writer.isOpened()
+    for i in range(12):
+        frame = np.full((48, 64, 3), 40, np.uint8)
+        cv2.circle(frame, (5 + 4 * i, 24), 6, (0, 200, 255), -1)
+        writer.write(frame)
+    writer.release()
+    return path
+
+
+@pytest.fixture
+def calib_yaml(tmp_path: Path) -> Path:
+    path = tmp_path / "cam0.yaml"
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    fs.write("image_width", 64)
+    fs.write("image_height", 48)
+    fs.write("camera_matrix", np.array([[50.0, 0, 32], [0, 50.0, 24], [0, 0, 1]]))
+    fs.write("distortion_coefficients", np.array([[0.01, -0.02, 0.0, 0.0, 0.0]]))
+    fs.write("rvec", np.array([[0.1], [0.2], [0.3]]))
+    fs.write("tvec", np.array([[1.0], [2.0], [3.0]]))
+    fs.release()
+    return path
+
+
+@pytest.fixture(scope="session")
+def sample_log() -> Path:
+    assert SAMPLE_LOG.exists(), "sample_logs/demo.mcap missing: run `make sample-logs`"
+    return SAMPLE_LOG

@@ -1,0 +1,133 @@
+"""CSV readers: the column contract, Sensor Logger exports, and errors naming file/line/column."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackctl.errors import InputError, NonFiniteValueError, NonMonotonicTimeError
+from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv
+from trackctl.logs.messages import Quat
+
+
+def test_imu_csv(imu_csv: Path) -> None:
+    samples = list(read_imu(imu_csv, "p1"))
+    assert len(samples) == 50
+    assert samples[1].t_ns == 200_000_000
+    assert samples[1].accel_mps2.x == pytest.approx(0.1)
+    assert samples[0].gyro_rps.z == pytest.approx(0.05)
+    assert samples[0].orientation == Quat(0.0, 0.0, 0.0, 1.0)  # qw first in CSV, last in Quat
+    assert samples[0].frame_id == "phone/p1"
+
+
+def test_imu_csv_without_quaternion(tmp_path: Path) -> None:
+    path = tmp_path / "imu.csv"
+    path.write_text("t_s,ax,ay,az,gx,gy,gz\n0,0,0,9.8,0,0,0\n0.1,0,0,9.8,0,0,0\n")
+    samples = list(read_imu(path, "p"))
+    assert [s.orientation for s in samples] == [None, None]
+
+
+def test_rssi_rows_group_into_scans(rssi_csv: Path) -> None:
+    scans = list(read_rssi_csv(rssi_csv))
+    assert len(scans) == 20
+    assert scans[0].observer == "ap1"
+    assert [r.eid for r in scans[0].readings] == ["aa:bb:cc:00:00:01", "aa:bb:cc:00:00:02"]
+    assert scans[1].observer == "ap2" and len(scans[1].readings) == 1
+
+
+def test_odometry_ticks_and_velocities(odom_csv: Path, tmp_path: Path) -> None:
+    ticks = list(read_odometry_csv(odom_csv, "r1"))
+    assert len(ticks) == 40 and ticks[2].left_ticks == 20 and ticks[2].right_ticks == 22
+    vel = tmp_path / "vel.csv"
+    vel.write_text("t_s,v_mps,omega_rps\n0,0.5,0.1\n1,0.6,-0.1\n")
+    out = list(read_odometry_csv(vel, "r1"))
+    assert out[1].v_mps == 0.6 and out[1].omega_rps == -0.1 and out[1].left_ticks is None
+
+
+def test_missing_column_names_file_and_columns(tmp_path: Path) -> None:
+    path = tmp_path / "imu.csv"
+    path.write_text("t_s,ax,ay,az\n0,0,0,9.8\n")
+    with pytest.raises(InputError, match=r"imu.csv: IMU CSV lacks column\(s\) gx, gy, gz"):
+        list(read_imu(path, "p"))
+
+
+def test_nan_names_file_line_and_column(tmp_path: Path) -> None:
+    path = tmp_path / "imu.csv"
+    path.write_text("t_s,ax,ay,az,gx,gy,gz\n0,0,0,9.8,0,0,0\n0.1,0,nan,9.8,0,0,0\n")
+    with pytest.raises(NonFiniteValueError, match=r"imu.csv: line 3, column ay: .*not a finite"):
+        list(read_imu(path, "p"))
+
+
+def test_inf_and_text_are_refused(tmp_path: Path) -> None:
+    path = tmp_path / "odom.csv"
+    path.write_text("t_s,v_mps,omega_rps\n0,inf,0\n")
+    with pytest.raises(NonFiniteValueError, match="line 2, column v_mps"):
+        list(read_odometry_csv(path, "r"))
+    path.write_text("t_s,observer,eid,rssi_dbm\n0,ap,e,strong\n")
+    with pytest.raises(NonFiniteValueError, match="line 2, column rssi_dbm: 'strong'"):
+        list(read_rssi_csv(path))
+
+
+def test_non_monotonic_time_names_the_line(tmp_path: Path) -> None:
+    path = tmp_path / "imu.csv"
+    path.write_text("t_s,ax,ay,az,gx,gy,gz\n0,0,0,9.8,0,0,0\n0.2,0,0,9.8,0,0,0\n"
+                    "0.1,0,0,9.8,0,0,0\n")
+    with pytest.raises(NonMonotonicTimeError, match=r"line 4, column t_s: 0.1 is earlier"):
+        list(read_imu(path, "p"))
+
+
+def test_empty_and_missing_files(tmp_path: Path) -> None:
+    empty = tmp_path / "e.csv"
+    empty.write_text("")
+    with pytest.raises(InputError, match="empty file; a header row is required"):
+        list(read_rssi_csv(empty))
+    with pytest.raises(InputError, match="no such file"):
+        list(read_rssi_csv(tmp_path / "nope.csv"))
+
+
+def _sensor_logger_files(folder: Path, with_total: bool) -> None:
+    t = 1_700_000_000_000_000_000 + np.arange(20) * 10_000_000
+    xyz = "time,seconds_elapsed,z,y,x\n"
+    if with_total:
+        (folder / "TotalAcceleration.csv").write_text(
+            xyz + "".join(f"{ti},{i * 0.01},9.8,0.1,0.2\n" for i, ti in enumerate(t)))
+    else:
+        (folder / "Accelerometer.csv").write_text(
+            xyz + "".join(f"{ti},{i * 0.01},0.0,0.1,0.2\n" for i, ti in enumerate(t)))
+        (folder / "Gravity.csv").write_text(
+            xyz + "".join(f"{ti},{i * 0.01},9.8,0,0\n" for i, ti in enumerate(t)))
+    (folder / "Gyroscope.csv").write_text(
+        xyz + "".join(f"{ti + 5_000_000},{i * 0.01},0.3,0,0\n" for i, ti in enumerate(t)))
+    (folder / "Orientation.csv").write_text(
+        "time,seconds_elapsed,qz,qy,qx,qw,roll,pitch,yaw\n"
+        + "".join(f"{ti},{i * 0.01},0,0,0,1,0,0,0\n" for i, ti in enumerate(t)))
+
+
+@pytest.mark.parametrize("with_total", [True, False])
+def test_sensor_logger_folder_and_zip(tmp_path: Path, with_total: bool) -> None:
+    folder = tmp_path / "export"
+    folder.mkdir()
+    _sensor_logger_files(folder, with_total)
+    zpath = tmp_path / "export.zip"
+    with zipfile.ZipFile(zpath, "w") as zf:
+        for f in folder.iterdir():
+            zf.write(f, f"Recording/{f.name}")
+    for source in (folder, zpath):
+        samples = list(read_imu(source, "p1"))
+        assert len(samples) == 20
+        s = samples[3]
+        assert s.t_ns == 1_700_000_000_030_000_000
+        assert (s.accel_mps2.x, s.accel_mps2.y, s.accel_mps2.z) == pytest.approx((0.2, 0.1, 9.8))
+        assert s.gyro_rps.z == pytest.approx(0.3)
+        assert s.orientation == Quat(0.0, 0.0, 0.0, 1.0)
+
+
+def test_sensor_logger_folder_without_gyro_is_refused(tmp_path: Path) -> None:
+    folder = tmp_path / "export"
+    folder.mkdir()
+    (folder / "TotalAcceleration.csv").write_text("time,seconds_elapsed,z,y,x\n1,0,9.8,0,0\n")
+    with pytest.raises(InputError, match="not a Sensor Logger export"):
+        list(read_imu(folder, "p1"))
