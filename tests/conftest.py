@@ -25,15 +25,18 @@ def trackctl_exe() -> list[str]:
     return [found] if found else [sys.executable, "-m", "trackctl.cli.main"]
 
 
-def run_cli(*args: str, input: bytes | None = None, timeout: float = 120,
-            check: bool = False) -> subprocess.CompletedProcess[bytes]:
+def run_cli(
+    *args: str, input: bytes | None = None, timeout: float = 120, check: bool = False
+) -> subprocess.CompletedProcess[bytes]:
     """Run trackctl as a real subprocess."""
     env = dict(os.environ, COLUMNS="200")
-    proc = subprocess.run([*trackctl_exe(), *args], input=input, capture_output=True,
-                          timeout=timeout, env=env)
+    proc = subprocess.run(
+        [*trackctl_exe(), *args], input=input, capture_output=True, timeout=timeout, env=env
+    )
     if check and proc.returncode != 0:
-        raise AssertionError(f"trackctl {' '.join(args)} exited {proc.returncode}: "
-                             f"{proc.stderr.decode()}")
+        raise AssertionError(
+            f"trackctl {' '.join(args)} exited {proc.returncode}: {proc.stderr.decode()}"
+        )
     return proc
 
 

@@ -73,8 +73,9 @@ def test_inf_and_text_are_refused(tmp_path: Path) -> None:
 
 def test_non_monotonic_time_names_the_line(tmp_path: Path) -> None:
     path = tmp_path / "imu.csv"
-    path.write_text("t_s,ax,ay,az,gx,gy,gz\n0,0,0,9.8,0,0,0\n0.2,0,0,9.8,0,0,0\n"
-                    "0.1,0,0,9.8,0,0,0\n")
+    path.write_text(
+        "t_s,ax,ay,az,gx,gy,gz\n0,0,0,9.8,0,0,0\n0.2,0,0,9.8,0,0,0\n0.1,0,0,9.8,0,0,0\n"
+    )
     with pytest.raises(NonMonotonicTimeError, match=r"line 4, column t_s: 0.1 is earlier"):
         list(read_imu(path, "p"))
 
@@ -93,17 +94,22 @@ def _sensor_logger_files(folder: Path, with_total: bool) -> None:
     xyz = "time,seconds_elapsed,z,y,x\n"
     if with_total:
         (folder / "TotalAcceleration.csv").write_text(
-            xyz + "".join(f"{ti},{i * 0.01},9.8,0.1,0.2\n" for i, ti in enumerate(t)))
+            xyz + "".join(f"{ti},{i * 0.01},9.8,0.1,0.2\n" for i, ti in enumerate(t))
+        )
     else:
         (folder / "Accelerometer.csv").write_text(
-            xyz + "".join(f"{ti},{i * 0.01},0.0,0.1,0.2\n" for i, ti in enumerate(t)))
+            xyz + "".join(f"{ti},{i * 0.01},0.0,0.1,0.2\n" for i, ti in enumerate(t))
+        )
         (folder / "Gravity.csv").write_text(
-            xyz + "".join(f"{ti},{i * 0.01},9.8,0,0\n" for i, ti in enumerate(t)))
+            xyz + "".join(f"{ti},{i * 0.01},9.8,0,0\n" for i, ti in enumerate(t))
+        )
     (folder / "Gyroscope.csv").write_text(
-        xyz + "".join(f"{ti + 5_000_000},{i * 0.01},0.3,0,0\n" for i, ti in enumerate(t)))
+        xyz + "".join(f"{ti + 5_000_000},{i * 0.01},0.3,0,0\n" for i, ti in enumerate(t))
+    )
     (folder / "Orientation.csv").write_text(
         "time,seconds_elapsed,qz,qy,qx,qw,roll,pitch,yaw\n"
-        + "".join(f"{ti},{i * 0.01},0,0,0,1,0,0,0\n" for i, ti in enumerate(t)))
+        + "".join(f"{ti},{i * 0.01},0,0,0,1,0,0,0\n" for i, ti in enumerate(t))
+    )
 
 
 @pytest.mark.parametrize("with_total", [True, False])

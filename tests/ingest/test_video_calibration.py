@@ -67,13 +67,22 @@ def test_opencv_calibration_with_extrinsics(calib_yaml: Path) -> None:
 
 def test_ros_camera_info(tmp_path: Path) -> None:
     path = tmp_path / "ost.yaml"
-    path.write_text(yaml.safe_dump({
-        "image_width": 640, "image_height": 480, "camera_name": "narrow_stereo",
-        "camera_matrix": {"rows": 3, "cols": 3,
-                          "data": [500.0, 0, 320, 0, 505.0, 240, 0, 0, 1]},
-        "distortion_model": "plumb_bob",
-        "distortion_coefficients": {"rows": 1, "cols": 5, "data": [0.1, 0, 0, 0, 0]},
-    }))
+    path.write_text(
+        yaml.safe_dump(
+            {
+                "image_width": 640,
+                "image_height": 480,
+                "camera_name": "narrow_stereo",
+                "camera_matrix": {
+                    "rows": 3,
+                    "cols": 3,
+                    "data": [500.0, 0, 320, 0, 505.0, 240, 0, 0, 1],
+                },
+                "distortion_model": "plumb_bob",
+                "distortion_coefficients": {"rows": 1, "cols": 5, "data": [0.1, 0, 0, 0, 0]},
+            }
+        )
+    )
     model = read_calibration(path, "cam0")
     assert (model.fx_px, model.fy_px, model.cy_px) == (500.0, 505.0, 240.0)
     assert model.world_from_camera is None

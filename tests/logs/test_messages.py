@@ -21,34 +21,81 @@ quat = st.builds(m.Quat, finite, finite, finite, finite)
 opt = st.none
 
 imu = st.builds(m.Imu, t_ns, text, vec3, vec3, st.one_of(opt(), quat))
-rssi = st.builds(m.RssiScan, t_ns, text,
-                 st.lists(st.builds(m.RssiReading, text, finite), max_size=4).map(tuple),
-                 st.one_of(opt(), vec3))
+rssi = st.builds(
+    m.RssiScan,
+    t_ns,
+    text,
+    st.lists(st.builds(m.RssiReading, text, finite), max_size=4).map(tuple),
+    st.one_of(opt(), vec3),
+)
 odom = st.one_of(
-    st.builds(m.WheelOdometry, t_ns, text, st.integers(-2**40, 2**40), st.integers(-2**40, 2**40)),
-    st.builds(m.WheelOdometry, t_ns, text, st.none(), st.none(), finite, finite,
-              st.one_of(opt(), st.builds(m.Pose2D, finite, finite, finite))),
+    st.builds(
+        m.WheelOdometry, t_ns, text, st.integers(-(2**40), 2**40), st.integers(-(2**40), 2**40)
+    ),
+    st.builds(
+        m.WheelOdometry,
+        t_ns,
+        text,
+        st.none(),
+        st.none(),
+        finite,
+        finite,
+        st.one_of(opt(), st.builds(m.Pose2D, finite, finite, finite)),
+    ),
 )
 box = st.builds(m.BBox, finite, finite, finite, finite)
-detection = st.builds(m.Detection, box, st.floats(0, 1), text, st.one_of(opt(), vec3),
-                      st.one_of(opt(), text))
+detection = st.builds(
+    m.Detection, box, st.floats(0, 1), text, st.one_of(opt(), vec3), st.one_of(opt(), text)
+)
 detections = st.builds(m.Detections, t_ns, text, st.lists(detection, max_size=3).map(tuple))
-track = st.builds(m.Track, text, vec3, st.one_of(opt(), vec3),
-                  st.one_of(opt(), st.lists(finite, min_size=9, max_size=9).map(tuple)),
-                  st.sampled_from(list(m.TrackState)), st.one_of(opt(), text),
-                  st.one_of(opt(), st.floats(0, 1)))
+track = st.builds(
+    m.Track,
+    text,
+    vec3,
+    st.one_of(opt(), vec3),
+    st.one_of(opt(), st.lists(finite, min_size=9, max_size=9).map(tuple)),
+    st.sampled_from(list(m.TrackState)),
+    st.one_of(opt(), text),
+    st.one_of(opt(), st.floats(0, 1)),
+)
 tracks = st.builds(m.Tracks, t_ns, st.lists(track, max_size=3).map(tuple))
-gt = st.builds(m.GroundTruth, t_ns, st.lists(st.builds(
-    m.GroundTruthEntity, text, vec3, st.one_of(opt(), finite), st.one_of(opt(), text),
-    st.one_of(opt(), text)), max_size=3).map(tuple))
+gt = st.builds(
+    m.GroundTruth,
+    t_ns,
+    st.lists(
+        st.builds(
+            m.GroundTruthEntity,
+            text,
+            vec3,
+            st.one_of(opt(), finite),
+            st.one_of(opt(), text),
+            st.one_of(opt(), text),
+        ),
+        max_size=3,
+    ).map(tuple),
+)
 camera = st.builds(
-    m.CameraModel, t_ns, text, st.integers(1, 8000), st.integers(1, 8000),
-    st.floats(1, 1e4), st.floats(1, 1e4), finite, finite, st.sampled_from(["plumb_bob", "none"]),
+    m.CameraModel,
+    t_ns,
+    text,
+    st.integers(1, 8000),
+    st.integers(1, 8000),
+    st.floats(1, 1e4),
+    st.floats(1, 1e4),
+    finite,
+    finite,
+    st.sampled_from(["plumb_bob", "none"]),
     st.lists(finite, max_size=5).map(tuple),
-    st.one_of(opt(), st.builds(m.Transform, vec3, quat)))
-metric_value = st.one_of(st.none(), st.booleans(), st.integers(-2**53, 2**53), finite, text)
-report = st.builds(m.MetricReport, t_ns, text, st.dictionaries(text, metric_value, max_size=4),
-                   st.dictionaries(text, metric_value, max_size=3))
+    st.one_of(opt(), st.builds(m.Transform, vec3, quat)),
+)
+metric_value = st.one_of(st.none(), st.booleans(), st.integers(-(2**53), 2**53), finite, text)
+report = st.builds(
+    m.MetricReport,
+    t_ns,
+    text,
+    st.dictionaries(text, metric_value, max_size=4),
+    st.dictionaries(text, metric_value, max_size=3),
+)
 
 ALL = st.one_of(imu, rssi, odom, detections, tracks, gt, camera, report)
 

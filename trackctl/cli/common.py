@@ -18,8 +18,17 @@ from trackctl.errors import TrackctlError
 from trackctl.logs.messages import MetricReport
 from trackctl.metrics.report import failed_conditions, jsonable_metrics, parse_fail_if
 
-__all__ = ["TrackctlGroup", "stderr", "print_json", "progress", "split_csv", "apply_fail_if",
-           "report_dict", "EXIT_BAD_INPUT", "EXIT_GATE"]
+__all__ = [
+    "TrackctlGroup",
+    "stderr",
+    "print_json",
+    "progress",
+    "split_csv",
+    "apply_fail_if",
+    "report_dict",
+    "EXIT_BAD_INPUT",
+    "EXIT_GATE",
+]
 
 EXIT_BAD_INPUT = 2
 EXIT_GATE = 1
@@ -27,8 +36,14 @@ EXIT_GATE = 1
 stderr = Console(stderr=True, highlight=False, soft_wrap=True)
 
 
-def _show_warning(message: Any, category: type[Warning], filename: str, lineno: int,
-                  file: Any = None, line: str | None = None) -> None:
+def _show_warning(
+    message: Any,
+    category: type[Warning],
+    filename: str,
+    lineno: int,
+    file: Any = None,
+    line: str | None = None,
+) -> None:
     stderr.print(f"[yellow]warning:[/] {message}", markup=True)
 
 
@@ -67,8 +82,14 @@ def progress(description: str, quiet: bool) -> Iterator[Callable[[int, int | Non
     if not show_progress(quiet):
         yield lambda done, total: None
         return
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                  TimeElapsedColumn(), console=stderr, transient=True) as bar:
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=stderr,
+        transient=True,
+    ) as bar:
         task = bar.add_task(description, total=None)
 
         def update(done: int, total: int | None) -> None:
@@ -86,8 +107,12 @@ def split_csv(values: Sequence[str] | None) -> list[str] | None:
 
 def report_dict(report: MetricReport) -> dict[str, Any]:
     """A report as the ``--json`` object of one processor run."""
-    return {"processor": report.processor, "t_ns": report.t_ns,
-            "metrics": jsonable_metrics(report.metrics), "params": jsonable_metrics(report.params)}
+    return {
+        "processor": report.processor,
+        "t_ns": report.t_ns,
+        "metrics": jsonable_metrics(report.metrics),
+        "params": jsonable_metrics(report.params),
+    }
 
 
 def apply_fail_if(expr: str | None, reports: Sequence[MetricReport]) -> None:

@@ -24,8 +24,10 @@ def info(
         print_json(data)
         return
     console = Console()
-    console.print(f"[bold]{data['path']}[/]  {data['message_count']} messages, "
-                  f"{data['duration_s']:.3f} s  ({data['start_ns']} .. {data['end_ns']} ns)")
+    console.print(
+        f"[bold]{data['path']}[/]  {data['message_count']} messages, "
+        f"{data['duration_s']:.3f} s  ({data['start_ns']} .. {data['end_ns']} ns)"
+    )
     table = Table(show_edge=False)
     for col in ("topic", "schema", "encoding", "count", "rate Hz"):
         table.add_column(col, justify="right" if col in ("count", "rate Hz") else "left")

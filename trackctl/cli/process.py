@@ -33,30 +33,35 @@ def print_reports(reports: Sequence[MetricReport]) -> None:
 
 def process(
     log: Annotated[Path | None, typer.Argument(help="Input MCAP log.")] = None,
-    with_: Annotated[list[str] | None, typer.Option(
-        "--with", help="Processor(s) to run in order (repeat or comma-separate).")] = None,
-    out: Annotated[Path | None, typer.Option(help="Output MCAP: input + derived channels.")
-                   ] = None,
+    with_: Annotated[
+        list[str] | None,
+        typer.Option("--with", help="Processor(s) to run in order (repeat or comma-separate)."),
+    ] = None,
+    out: Annotated[Path | None, typer.Option(help="Output MCAP: input + derived channels.")] = None,
     list_: Annotated[bool, typer.Option("--list", help="List registered processors.")] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
-    fail_if: Annotated[str | None, typer.Option(
-        help='Exit 1 when a metric crosses a threshold, e.g. "nonfinite_values>0".')] = None,
+    fail_if: Annotated[
+        str | None,
+        typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "nonfinite_values>0".'),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """Run registered processors over a log; the output holds the input plus their results."""
     if list_:
         entries = processors()
         if json_out:
-            print_json({"processors": [{"name": p.name, "description": p.description}
-                                       for p in entries]})
+            print_json(
+                {"processors": [{"name": p.name, "description": p.description} for p in entries]}
+            )
         else:
             for p in entries:
                 typer.echo(f"{p.name:14s} {p.description}")
         return
     names = split_csv(with_)
     if log is None or not names or out is None:
-        raise InputError("process needs LOG, --with NAME and --out OUT.mcap "
-                         "(or --list to see processors)")
+        raise InputError(
+            "process needs LOG, --with NAME and --out OUT.mcap (or --list to see processors)"
+        )
     chain = [get_processor(name).factory() for name in names]
     with progress("processing", quiet) as bar:
         reports = run_processors(log, out, chain, bar)
@@ -71,14 +76,18 @@ def report(
     log: Annotated[Path, typer.Argument(help="MCAP log written by a processor.")],
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     csv: Annotated[Path | None, typer.Option(help="Also write the reports as CSV.")] = None,
-    fail_if: Annotated[str | None, typer.Option(
-        help='Exit 1 when a metric crosses a threshold, e.g. "error_m_mean>0.5".')] = None,
+    fail_if: Annotated[
+        str | None,
+        typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "error_m_mean>0.5".'),
+    ] = None,
 ) -> None:
     """Print the metric reports stored in a log."""
     reports = read_reports(LogReader(log))
     if not reports:
-        raise InputError(f"{log}: holds no metric report (no /metrics/* topic or metadata); "
-                         "run a processor on it first")
+        raise InputError(
+            f"{log}: holds no metric report (no /metrics/* topic or metadata); "
+            "run a processor on it first"
+        )
     if csv is not None:
         rows = [{"processor": r.processor, "t_ns": r.t_ns, **dict(r.metrics)} for r in reports]
         pd.DataFrame(rows).to_csv(csv, index=False)

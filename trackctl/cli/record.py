@@ -23,50 +23,94 @@ def _stdin_lines() -> Any:
 
 def record(
     out: Annotated[Path, typer.Argument(help="MCAP log to write (atomically).")],
-    imu: Annotated[list[str] | None, typer.Option(
-        "--imu", metavar="NAME=FILE",
-        help="IMU CSV (t_s,ax,ay,az,gx,gy,gz[,qw,qx,qy,qz]) or Sensor Logger export folder/zip "
-             "-> /phone/NAME/imu.")] = None,
-    rssi: Annotated[list[Path] | None, typer.Option(
-        "--rssi", metavar="FILE", help="RSSI CSV (t_s,observer,eid,rssi_dbm) -> /rssi.")] = None,
-    odom: Annotated[list[str] | None, typer.Option(
-        "--odom", metavar="NAME=FILE",
-        help="Odometry CSV (t_s,left_ticks,right_ticks or t_s,v_mps,omega_rps) "
-             "-> /robot/NAME/odom.")] = None,
-    video: Annotated[list[str] | None, typer.Option(
-        "--video", metavar="NAME=FILE",
-        help="Video file or image folder -> /NAME/image (foxglove.CompressedImage).")] = None,
-    calib: Annotated[list[str] | None, typer.Option(
-        "--calib", metavar="NAME=FILE",
-        help="OpenCV or ROS camera_info YAML for camera NAME -> /NAME/calibration, "
-             "/NAME/camera_model.")] = None,
-    fps: Annotated[float | None, typer.Option(
-        help="Frame rate of image folders (overrides a video's own rate).")] = None,
-    video_start: Annotated[float, typer.Option(
-        help="Log time of the first video frame, seconds (align video with CSV t_s).")] = 0.0,
-    stdin: Annotated[bool, typer.Option(
-        "--stdin", help="Record JSON lines from stdin until EOF or Ctrl-C.")] = False,
-    udp: Annotated[int | None, typer.Option(
-        "--udp", metavar="PORT",
-        help="Record JSON lines from UDP datagrams on 127.0.0.1:PORT until Ctrl-C "
-             "(0 picks a free port).")] = None,
-    compression: Annotated[str, typer.Option(help=f"Chunk compression: {', '.join(COMPRESSIONS)}.")
-                           ] = "zstd",
+    imu: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--imu",
+            metavar="NAME=FILE",
+            help="IMU CSV (t_s,ax,ay,az,gx,gy,gz[,qw,qx,qy,qz]) or Sensor Logger export folder/zip "
+            "-> /phone/NAME/imu.",
+        ),
+    ] = None,
+    rssi: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--rssi", metavar="FILE", help="RSSI CSV (t_s,observer,eid,rssi_dbm) -> /rssi."
+        ),
+    ] = None,
+    odom: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--odom",
+            metavar="NAME=FILE",
+            help="Odometry CSV (t_s,left_ticks,right_ticks or t_s,v_mps,omega_rps) "
+            "-> /robot/NAME/odom.",
+        ),
+    ] = None,
+    video: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--video",
+            metavar="NAME=FILE",
+            help="Video file or image folder -> /NAME/image (foxglove.CompressedImage).",
+        ),
+    ] = None,
+    calib: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--calib",
+            metavar="NAME=FILE",
+            help="OpenCV or ROS camera_info YAML for camera NAME -> /NAME/calibration, "
+            "/NAME/camera_model.",
+        ),
+    ] = None,
+    fps: Annotated[
+        float | None,
+        typer.Option(help="Frame rate of image folders (overrides a video's own rate)."),
+    ] = None,
+    video_start: Annotated[
+        float,
+        typer.Option(help="Log time of the first video frame, seconds (align video with CSV t_s)."),
+    ] = 0.0,
+    stdin: Annotated[
+        bool, typer.Option("--stdin", help="Record JSON lines from stdin until EOF or Ctrl-C.")
+    ] = False,
+    udp: Annotated[
+        int | None,
+        typer.Option(
+            "--udp",
+            metavar="PORT",
+            help="Record JSON lines from UDP datagrams on 127.0.0.1:PORT until Ctrl-C "
+            "(0 picks a free port).",
+        ),
+    ] = None,
+    compression: Annotated[
+        str, typer.Option(help=f"Chunk compression: {', '.join(COMPRESSIONS)}.")
+    ] = "zstd",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress or notes.")] = False,
 ) -> None:
     """Ingest video, calibration, IMU/RSSI/odometry CSV or live JSON lines into an MCAP log."""
     cfg = RecordConfig(
-        imu=parse_named(imu or [], "--imu"), rssi=tuple(rssi or ()),
-        odom=parse_named(odom or [], "--odom"), video=parse_named(video or [], "--video"),
-        calib=parse_named(calib or [], "--calib"), fps=fps, video_start_s=video_start,
+        imu=parse_named(imu or [], "--imu"),
+        rssi=tuple(rssi or ()),
+        odom=parse_named(odom or [], "--odom"),
+        video=parse_named(video or [], "--video"),
+        calib=parse_named(calib or [], "--calib"),
+        fps=fps,
+        video_start_s=video_start,
     )
     if stdin and udp is not None:
         raise InputError("--stdin and --udp are exclusive; record one live source at a time")
     if cfg.empty and not stdin and udp is None:
         raise InputError("nothing to record: give --imu/--rssi/--odom/--video, --stdin or --udp")
-    inputs = [*cfg.imu.values(), *cfg.rssi, *cfg.odom.values(), *cfg.video.values(),
-              *cfg.calib.values()]
+    inputs = [
+        *cfg.imu.values(),
+        *cfg.rssi,
+        *cfg.odom.values(),
+        *cfg.video.values(),
+        *cfg.calib.values(),
+    ]
     counts: Counter[str] = Counter()
     rejected = 0
     interrupted = False
@@ -81,6 +125,7 @@ def record(
                 with progress("recording files", quiet) as bar:
                     counts.update(record_files(writer, cfg, lambda n: bar(n, None)))
             if stdin or source is not None:
+
                 def reject(msg: str) -> None:
                     if not quiet:
                         stderr.print(f"[yellow]rejected:[/] {msg}", markup=True)
@@ -97,11 +142,18 @@ def record(
         signal.signal(signal.SIGTERM, previous)
         if source is not None:
             source.close()
-    summary = {"out": str(out), "topics": dict(sorted(counts.items())),
-               "messages": sum(counts.values()), "rejected": rejected, "interrupted": interrupted}
+    summary = {
+        "out": str(out),
+        "topics": dict(sorted(counts.items())),
+        "messages": sum(counts.values()),
+        "rejected": rejected,
+        "interrupted": interrupted,
+    }
     if json_out:
         print_json(summary)
     elif not quiet:
-        stderr.print(f"wrote {summary['messages']} messages on {len(counts)} topics to {out}"
-                     + (f" ({rejected} lines rejected)" if rejected else "")
-                     + (" (stopped by interrupt)" if interrupted else ""))
+        stderr.print(
+            f"wrote {summary['messages']} messages on {len(counts)} topics to {out}"
+            + (f" ({rejected} lines rejected)" if rejected else "")
+            + (" (stopped by interrupt)" if interrupted else "")
+        )

@@ -35,18 +35,31 @@ def _table(meter: RateMeter, title: str) -> Table:
 
 def replay(
     log: Annotated[Path, typer.Argument(help="MCAP log to play back.")],
-    topics: Annotated[list[str] | None, typer.Option(
-        "--topics", help="Topics to play (repeat or comma-separate); default all.")] = None,
-    start: Annotated[float | None, typer.Option(
-        help="Start, seconds after the log's first message.")] = None,
-    end: Annotated[float | None, typer.Option(
-        help="End, seconds after the log's first message.")] = None,
-    speed: Annotated[float, typer.Option(
-        help="Playback speed: 1.0 real time, 2.0 twice as fast, 0 as fast as possible.")] = 1.0,
-    fmt: Annotated[Format, typer.Option("--format", help="jsonl on stdout, or a live table.")
-                   ] = Format.jsonl,
-    udp: Annotated[str | None, typer.Option(
-        "--udp", metavar="HOST:PORT", help="Also send each JSON line as a UDP datagram.")] = None,
+    topics: Annotated[
+        list[str] | None,
+        typer.Option("--topics", help="Topics to play (repeat or comma-separate); default all."),
+    ] = None,
+    start: Annotated[
+        float | None, typer.Option(help="Start, seconds after the log's first message.")
+    ] = None,
+    end: Annotated[
+        float | None, typer.Option(help="End, seconds after the log's first message.")
+    ] = None,
+    speed: Annotated[
+        float,
+        typer.Option(
+            help="Playback speed: 1.0 real time, 2.0 twice as fast, 0 as fast as possible."
+        ),
+    ] = 1.0,
+    fmt: Annotated[
+        Format, typer.Option("--format", help="jsonl on stdout, or a live table.")
+    ] = Format.jsonl,
+    udp: Annotated[
+        str | None,
+        typer.Option(
+            "--udp", metavar="HOST:PORT", help="Also send each JSON line as a UDP datagram."
+        ),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No notes on stderr.")] = False,
 ) -> None:
     """Play a log back in log-time order, paced or as fast as possible."""
@@ -71,8 +84,9 @@ def replay(
             meter = RateMeter()
             console = Console()
             last_draw = 0.0
-            with Live(_table(meter, str(log)), console=console, refresh_per_second=4,
-                      transient=False) as live:
+            with Live(
+                _table(meter, str(log)), console=console, refresh_per_second=4, transient=False
+            ) as live:
                 for raw, line in stream:
                     meter.add(raw)
                     if sink is not None:
@@ -91,5 +105,7 @@ def replay(
         if sink is not None:
             sink.close()
     if sink is not None and sink.skipped and not quiet:
-        stderr.print(f"[yellow]warning:[/] {sink.skipped} messages larger than a UDP datagram "
-                     "were not sent", markup=True)
+        stderr.print(
+            f"[yellow]warning:[/] {sink.skipped} messages larger than a UDP datagram were not sent",
+            markup=True,
+        )

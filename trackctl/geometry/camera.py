@@ -78,8 +78,13 @@ class PinholeCamera:
         """Mask of world points that project inside the image, in front of the camera."""
         px, front = self.project(points_w)
         m = self.model
-        return front & (px[:, 0] >= 0) & (px[:, 0] < m.width_px) & (px[:, 1] >= 0) & (
-            px[:, 1] < m.height_px)
+        return (
+            front
+            & (px[:, 0] >= 0)
+            & (px[:, 0] < m.width_px)
+            & (px[:, 1] >= 0)
+            & (px[:, 1] < m.height_px)
+        )
 
     def ground_point(self, pixels: np.ndarray, ground_z: float = 0.0) -> np.ndarray:
         """World points (N, 3) where the rays through ``pixels`` meet the plane z = ground_z.

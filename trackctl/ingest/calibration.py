@@ -36,8 +36,16 @@ def _world_from_camera(rvec: np.ndarray, tvec: np.ndarray) -> Transform:
     return Transform(Vec3(*map(float, t_wc)), Quat(*map(float, r_wc.as_quat())))
 
 
-def _model(path: Path, camera: str, k: np.ndarray, d: np.ndarray, width: Any, height: Any,
-           dist_model: str, extr: Transform | None) -> CameraModel:
+def _model(
+    path: Path,
+    camera: str,
+    k: np.ndarray,
+    d: np.ndarray,
+    width: Any,
+    height: Any,
+    dist_model: str,
+    extr: Transform | None,
+) -> CameraModel:
     k = np.asarray(k, dtype=float).reshape(-1)
     if k.size != 9:
         raise InputError(f"{path}: camera matrix must have 9 values, got {k.size}")
@@ -45,8 +53,14 @@ def _model(path: Path, camera: str, k: np.ndarray, d: np.ndarray, width: Any, he
         raise InputError(f"{path}: image_width and image_height are required")
     try:
         return CameraModel(
-            t_ns=0, camera=camera, width_px=int(width), height_px=int(height),
-            fx_px=float(k[0]), fy_px=float(k[4]), cx_px=float(k[2]), cy_px=float(k[5]),
+            t_ns=0,
+            camera=camera,
+            width_px=int(width),
+            height_px=int(height),
+            fx_px=float(k[0]),
+            fy_px=float(k[4]),
+            cx_px=float(k[2]),
+            cy_px=float(k[5]),
             distortion_model=dist_model,
             distortion=tuple(float(x) for x in np.asarray(d, dtype=float).reshape(-1)),
             world_from_camera=extr,
@@ -62,9 +76,16 @@ def _read_ros(path: Path, camera: str, doc: dict[str, Any]) -> CameraModel:
             raise InputError(f"{path}: ROS camera_info field {key}.data is missing")
         return np.asarray(entry["data"], dtype=float)
 
-    return _model(path, camera, matrix("camera_matrix"), matrix("distortion_coefficients"),
-                  doc.get("image_width"), doc.get("image_height"),
-                  str(doc.get("distortion_model", "plumb_bob")), None)
+    return _model(
+        path,
+        camera,
+        matrix("camera_matrix"),
+        matrix("distortion_coefficients"),
+        doc.get("image_width"),
+        doc.get("image_height"),
+        str(doc.get("distortion_model", "plumb_bob")),
+        None,
+    )
 
 
 def _read_opencv(path: Path, camera: str) -> CameraModel:
@@ -90,8 +111,16 @@ def _read_opencv(path: Path, camera: str) -> CameraModel:
         d = mat(_D_KEYS)
         rvec, tvec = mat(("rvec",)), mat(("tvec",))
         extr = _world_from_camera(rvec, tvec) if rvec is not None and tvec is not None else None
-        return _model(path, camera, k, np.zeros(5) if d is None else d, num("image_width"),
-                      num("image_height"), "plumb_bob", extr)
+        return _model(
+            path,
+            camera,
+            k,
+            np.zeros(5) if d is None else d,
+            num("image_width"),
+            num("image_height"),
+            "plumb_bob",
+            extr,
+        )
     finally:
         fs.release()
 
@@ -121,9 +150,13 @@ def to_foxglove_calibration(model: CameraModel, t_ns: int | None = None) -> Came
     """The Foxglove CameraCalibration (K, D, R = I, P = [K|0]) of a camera model."""
     k = camera_matrix(model)
     msg = CameraCalibration(
-        frame_id=model.camera, width=model.width_px, height=model.height_px,
+        frame_id=model.camera,
+        width=model.width_px,
+        height=model.height_px,
         distortion_model=model.distortion_model if model.distortion_model != "none" else "",
-        D=list(model.distortion), K=list(k.reshape(-1)), R=[1, 0, 0, 0, 1, 0, 0, 0, 1],
+        D=list(model.distortion),
+        K=list(k.reshape(-1)),
+        R=[1, 0, 0, 0, 1, 0, 0, 0, 1],
         P=list(np.hstack([k, np.zeros((3, 1))]).reshape(-1)),
     )
     msg.timestamp.FromNanoseconds(int(model.t_ns if t_ns is None else t_ns))

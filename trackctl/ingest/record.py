@@ -18,8 +18,7 @@ from trackctl.logs import topics
 from trackctl.logs.jsonl import parse_jsonl
 from trackctl.logs.writer import LogWriter
 
-__all__ = ["RecordConfig", "record_files", "record_live", "LiveStats", "UdpSource",
-           "parse_named"]
+__all__ = ["RecordConfig", "record_files", "record_live", "LiveStats", "UdpSource", "parse_named"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,7 +50,9 @@ def parse_named(values: Iterable[str], option: str) -> dict[str, Path]:
     for value in values:
         name, sep, path = value.partition("=")
         if not sep or not name or not path:
-            raise InputError(f"{option} {value!r}: expected NAME=PATH (e.g. {option} cam0=lobby.mp4)")
+            raise InputError(
+                f"{option} {value!r}: expected NAME=PATH (e.g. {option} cam0=lobby.mp4)"
+            )
         if "/" in name or " " in name:
             raise InputError(f"{option} {value!r}: NAME must not contain '/' or spaces")
         if name in out:
@@ -69,13 +70,19 @@ def _stamped(source: Iterable[Any], topic: str, order: int) -> Iterator[Stamped]
 
 
 def _frames(path: Path, name: str, cfg: RecordConfig, order: int) -> Iterator[Stamped]:
-    for t_ns, img in read_frames(path, name, fps=cfg.fps, start_ns=seconds_to_ns(cfg.video_start_s),
-                                 jpeg_quality=cfg.jpeg_quality):
+    for t_ns, img in read_frames(
+        path,
+        name,
+        fps=cfg.fps,
+        start_ns=seconds_to_ns(cfg.video_start_s),
+        jpeg_quality=cfg.jpeg_quality,
+    ):
         yield (t_ns, order, topics.image(name), img)
 
 
-def record_files(writer: LogWriter, cfg: RecordConfig,
-                 progress: Callable[[int], None] | None = None) -> Counter[str]:
+def record_files(
+    writer: LogWriter, cfg: RecordConfig, progress: Callable[[int], None] | None = None
+) -> Counter[str]:
     """Write every file source of ``cfg`` into ``writer``, merged in time order.
 
     Returns:
@@ -94,8 +101,9 @@ def record_files(writer: LogWriter, cfg: RecordConfig,
         model = replace(model, t_ns=start_ns)
         writer.write(topics.calibration(name), to_foxglove_calibration(model), start_ns)
         writer.write(topics.camera_model(name), model)
-        writer.add_attachment(f"calibration/{name}{path.suffix}", path.read_bytes(),
-                              "application/x-yaml", start_ns)
+        writer.add_attachment(
+            f"calibration/{name}{path.suffix}", path.read_bytes(), "application/x-yaml", start_ns
+        )
         counts[topics.calibration(name)] += 1
         counts[topics.camera_model(name)] += 1
     streams: list[Iterator[Stamped]] = []

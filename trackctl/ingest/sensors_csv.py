@@ -28,8 +28,16 @@ import pandas as pd
 from trackctl.errors import InputError, NonFiniteValueError, NonMonotonicTimeError
 from trackctl.logs.messages import Imu, Quat, RssiReading, RssiScan, Vec3, WheelOdometry
 
-__all__ = ["read_imu", "read_rssi_csv", "read_odometry_csv", "seconds_to_ns",
-           "IMU_COLUMNS", "RSSI_COLUMNS", "ODOM_TICK_COLUMNS", "ODOM_VEL_COLUMNS"]
+__all__ = [
+    "read_imu",
+    "read_rssi_csv",
+    "read_odometry_csv",
+    "seconds_to_ns",
+    "IMU_COLUMNS",
+    "RSSI_COLUMNS",
+    "ODOM_TICK_COLUMNS",
+    "ODOM_VEL_COLUMNS",
+]
 
 IMU_COLUMNS = ("t_s", "ax", "ay", "az", "gx", "gy", "gz")
 IMU_QUAT_COLUMNS = ("qw", "qx", "qy", "qz")
@@ -243,8 +251,11 @@ def read_odometry_csv(path: str | Path, name: str) -> Iterator[WheelOdometry]:
                 f"{path}: odometry CSV needs columns {','.join(ODOM_TICK_COLUMNS)} or "
                 f"{','.join(ODOM_VEL_COLUMNS)} (found {','.join(map(str, df.columns))})"
             )
-        cols = ("t_s",) + (ODOM_TICK_COLUMNS[1:] if ticks else ()) + (
-            ODOM_VEL_COLUMNS[1:] if vel else ())
+        cols = (
+            ("t_s",)
+            + (ODOM_TICK_COLUMNS[1:] if ticks else ())
+            + (ODOM_VEL_COLUMNS[1:] if vel else ())
+        )
         a = _numeric(path, df, cols, line)
         check(a[:, 0], line)
         for row in a:

@@ -47,13 +47,19 @@ def read_frames(
     if path.is_dir():
         files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
         if not files:
-            raise InputError(f"{path}: image folder holds no .jpg/.png/.webp files (camera {camera})")
+            raise InputError(
+                f"{path}: image folder holds no .jpg/.png/.webp files (camera {camera})"
+            )
         if fps is None:
             raise InputError(f"{path}: an image folder needs --fps to stamp its frames")
         for i, f in enumerate(files):
             t_ns = start_ns + int(round(i * 1e9 / fps))
-            yield t_ns, make_compressed_image(t_ns, camera, f.read_bytes(),
-                                              IMAGE_SUFFIXES[f.suffix.lower()])
+            yield (
+                t_ns,
+                make_compressed_image(
+                    t_ns, camera, f.read_bytes(), IMAGE_SUFFIXES[f.suffix.lower()]
+                ),
+            )
         return
     cap = cv2.VideoCapture(str(path))
     try:

@@ -277,8 +277,7 @@ def codec_for(
         return _dynamic_codec(message_encoding, schema_name, schema_data)
     known = ", ".join(sorted(name for _, name in _REGISTRY))
     raise UnknownSchemaError(
-        f"unknown schema {schema_name!r} with encoding {message_encoding!r} "
-        f"(known: {known})"
+        f"unknown schema {schema_name!r} with encoding {message_encoding!r} (known: {known})"
     )
 
 

@@ -36,8 +36,9 @@ def log_info(reader: LogReader) -> dict[str, Any]:
         "end_ns": end if end is not None else 0,
         "duration_s": 0.0 if start is None or end is None else (end - start) / 1e9,
         "metadata": metadata,
-        "attachments": {name: {"media_type": mt, "bytes": len(data)}
-                        for name, (mt, data) in attachments.items()},
+        "attachments": {
+            name: {"media_type": mt, "bytes": len(data)} for name, (mt, data) in attachments.items()
+        },
         "truncated": reader.truncated,
         "warnings": list(reader.warnings),
     }

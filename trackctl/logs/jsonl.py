@@ -22,8 +22,10 @@ __all__ = ["to_jsonl", "parse_jsonl", "JsonlRecord"]
 
 def to_jsonl(raw: RawMessage, codec: Codec) -> str:
     """One JSON line (without the newline) for a stored message."""
-    head = (f'{{"topic":{json.dumps(raw.topic)},"log_time_ns":{raw.log_time_ns},'
-            f'"schema":{json.dumps(raw.schema_name)},"message":')
+    head = (
+        f'{{"topic":{json.dumps(raw.topic)},"log_time_ns":{raw.log_time_ns},'
+        f'"schema":{json.dumps(raw.schema_name)},"message":'
+    )
     if raw.message_encoding == "json" and b"\n" not in raw.data:
         # JSON payloads pass through as they are stored: no decode/encode on the hot path.
         return head + raw.data.decode("utf-8") + "}"
@@ -41,8 +43,9 @@ class JsonlRecord:
     data: bytes
 
 
-def parse_jsonl(line: str | bytes, where: str = "<stdin>", lineno: int = 0,
-                now_ns: int | None = None) -> JsonlRecord:
+def parse_jsonl(
+    line: str | bytes, where: str = "<stdin>", lineno: int = 0, now_ns: int | None = None
+) -> JsonlRecord:
     """Parse and encode one JSON line; ``log_time_ns`` defaults to the arrival time.
 
     Raises:

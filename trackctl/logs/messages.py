@@ -310,9 +310,7 @@ class BBox(NamedTuple):
 
     @classmethod
     def from_json(cls, obj: Mapping[str, Any]) -> BBox:
-        return cls(
-            float(obj["x_px"]), float(obj["y_px"]), float(obj["w_px"]), float(obj["h_px"])
-        )
+        return cls(float(obj["x_px"]), float(obj["y_px"]), float(obj["w_px"]), float(obj["h_px"]))
 
 
 @dataclass(frozen=True, slots=True)

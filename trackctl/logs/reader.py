@@ -11,7 +11,6 @@ could read. Such a log is iterated in file order, which trackctl's writer keeps 
 
 from __future__ import annotations
 
-import io
 import os
 import warnings
 from collections.abc import Iterable, Iterator, Mapping
@@ -20,14 +19,20 @@ from pathlib import Path
 from typing import IO, Any
 
 from mcap.exceptions import McapError
-from mcap.reader import NonSeekingReader, SeekingReader
-from mcap.records import Channel, Message, MessageIndex, Schema, Statistics
-from mcap.summary import Summary
+from mcap.reader import SeekingReader
+from mcap.records import Attachment, Channel, Message, MessageIndex, Metadata, Schema, Statistics
 from mcap.stream_reader import StreamReader
+from mcap.summary import Summary
 
-from trackctl.errors import LogError, MissingTopicError, NotAFileError, NotAnMcapError
-from trackctl.errors import TruncatedLogWarning
+from trackctl.errors import (
+    LogError,
+    MissingTopicError,
+    NotAFileError,
+    NotAnMcapError,
+    TruncatedLogWarning,
+)
 from trackctl.logs.codecs import Codec, codec_for
+from trackctl.logs.recovery import ScanEnd, scan_damaged
 
 __all__ = ["LogReader", "RawMessage", "LogMessage", "TopicInfo", "MCAP_MAGIC"]
 
@@ -84,9 +89,16 @@ _READ_ERRORS = (McapError, EOFError, ValueError, OSError, KeyError, IndexError)
 
 def _is_damage(err: BaseException) -> bool:
     """True for errors that mean "the bytes end or break here" (zstd/lz4 raise their own types)."""
-    return isinstance(err, _READ_ERRORS) or type(err).__module__.split(".")[0] in (
-        "zstandard", "lz4", "struct",
-    ) or type(err).__name__ in ("ZstdError", "error")
+    return (
+        isinstance(err, _READ_ERRORS)
+        or type(err).__module__.split(".")[0]
+        in (
+            "zstandard",
+            "lz4",
+            "struct",
+        )
+        or type(err).__name__ in ("ZstdError", "error")
+    )
 
 
 class LogReader:
@@ -137,7 +149,11 @@ class LogReader:
 
     # -- iteration ----------------------------------------------------------------------------
     def _iter_records(
-        self, f: IO[bytes], topics: list[str] | None, start_ns: int | None, end_ns: int | None,
+        self,
+        f: IO[bytes],
+        topics: list[str] | None,
+        start_ns: int | None,
+        end_ns: int | None,
     ) -> Iterator[tuple[Schema | None, Channel, Message]]:
         if not self.truncated:
             try:
@@ -147,20 +163,37 @@ class LogReader:
             except McapError as err:
                 raise LogError(f"{self.path}: corrupt log: {err}") from err
             return
-        f.seek(0, io.SEEK_SET)
+        end = ScanEnd()
+        schemas: dict[int, Schema] = {}
+        channels: dict[int, Channel] = {}
+        wanted = None if topics is None else set(topics)
         count = 0
-        try:
-            for item in NonSeekingReader(f).iter_messages(
-                topics=topics, starting_at=start_ns, ending_before=end_ns, log_time_order=False
-            ):
+        for record in scan_damaged(f, end):
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                channel = channels.get(record.channel_id)
+                if channel is None:
+                    continue
+                if wanted is not None and channel.topic not in wanted:
+                    continue
+                if start_ns is not None and record.log_time < start_ns:
+                    continue
+                if end_ns is not None and record.log_time >= end_ns:
+                    continue
                 count += 1
-                yield item
-        except Exception as err:  # noqa: BLE001
-            if not _is_damage(err):
-                raise
+                yield schemas.get(channel.schema_id), channel, record
+        if end.reason != "end":
+            partial = (
+                f", {end.partial_chunk_messages} of them from the cut-off last chunk"
+                if end.partial_chunk_messages
+                else ""
+            )
             self._warn(
-                f"{self.path}: log ends early at byte {f.tell()} ({type(err).__name__}); "
-                f"read {count} messages before the damage, the rest is lost"
+                f"{self.path}: log ends early at byte {end.offset} ({end.reason}); "
+                f"read {count} messages before the damage{partial}, the rest is lost"
             )
 
     def raw(
@@ -187,8 +220,9 @@ class LogReader:
 
     def codec(self, raw: RawMessage) -> Codec:
         """The codec that decodes ``raw``'s channel."""
-        return codec_for(raw.schema_name, raw.message_encoding, raw.schema_encoding,
-                         raw.schema_data)
+        return codec_for(
+            raw.schema_name, raw.message_encoding, raw.schema_encoding, raw.schema_data
+        )
 
     def messages(
         self,
@@ -256,8 +290,13 @@ class LogReader:
         for raw in self.raw():
             entry = counts.get(raw.topic)
             if entry is None:
-                counts[raw.topic] = [raw.schema_name, raw.message_encoding, 1,
-                                     raw.log_time_ns, raw.log_time_ns]
+                counts[raw.topic] = [
+                    raw.schema_name,
+                    raw.message_encoding,
+                    1,
+                    raw.log_time_ns,
+                    raw.log_time_ns,
+                ]
             else:
                 entry[2] += 1
                 entry[3] = min(entry[3], raw.log_time_ns)
@@ -289,8 +328,8 @@ class LogReader:
         with self.path.open("rb") as f:
             try:
                 if self.truncated:
-                    for record in self._damaged_records(f):
-                        if type(record).__name__ == "Metadata":
+                    for record in scan_damaged(f, ScanEnd()):
+                        if isinstance(record, Metadata):
                             out[record.name] = dict(record.metadata)
                 else:
                     for md in SeekingReader(f).iter_metadata():
@@ -304,21 +343,13 @@ class LogReader:
         out: dict[str, tuple[str, bytes]] = {}
         with self.path.open("rb") as f:
             if self.truncated:
-                for record in self._damaged_records(f):
-                    if type(record).__name__ == "Attachment":
+                for record in scan_damaged(f, ScanEnd()):
+                    if isinstance(record, Attachment):
                         out[record.name] = (record.media_type, record.data)
             else:
                 for att in SeekingReader(f).iter_attachments():
                     out[att.name] = (att.media_type, att.data)
         return out
-
-    def _damaged_records(self, f: IO[bytes]) -> Iterator[Any]:
-        f.seek(0)
-        try:
-            yield from StreamReader(f).records
-        except Exception as err:  # noqa: BLE001
-            if not _is_damage(err):
-                raise
 
     def require(self, topics: Iterable[str], needed_by: str, why: str = "") -> None:
         """Raise :class:`MissingTopicError` naming the first absent topic and who needs it."""

@@ -94,8 +94,7 @@ class RateMeter:
             st = self.topics[topic]
             while st.recent and st.recent[0] < now - self.window_s:
                 st.recent.popleft()
-            out.append((topic, st.schema, st.count, len(st.recent) / self.window_s,
-                        st.last_log_ns))
+            out.append((topic, st.schema, st.count, len(st.recent) / self.window_s, st.last_log_ns))
         return out
 
 

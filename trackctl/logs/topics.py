@@ -2,8 +2,17 @@
 
 from __future__ import annotations
 
-__all__ = ["RSSI", "GROUND_TRUTH", "imu", "odom", "image", "calibration", "camera_model",
-           "detections", "metrics"]
+__all__ = [
+    "RSSI",
+    "GROUND_TRUTH",
+    "imu",
+    "odom",
+    "image",
+    "calibration",
+    "camera_model",
+    "detections",
+    "metrics",
+]
 
 RSSI = "/rssi"
 GROUND_TRUTH = "/ground_truth"

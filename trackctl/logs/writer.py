@@ -22,7 +22,11 @@ from trackctl.logs.reader import RawMessage
 
 __all__ = ["LogWriter", "COMPRESSIONS"]
 
-COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+COMPRESSIONS = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
 PROFILE = "trackctl"
 
 
@@ -133,7 +137,10 @@ class LogWriter:
         if known is not None and known[1] == codec.schema_name:
             return known[0]
         return self.channel(
-            topic, codec.schema_name, codec.schema_encoding, codec.schema_data,
+            topic,
+            codec.schema_name,
+            codec.schema_encoding,
+            codec.schema_data,
             codec.message_encoding,
         )
 
@@ -148,7 +155,11 @@ class LogWriter:
         self.write_encoded(topic, codec, codec.encode(message), log_time_ns)
 
     def write_encoded(
-        self, topic: str, codec: Codec, data: bytes, log_time_ns: int,
+        self,
+        topic: str,
+        codec: Codec,
+        data: bytes,
+        log_time_ns: int,
         publish_time_ns: int | None = None,
     ) -> None:
         """Write bytes already encoded by ``codec``."""
@@ -158,8 +169,12 @@ class LogWriter:
     def write_raw(self, raw: RawMessage) -> None:
         """Copy a message read from another log unchanged (schema, encoding and bytes)."""
         cid = self.channel(
-            raw.topic, raw.schema_name, raw.schema_encoding, raw.schema_data,
-            raw.message_encoding, raw.channel_metadata,
+            raw.topic,
+            raw.schema_name,
+            raw.schema_encoding,
+            raw.schema_data,
+            raw.message_encoding,
+            raw.channel_metadata,
         )
         self._add(cid, raw.data, raw.log_time_ns, raw.publish_time_ns)
 
@@ -182,12 +197,18 @@ class LogWriter:
         self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
 
     def add_attachment(
-        self, name: str, data: bytes, media_type: str = "application/octet-stream",
+        self,
+        name: str,
+        data: bytes,
+        media_type: str = "application/octet-stream",
         log_time_ns: int = 0,
     ) -> None:
         """Attach a file (calibration source, configuration...) to the log."""
         self._writer.add_attachment(
-            create_time=log_time_ns, log_time=log_time_ns, name=name, media_type=media_type,
+            create_time=log_time_ns,
+            log_time=log_time_ns,
+            name=name,
+            media_type=media_type,
             data=data,
         )
 
@@ -222,7 +243,9 @@ class LogWriter:
         return self
 
     def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None,
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
         if exc_type is None:

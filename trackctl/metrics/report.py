@@ -13,14 +13,25 @@ from trackctl.errors import InputError
 from trackctl.logs.messages import MetricReport, MetricValue
 from trackctl.logs.reader import LogReader
 
-__all__ = ["Condition", "parse_fail_if", "failed_conditions", "read_reports", "report_topic",
-           "METADATA_PREFIX", "jsonable_metrics"]
+__all__ = [
+    "Condition",
+    "parse_fail_if",
+    "failed_conditions",
+    "read_reports",
+    "report_topic",
+    "METADATA_PREFIX",
+    "jsonable_metrics",
+]
 
 METADATA_PREFIX = "metrics/"
 
 _OPS: dict[str, Callable[[float, float], bool]] = {
-    ">=": operator.ge, "<=": operator.le, "==": operator.eq, "!=": operator.ne,
-    ">": operator.gt, "<": operator.lt,
+    ">=": operator.ge,
+    "<=": operator.le,
+    "==": operator.eq,
+    "!=": operator.ne,
+    ">": operator.gt,
+    "<": operator.lt,
 }
 _COND = re.compile(r"^\s*([A-Za-z_][\w.\-]*)\s*(>=|<=|==|!=|>|<)\s*(-?[\d.]+(?:[eE][-+]?\d+)?)\s*$")
 
@@ -55,7 +66,7 @@ def parse_fail_if(expr: str) -> list[Condition]:
         if match is None:
             raise InputError(
                 f"--fail-if: cannot parse {part.strip()!r}; expected KEY OP NUMBER with OP one of "
-                "> >= < <= == != (e.g. \"error_m_mean>0.5\")"
+                '> >= < <= == != (e.g. "error_m_mean>0.5")'
             )
         conditions.append(Condition(match[1], match[2], float(match[3])))
     if not conditions:
@@ -63,8 +74,9 @@ def parse_fail_if(expr: str) -> list[Condition]:
     return conditions
 
 
-def failed_conditions(metrics: Mapping[str, MetricValue], conditions: Iterable[Condition]
-                      ) -> list[str]:
+def failed_conditions(
+    metrics: Mapping[str, MetricValue], conditions: Iterable[Condition]
+) -> list[str]:
     """The conditions that hold on ``metrics``, as ``key=value (cond)`` strings.
 
     Raises:
@@ -92,14 +104,19 @@ def report_topic(processor: str) -> str:
 
 def jsonable_metrics(metrics: Mapping[str, MetricValue]) -> dict[str, MetricValue]:
     """Metrics with NaN/inf replaced by None (JSON has no NaN)."""
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-            for k, v in metrics.items()}
+    return {
+        k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+        for k, v in metrics.items()
+    }
 
 
 def read_reports(reader: LogReader) -> list[MetricReport]:
     """Every metric report in a log: ``/metrics/*`` messages, else ``metrics/*`` metadata."""
-    topics = [t for t, info in reader.topics().items()
-              if t.startswith("/metrics/") and info.schema_name == MetricReport.SCHEMA]
+    topics = [
+        t
+        for t, info in reader.topics().items()
+        if t.startswith("/metrics/") and info.schema_name == MetricReport.SCHEMA
+    ]
     reports = [m.message for m in reader.messages(topics)] if topics else []
     if reports:
         return reports

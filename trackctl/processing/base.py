@@ -17,8 +17,14 @@ from trackctl.logs.messages import MetricReport
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 
-__all__ = ["Processor", "ProcessorInfo", "register_processor", "get_processor", "processors",
-           "Progress"]
+__all__ = [
+    "Processor",
+    "ProcessorInfo",
+    "register_processor",
+    "get_processor",
+    "processors",
+    "Progress",
+]
 
 Progress = Callable[[int, int | None], None]
 """Progress callback: (done, total or None). Library code reports; the CLI draws."""
@@ -29,8 +35,9 @@ class Processor(Protocol):
 
     name: str
 
-    def run(self, reader: LogReader, writer: LogWriter, progress: Progress | None = None
-            ) -> MetricReport:
+    def run(
+        self, reader: LogReader, writer: LogWriter, progress: Progress | None = None
+    ) -> MetricReport:
         """Process ``reader``; write derived messages to ``writer``; return the report."""
         ...
 

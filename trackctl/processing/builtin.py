@@ -41,8 +41,9 @@ class CheckProcessor:
     def __init__(self, config: CheckConfig | None = None) -> None:
         self.config = config or CheckConfig()
 
-    def run(self, reader: LogReader, writer: LogWriter, progress: Progress | None = None
-            ) -> MetricReport:
+    def run(
+        self, reader: LogReader, writer: LogWriter, progress: Progress | None = None
+    ) -> MetricReport:
         states: dict[str, _TopicState] = defaultdict(_TopicState)
         nonmono = nonfinite = stamp_mismatch = decode_errors = messages = 0
         first_problem = ""
@@ -65,7 +66,8 @@ class CheckProcessor:
                 if st.last_stamp is not None and stamp < st.last_stamp:
                     nonmono += 1
                     first_problem = first_problem or (
-                        f"{raw.topic}: stamp {stamp} ns after {st.last_stamp} ns")
+                        f"{raw.topic}: stamp {stamp} ns after {st.last_stamp} ns"
+                    )
                 if stamp != raw.log_time_ns:
                     stamp_mismatch += 1
                 st.last_stamp = stamp
@@ -103,8 +105,10 @@ class CheckProcessor:
         )
 
 
-register_processor(ProcessorInfo(
-    name="check",
-    description="Log health: non-monotonic stamps, NaN/inf values, gaps, undecodable messages",
-    factory=CheckProcessor,
-))
+register_processor(
+    ProcessorInfo(
+        name="check",
+        description="Log health: non-monotonic stamps, NaN/inf values, gaps, undecodable messages",
+        factory=CheckProcessor,
+    )
+)

@@ -38,16 +38,22 @@ def copy_log(reader: LogReader, writer: LogWriter, progress: Progress | None = N
 
 def store_report(writer: LogWriter, report: MetricReport) -> None:
     """Write a report as a ``/metrics/<processor>`` message and as ``metrics/<processor>`` metadata."""
-    clean = replace(report, metrics=jsonable_metrics(report.metrics),
-                    params=jsonable_metrics(report.params))
+    clean = replace(
+        report, metrics=jsonable_metrics(report.metrics), params=jsonable_metrics(report.params)
+    )
     writer.write(report_topic(report.processor), clean)
     flat = {k: json.dumps(v) for k, v in clean.metrics.items()}
     flat["report"] = json.dumps(clean.to_json())
     writer.add_metadata(METADATA_PREFIX + report.processor, flat)
 
 
-def _run_one(input_path: Path, out_path: Path, processor: Processor, inputs: Sequence[Path],
-             progress: Progress | None) -> MetricReport:
+def _run_one(
+    input_path: Path,
+    out_path: Path,
+    processor: Processor,
+    inputs: Sequence[Path],
+    progress: Progress | None,
+) -> MetricReport:
     reader = LogReader(input_path)
     with LogWriter(out_path, inputs=inputs) as writer:
         copy_log(reader, writer)
@@ -95,13 +101,15 @@ def run_processors(
             if last:
                 target = out_path
             else:
-                fd, tmp = tempfile.mkstemp(prefix=f".{out_path.name}.stage{i}.", suffix=".mcap",
-                                           dir=out_path.parent)
+                fd, tmp = tempfile.mkstemp(
+                    prefix=f".{out_path.name}.stage{i}.", suffix=".mcap", dir=out_path.parent
+                )
                 os.close(fd)
                 target = Path(tmp)
                 temps.append(target)
-            reports.append(_run_one(current, target, processor, [input_path, *temps[:-1]],
-                                    progress))
+            reports.append(
+                _run_one(current, target, processor, [input_path, *temps[:-1]], progress)
+            )
             current = target
     finally:
         for tmp in temps:

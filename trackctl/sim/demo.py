@@ -55,8 +55,13 @@ class DemoConfig:
     height_px: int = 240
 
 
-def _walker_path(t: np.ndarray, center: tuple[float, float], radii: tuple[float, float],
-                 period_s: float, phase: float) -> np.ndarray:
+def _walker_path(
+    t: np.ndarray,
+    center: tuple[float, float],
+    radii: tuple[float, float],
+    period_s: float,
+    phase: float,
+) -> np.ndarray:
     ang = 2 * math.pi * t / period_s + phase
     return np.column_stack([center[0] + radii[0] * np.cos(ang), center[1] + radii[1] * np.sin(ang)])
 
@@ -64,14 +69,27 @@ def _walker_path(t: np.ndarray, center: tuple[float, float], radii: tuple[float,
 def _camera(cfg: DemoConfig) -> CameraModel:
     pose = look_at(np.array([0.2, 0.2, 2.8]), np.array([3.2, 2.6, 0.0]))
     f = cfg.width_px / (2 * math.tan(math.radians(80) / 2))
-    return CameraModel(t_ns=0, camera="cam0", width_px=cfg.width_px, height_px=cfg.height_px,
-                       fx_px=f, fy_px=f, cx_px=cfg.width_px / 2, cy_px=cfg.height_px / 2,
-                       distortion_model="plumb_bob", distortion=(0.0,) * 5,
-                       world_from_camera=pose)
+    return CameraModel(
+        t_ns=0,
+        camera="cam0",
+        width_px=cfg.width_px,
+        height_px=cfg.height_px,
+        fx_px=f,
+        fy_px=f,
+        cx_px=cfg.width_px / 2,
+        cy_px=cfg.height_px / 2,
+        distortion_model="plumb_bob",
+        distortion=(0.0,) * 5,
+        world_from_camera=pose,
+    )
 
 
-def _render(cam: PinholeCamera, people: list[tuple[np.ndarray, tuple[int, int, int]]],
-            rng: np.random.Generator, cfg: DemoConfig) -> tuple[bytes, list[BBox]]:
+def _render(
+    cam: PinholeCamera,
+    people: list[tuple[np.ndarray, tuple[int, int, int]]],
+    rng: np.random.Generator,
+    cfg: DemoConfig,
+) -> tuple[bytes, list[BBox]]:
     img = np.full((cfg.height_px, cfg.width_px, 3), (120, 120, 110), np.uint8)
     # floor grid so the frame reads as a room
     for gx in np.arange(0, 6.01, 1.0):
@@ -87,16 +105,25 @@ def _render(cam: PinholeCamera, people: list[tuple[np.ndarray, tuple[int, int, i
         foot = np.array([xy[0], xy[1], 0.0])
         head = np.array([xy[0], xy[1], 1.7])
         side = np.array([xy[0], xy[1], 0.85]) + 0.25 * np.cross(
-            np.array([0, 0, 1.0]), np.r_[xy - cam.position[:2], 0] / np.linalg.norm(
-                xy - cam.position[:2]))
+            np.array([0, 0, 1.0]),
+            np.r_[xy - cam.position[:2], 0] / np.linalg.norm(xy - cam.position[:2]),
+        )
         px, front = cam.project(np.stack([foot, head, side]))
         if not front.all():
             continue
         (fx, fy), (hx, hy), (sx, sy) = px
         half_w = max(2.0, abs(sx - (fx + hx) / 2))
         box = BBox(float(min(fx, hx) - half_w), float(hy), float(2 * half_w), float(fy - hy))
-        cv2.ellipse(img, (int((fx + hx) / 2), int((fy + hy) / 2)),
-                    (int(half_w), int(abs(fy - hy) / 2)), 0, 0, 360, color, -1)
+        cv2.ellipse(
+            img,
+            (int((fx + hx) / 2), int((fy + hy) / 2)),
+            (int(half_w), int(abs(fy - hy) / 2)),
+            0,
+            0,
+            360,
+            color,
+            -1,
+        )
         boxes.append(box)
     noise = rng.normal(0, 4, img.shape)
     img = np.clip(img + noise, 0, 255).astype(np.uint8)
@@ -128,8 +155,15 @@ def simulate_demo(out: str, cfg: DemoConfig | None = None) -> dict[str, int]:
     ap_pos = np.array([0.5, 4.5])
     wheel_base, ticks_per_m = 0.30, 2000.0
     with LogWriter(out) as w:
-        w.add_metadata("scenario", {"generator": "trackctl simulate demo", "seed": cfg.seed,
-                                    "duration_s": cfg.duration_s, "field": "office 6x5 m"})
+        w.add_metadata(
+            "scenario",
+            {
+                "generator": "trackctl simulate demo",
+                "seed": cfg.seed,
+                "duration_s": cfg.duration_s,
+                "field": "office 6x5 m",
+            },
+        )
         put(w, topics.calibration("cam0"), to_foxglove_calibration(model), 0)
         put(w, topics.camera_model("cam0"), model)
         events: list[tuple[int, int, str, object]] = []
@@ -149,16 +183,37 @@ def simulate_demo(out: str, cfg: DemoConfig | None = None) -> dict[str, int]:
             f_dev = rot.inv().apply(f_world) + rng.normal(0, 0.05, 3)
             gyro = np.array([0.0, 0.0, yaw_rate[k]]) + rng.normal(0, 0.01, 3)
             q = rot.as_quat()
-            events.append((int(tk * S), 0, topics.imu("p1"), Imu(
-                int(tk * S), "phone/p1", Vec3(*map(float, f_dev)), Vec3(*map(float, gyro)),
-                Quat(*map(float, q)))))
+            events.append(
+                (
+                    int(tk * S),
+                    0,
+                    topics.imu("p1"),
+                    Imu(
+                        int(tk * S),
+                        "phone/p1",
+                        Vec3(*map(float, f_dev)),
+                        Vec3(*map(float, gyro)),
+                        Quat(*map(float, q)),
+                    ),
+                )
+            )
         # RSSI at 1 Hz from the AP by the door (log-distance path loss, 4 dB shadowing)
         for tk in np.arange(0, cfg.duration_s, 1.0):
             d = max(0.5, float(np.linalg.norm(person(np.array([tk]), 0)[0] - ap_pos)))
             rssi = -40.0 - 10 * 2.2 * math.log10(d) + rng.normal(0, 4.0)
-            events.append((int(tk * S), 1, topics.RSSI, RssiScan(
-                int(tk * S), "ap-door", (RssiReading(mac, round(rssi, 1)),),
-                Vec3(float(ap_pos[0]), float(ap_pos[1]), 2.5))))
+            events.append(
+                (
+                    int(tk * S),
+                    1,
+                    topics.RSSI,
+                    RssiScan(
+                        int(tk * S),
+                        "ap-door",
+                        (RssiReading(mac, round(rssi, 1)),),
+                        Vec3(float(ap_pos[0]), float(ap_pos[1]), 2.5),
+                    ),
+                )
+            )
         # Robot odometry: cumulative ticks with 1% scale noise per wheel
         dt_o = 1.0 / cfg.odom_hz
         to = np.arange(0, cfg.duration_s, dt_o)
@@ -170,38 +225,69 @@ def simulate_demo(out: str, cfg: DemoConfig | None = None) -> dict[str, int]:
         left = np.cumsum((v - om * wheel_base / 2) * dt_o * ticks_per_m * 1.01)
         right = np.cumsum((v + om * wheel_base / 2) * dt_o * ticks_per_m * 0.99)
         for k, tk in enumerate(to):
-            events.append((int(tk * S), 2, topics.odom("r1"), WheelOdometry(
-                int(tk * S), "robot/r1", int(left[k]), int(right[k]), float(v[k]), float(om[k]))))
+            events.append(
+                (
+                    int(tk * S),
+                    2,
+                    topics.odom("r1"),
+                    WheelOdometry(
+                        int(tk * S),
+                        "robot/r1",
+                        int(left[k]),
+                        int(right[k]),
+                        float(v[k]),
+                        float(om[k]),
+                    ),
+                )
+            )
         # Ground truth at 10 Hz
         for tk in np.arange(0, cfg.duration_s, 0.1):
             ts = np.array([tk])
             ents = (
-                GroundTruthEntity("p1", Vec3(*map(float, person(ts, 0)[0]), 0.0),
-                                  electronic_id=mac, visual_id="v1"),
+                GroundTruthEntity(
+                    "p1",
+                    Vec3(*map(float, person(ts, 0)[0]), 0.0),
+                    electronic_id=mac,
+                    visual_id="v1",
+                ),
                 GroundTruthEntity("p2", Vec3(*map(float, person(ts, 1)[0]), 0.0), visual_id="v2"),
                 GroundTruthEntity("r1", Vec3(*map(float, robot(ts)[0]), 0.0)),
             )
-            events.append((int(round(tk * 10)) * S // 10, 3, topics.GROUND_TRUTH,
-                           GroundTruth(int(round(tk * 10)) * S // 10, ents)))
+            events.append(
+                (
+                    int(round(tk * 10)) * S // 10,
+                    3,
+                    topics.GROUND_TRUTH,
+                    GroundTruth(int(round(tk * 10)) * S // 10, ents),
+                )
+            )
         # Camera frames + detections
         for tk in np.arange(0, cfg.duration_s, 1.0 / cfg.fps):
             t_ns = int(round(tk * S))
             ts = np.array([tk])
             people = [(person(ts, 0)[0], (40, 60, 200)), (person(ts, 1)[0], (200, 80, 40))]
             jpeg, boxes = _render(cam, people, rng, cfg)
-            events.append((t_ns, 4, topics.image("cam0"),
-                           make_compressed_image(t_ns, "cam0", jpeg, "jpeg")))
+            events.append(
+                (t_ns, 4, topics.image("cam0"), make_compressed_image(t_ns, "cam0", jpeg, "jpeg"))
+            )
             dets = []
             for (pxy, _), box, vid in zip(people, boxes, ("v1", "v2"), strict=False):
                 if rng.random() < 0.05:
                     continue  # miss
                 # per-axis sigma so the mean 2-D error (Rayleigh mean) is det_noise_m
                 err = rng.normal(0, cfg.det_noise_m / math.sqrt(math.pi / 2), 2)
-                dets.append(Detection(box, round(float(rng.uniform(0.6, 0.99)), 3), "person",
-                                      Vec3(float(pxy[0] + err[0]), float(pxy[1] + err[1]), 0.0),
-                                      vid))
-            events.append((t_ns, 5, topics.detections("cam0"), Detections(t_ns, "cam0",
-                                                                         tuple(dets))))
+                dets.append(
+                    Detection(
+                        box,
+                        round(float(rng.uniform(0.6, 0.99)), 3),
+                        "person",
+                        Vec3(float(pxy[0] + err[0]), float(pxy[1] + err[1]), 0.0),
+                        vid,
+                    )
+                )
+            events.append(
+                (t_ns, 5, topics.detections("cam0"), Detections(t_ns, "cam0", tuple(dets)))
+            )
         events.sort(key=lambda e: (e[0], e[1]))
         for t_ns, _, topic, msg in events:
             put(w, topic, msg, t_ns)

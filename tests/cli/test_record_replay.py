@@ -1,0 +1,245 @@
+"""Acceptance paths of record / info / replay, through real subprocesses (as pipelines call us)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import run_cli, trackctl_exe
+from trackctl.logs import LogReader
+
+
+def _info(path: Path) -> dict:
+    proc = run_cli("info", str(path), "--json", check=True)
+    return json.loads(proc.stdout)
+
+
+@pytest.fixture
+def recorded(
+    tmp_path: Path, imu_csv: Path, rssi_csv: Path, odom_csv: Path, video_mp4: Path, calib_yaml: Path
+) -> Path:
+    out = tmp_path / "r.mcap"
+    run_cli(
+        "record",
+        str(out),
+        "--imu",
+        f"phone1={imu_csv}",
+        "--rssi",
+        str(rssi_csv),
+        "--odom",
+        f"robot1={odom_csv}",
+        "--video",
+        f"cam0={video_mp4}",
+        "--calib",
+        f"cam0={calib_yaml}",
+        "--quiet",
+        check=True,
+    )
+    return out
+
+
+def test_record_then_info_lists_every_topic_with_counts(recorded: Path) -> None:
+    info = _info(recorded)
+    counts = {t: v["count"] for t, v in info["topics"].items()}
+    assert counts == {
+        "/phone/phone1/imu": 50,
+        "/rssi": 20,
+        "/robot/robot1/odom": 40,
+        "/cam0/image": 12,
+        "/cam0/calibration": 1,
+        "/cam0/camera_model": 1,
+    }
+    assert info["topics"]["/cam0/image"]["schema"] == "foxglove.CompressedImage"
+    assert info["topics"]["/cam0/image"]["encoding"] == "protobuf"
+    assert info["topics"]["/phone/phone1/imu"]["rate_hz"] == pytest.approx(5.0)
+    assert info["start_ns"] == 0 and info["end_ns"] == 9_800_000_000
+    assert info["warnings"] == []
+    assert "calibration/cam0.yaml" in info["attachments"]
+
+
+def test_replay_jsonl_piped_into_record_reproduces_the_log(recorded: Path, tmp_path: Path) -> None:
+    copy = tmp_path / "r2.mcap"
+    replay = subprocess.Popen(
+        [*trackctl_exe(), "replay", str(recorded), "--speed", "0", "--format", "jsonl"],
+        stdout=subprocess.PIPE,
+    )
+    rec = subprocess.run(
+        [*trackctl_exe(), "record", str(copy), "--stdin", "--quiet"],
+        stdin=replay.stdout,
+        capture_output=True,
+        timeout=120,
+    )
+    replay.stdout.close()  # type: ignore[union-attr]
+    assert replay.wait(timeout=60) == 0
+    assert rec.returncode == 0, rec.stderr.decode()
+    a, b = LogReader(recorded), LogReader(copy)
+    assert {t: (i.schema_name, i.count) for t, i in a.topics().items()} == {
+        t: (i.schema_name, i.count) for t, i in b.topics().items()
+    }
+    for ma, mb in zip(a.messages(), b.messages(), strict=True):
+        assert (ma.topic, ma.log_time_ns, ma.message) == (mb.topic, mb.log_time_ns, mb.message)
+
+
+def test_replay_filters_topics_and_time(recorded: Path) -> None:
+    proc = run_cli(
+        "replay",
+        str(recorded),
+        "--speed",
+        "0",
+        "--topics",
+        "/rssi,/cam0/image",
+        "--start",
+        "0.5",
+        "--end",
+        "4",
+        check=True,
+    )
+    lines = [json.loads(x) for x in proc.stdout.splitlines()]
+    assert {x["topic"] for x in lines} == {"/rssi", "/cam0/image"}
+    assert all(0.5e9 <= x["log_time_ns"] < 4e9 for x in lines)
+    assert len([x for x in lines if x["topic"] == "/rssi"]) == 6  # 2 observers x t=1,2,3
+    assert len([x for x in lines if x["topic"] == "/cam0/image"]) == 7  # frames 5..11 at 10 fps
+    img = next(x for x in lines if x["topic"] == "/cam0/image")
+    assert img["schema"] == "foxglove.CompressedImage" and img["message"]["format"] == "jpeg"
+    assert set(img) == {"topic", "log_time_ns", "schema", "message"}
+
+
+def test_replay_is_paced_by_speed(recorded: Path) -> None:
+    # the RSSI topic spans 9 s of log time; at speed 30 that is ~0.3 s of wall time
+    start = time.monotonic()
+    run_cli("replay", str(recorded), "--topics", "/rssi", "--speed", "30", check=True)
+    assert time.monotonic() - start >= 0.3
+
+
+def test_replay_table_format(recorded: Path) -> None:
+    proc = run_cli("replay", str(recorded), "--speed", "0", "--format", "table", check=True)
+    text = proc.stdout.decode()
+    assert "/phone/phone1/imu" in text and "50" in text
+
+
+def test_replay_sends_udp_datagrams(recorded: Path) -> None:
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(5)
+    port = sock.getsockname()[1]
+    run_cli(
+        "replay",
+        str(recorded),
+        "--speed",
+        "0",
+        "--topics",
+        "/rssi",
+        "--udp",
+        f"127.0.0.1:{port}",
+        check=True,
+    )
+    got = [json.loads(sock.recv(65535)) for _ in range(20)]
+    sock.close()
+    assert {g["topic"] for g in got} == {"/rssi"}
+
+
+def _wait_listening(proc: subprocess.Popen[bytes]) -> int:
+    line = proc.stderr.readline().decode()  # type: ignore[union-attr]
+    assert line.startswith("listening on udp"), line
+    return int(line.strip().rsplit(":", 1)[1])
+
+
+def test_udp_record_stopped_by_sigint_keeps_every_message(tmp_path: Path) -> None:
+    out = tmp_path / "live.mcap"
+    proc = subprocess.Popen(
+        [*trackctl_exe(), "record", str(out), "--udp", "0"],
+        stderr=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+    )
+    try:
+        port = _wait_listening(proc)
+        sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        n = 300
+        for i in range(n):
+            msg = {
+                "topic": "/phone/p1/imu",
+                "log_time_ns": i * 10_000_000,
+                "schema": "trackctl.Imu",
+                "message": {
+                    "timestamp": {"sec": 0, "nsec": i * 10_000_000},
+                    "frame_id": "phone/p1",
+                    "accel_mps2": {"x": 0, "y": 0, "z": 9.8},
+                    "gyro_rps": {"x": 0, "y": 0, "z": i * 0.001},
+                },
+            }
+            sender.sendto(json.dumps(msg).encode(), ("127.0.0.1", port))
+            if i % 50 == 0:
+                time.sleep(0.01)
+        # two lines in one datagram, one of them bad: the bad one is rejected, the other kept
+        sender.sendto(
+            b'{"topic":"/rssi","schema":"trackctl.RssiScan","log_time_ns":5,'
+            b'"message":{"timestamp":{"sec":0,"nsec":5},"observer":"ap","readings":[]}}'
+            b"\nnot json\n",
+            ("127.0.0.1", port),
+        )
+        sender.close()
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err.decode()
+    assert "rejected" in err.decode()
+    info = _info(out)
+    assert info["topics"]["/phone/p1/imu"]["count"] == n
+    assert info["topics"]["/rssi"]["count"] == 1
+    assert info["warnings"] == []
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_stdin_record_stopped_by_sigterm_is_valid(tmp_path: Path) -> None:
+    out = tmp_path / "live.mcap"
+    proc = subprocess.Popen(
+        [*trackctl_exe(), "record", str(out), "--stdin", "--quiet"],
+        stdin=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    line = json.dumps(
+        {
+            "topic": "/robot/r/odom",
+            "log_time_ns": 1,
+            "schema": "trackctl.WheelOdometry",
+            "message": {
+                "timestamp": {"sec": 0, "nsec": 1},
+                "frame_id": "robot/r",
+                "v_mps": 0.5,
+                "omega_rps": 0.0,
+            },
+        }
+    )
+    proc.stdin.write((line + "\n").encode() * 5)  # type: ignore[union-attr]
+    proc.stdin.flush()  # type: ignore[union-attr]
+    time.sleep(1.0)
+    os.kill(proc.pid, signal.SIGTERM)
+    proc.wait(timeout=30)
+    assert proc.returncode == 0
+    assert _info(out)["topics"]["/robot/r/odom"]["count"] == 5
+
+
+def test_truncated_log_info_and_replay_warn_and_succeed(sample_log: Path, tmp_path: Path) -> None:
+    data = sample_log.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: int(len(data) * 0.6)])
+    info = run_cli("info", str(cut), "--json")
+    assert info.returncode == 0
+    obj = json.loads(info.stdout)
+    assert obj["truncated"] and obj["message_count"] > 0
+    assert any("log ends early" in w for w in obj["warnings"])
+    assert b"warning:" in info.stderr
+    replay = run_cli("replay", str(cut), "--speed", "0")
+    assert replay.returncode == 0
+    assert b"warning:" in replay.stderr
+    assert len(replay.stdout.splitlines()) == obj["message_count"]
