@@ -1,4 +1,4 @@
-"""Getting data into MCAP: CSV sensors, video, calibration, live JSON lines (``trackctl record``)."""
+"""Getting data into MCAP: CSV sensors, video, calibration, live JSON lines (`record`)."""
 
 from trackctl.ingest.calibration import read_calibration, to_foxglove_calibration
 from trackctl.ingest.record import LiveStats, RecordConfig, record_files, record_live

@@ -238,7 +238,7 @@ def read_rssi_csv(path: str | Path) -> Iterator[RssiScan]:
 
 
 def read_odometry_csv(path: str | Path, name: str) -> Iterator[WheelOdometry]:
-    """Wheel odometry from ticks (``left_ticks,right_ticks``) or velocities (``v_mps,omega_rps``)."""
+    """Wheel odometry from ticks (``left_ticks,right_ticks``) or ``v_mps,omega_rps``."""
     path = Path(path)
     check = _TimeCheck(path)
     line = 2

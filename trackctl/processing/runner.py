@@ -37,7 +37,7 @@ def copy_log(reader: LogReader, writer: LogWriter, progress: Progress | None = N
 
 
 def store_report(writer: LogWriter, report: MetricReport) -> None:
-    """Write a report as a ``/metrics/<processor>`` message and as ``metrics/<processor>`` metadata."""
+    """Store a report as a ``/metrics/<processor>`` message and ``metrics/<processor>`` metadata."""
     clean = replace(
         report, metrics=jsonable_metrics(report.metrics), params=jsonable_metrics(report.params)
     )

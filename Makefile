@@ -1,0 +1,11 @@
+# Convenience targets; each is one documented command.
+.PHONY: sample-logs test bench
+
+sample-logs:  ## regenerate the shipped sample logs (deterministic: same bytes every time)
+	trackctl simulate demo --out sample_logs/demo.mcap --seed 0 --duration 20
+
+test:
+	pytest -q
+
+bench:
+	python benchmarks/replay_throughput.py

@@ -1,0 +1,24 @@
+"""Project contract: CI runs the README's test command; required top-level layout exists."""
+
+from __future__ import annotations
+
+from tests.conftest import ROOT
+
+
+def test_ci_runs_the_readme_test_command() -> None:
+    readme = (ROOT / "README.md").read_text()
+    ci = (ROOT / ".ci" / "run").read_text()
+    command = "pip install -e '.[dev]' && pytest -q"
+    assert command in readme
+    assert command in ci
+
+
+def test_required_top_level_layout() -> None:
+    for name in ("pyproject.toml", "trackctl", "formats", "sample_logs", "tests", "docs",
+                 "README.md", ".ci/run"):
+        assert (ROOT / name).exists(), name
+
+
+def test_sample_logs_stay_small() -> None:
+    total = sum(p.stat().st_size for p in (ROOT / "sample_logs").glob("*.mcap"))
+    assert total < 5 * 1024 * 1024
