@@ -120,7 +120,9 @@ def record(
     # SIGTERM (a supervisor stopping us) ends a live recording like Ctrl-C: with a valid log.
     previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
-        with LogWriter(out, inputs=inputs, compression=compression) as writer:
+        # Live logs use smaller chunks: a recorder killed with SIGKILL loses at most one chunk.
+        chunk = 256 * 1024 if (stdin or source is not None) else 1 << 20
+        with LogWriter(out, inputs=inputs, compression=compression, chunk_size=chunk) as writer:
             if not cfg.empty:
                 with progress("recording files", quiet) as bar:
                     counts.update(record_files(writer, cfg, lambda n: bar(n, None)))

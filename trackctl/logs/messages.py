@@ -15,7 +15,6 @@ codec in :mod:`trackctl.logs.codecs` adds the bytes layer.
 from __future__ import annotations
 
 import enum
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, NamedTuple
@@ -126,12 +125,6 @@ class Transform(NamedTuple):
 def _opt(obj: Mapping[str, Any], key: str, conv: Any) -> Any:
     value = obj.get(key)
     return None if value is None else conv(value)
-
-
-def _finite(name: str, values: Any) -> None:
-    for v in values:
-        if isinstance(v, float) and not math.isfinite(v):
-            raise ValueError(f"{name}: {v} is not a finite number")
 
 
 @dataclass(frozen=True, slots=True)

@@ -10,6 +10,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
 from trackctl.errors import InputError
+from trackctl.logs import topics
 from trackctl.logs.messages import MetricReport, MetricValue
 from trackctl.logs.reader import LogReader
 
@@ -99,7 +100,7 @@ def failed_conditions(
 
 def report_topic(processor: str) -> str:
     """Topic a processor's report is published on."""
-    return f"/metrics/{processor}"
+    return topics.metrics(processor)
 
 
 def jsonable_metrics(metrics: Mapping[str, MetricValue]) -> dict[str, MetricValue]:
