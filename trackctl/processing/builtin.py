@@ -1,4 +1,4 @@
-"""Processors that need no system: log health checks."""
+"""Processors that need no system: log health checks and wheel dead reckoning."""
 
 from __future__ import annotations
 
@@ -6,12 +6,15 @@ import math
 from collections import defaultdict
 from dataclasses import dataclass, field
 
-from trackctl.logs.messages import MetricReport
+from trackctl.geometry.odometry import DiffDrive, integrate_step
+from trackctl.logs import topics
+from trackctl.logs.foxglove import pose_in_frame
+from trackctl.logs.messages import MetricReport, WheelOdometry
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import ProcessorInfo, Progress, register_processor
 
-__all__ = ["CheckProcessor", "CheckConfig"]
+__all__ = ["CheckProcessor", "CheckConfig", "DeadReckoningProcessor", "DeadReckoningConfig"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,5 +113,137 @@ register_processor(
         name="check",
         description="Log health: non-monotonic stamps, NaN/inf values, gaps, undecodable messages",
         factory=CheckProcessor,
+    )
+)
+
+
+@dataclass(frozen=True, slots=True)
+class DeadReckoningConfig:
+    """Options of the ``dead-reckoning`` processor."""
+
+    drive: DiffDrive = field(default_factory=DiffDrive)
+    prefer_ticks: bool = False
+    """Integrate encoder ticks even when the robot also reports v/omega."""
+
+
+class DeadReckoningProcessor:
+    """Wheel-odometry dead reckoning of every ``/robot/<NAME>/odom`` topic.
+
+    Writes ``/robot/<NAME>/dead_reckoning`` (foxglove.PoseInFrame, frame ``world``). The start pose
+    is the robot's first ground-truth pose when the log has one (``/ground_truth`` entity NAME),
+    else the origin; against ground truth it reports the position error, which grows with
+    distance because nothing corrects the drift (S-Mirror and BridgeLoc add the fixes).
+    Wheel geometry comes from metadata ``robot/<NAME>`` (``ticks_per_m``, ``wheel_base_m``) when
+    present, else from the configuration.
+    """
+
+    name = "dead-reckoning"
+
+    def __init__(self, config: DeadReckoningConfig | None = None) -> None:
+        self.config = config or DeadReckoningConfig()
+
+    def run(
+        self, reader: LogReader, writer: LogWriter, progress: Progress | None = None
+    ) -> MetricReport:
+        odom_topics = sorted(
+            t
+            for t, info in reader.topics().items()
+            if info.schema_name == WheelOdometry.SCHEMA and t.startswith("/robot/")
+        )
+        if not odom_topics:
+            reader.require([topics.odom("<NAME>")], self.name, "wheel odometry to integrate")
+        robots = {t.split("/")[2]: t for t in odom_topics}
+        truth = self._truth(reader, set(robots))
+        metadata = reader.metadata()
+        errors: list[float] = []
+        path_m = 0.0
+        poses = 0
+        state: dict[str, tuple[float, float, float, int, WheelOdometry]] = {}
+        for msg in reader.messages(odom_topics):
+            name = msg.topic.split("/")[2]
+            odo: WheelOdometry = msg.message
+            prev = state.get(name)
+            if prev is None:
+                start = truth.get(name, {}).get("start", (0.0, 0.0, 0.0))
+                x, y, yaw = start
+            else:
+                x, y, yaw, t_prev, last = prev
+                ds, dyaw = self._motion(name, last, odo, (msg.log_time_ns - t_prev) / 1e9, metadata)
+                path_m += abs(ds)
+                x, y, yaw = integrate_step(x, y, yaw, ds, dyaw)
+            state[name] = (x, y, yaw, msg.log_time_ns, odo)
+            writer.write(
+                f"/robot/{name}/dead_reckoning",
+                pose_in_frame(msg.log_time_ns, x, y, yaw),
+                msg.log_time_ns,
+            )
+            poses += 1
+            gt = truth.get(name, {}).get("track")
+            if gt is not None:
+                ref = gt.get(msg.log_time_ns)
+                if ref is not None:
+                    errors.append(math.hypot(x - ref[0], y - ref[1]))
+        metrics: dict[str, float | int | None] = {
+            "robots": len(robots),
+            "poses": poses,
+            "path_m": round(path_m, 4),
+            "error_m_mean": round(sum(errors) / len(errors), 4) if errors else None,
+            "error_m_max": round(max(errors), 4) if errors else None,
+            "error_m_final": round(errors[-1], 4) if errors else None,
+        }
+        return MetricReport(
+            t_ns=reader.end_ns or 0,
+            processor=self.name,
+            metrics=metrics,
+            params={
+                "ticks_per_m": self.config.drive.ticks_per_m,
+                "wheel_base_m": self.config.drive.wheel_base_m,
+            },
+        )
+
+    def _motion(
+        self,
+        name: str,
+        last: WheelOdometry,
+        odo: WheelOdometry,
+        dt: float,
+        metadata: dict[str, dict[str, str]],
+    ) -> tuple[float, float]:
+        has_ticks = odo.left_ticks is not None and last.left_ticks is not None
+        has_vel = odo.v_mps is not None and last.v_mps is not None
+        if has_ticks and (self.config.prefer_ticks or not has_vel):
+            md = metadata.get(f"robot/{name}", {})
+            drive = DiffDrive(
+                float(md.get("ticks_per_m", self.config.drive.ticks_per_m)),
+                float(md.get("wheel_base_m", self.config.drive.wheel_base_m)),
+            )
+            return drive.motion_from_ticks(
+                odo.left_ticks - last.left_ticks,  # type: ignore[operator]
+                odo.right_ticks - last.right_ticks,  # type: ignore[operator]
+            )
+        # velocities held over the interval (the sample at its start)
+        return last.v_mps * dt, last.omega_rps * dt  # type: ignore[operator]
+
+    @staticmethod
+    def _truth(reader: LogReader, names: set[str]) -> dict[str, dict]:
+        if topics.GROUND_TRUTH not in reader.topics():
+            return {}
+        out: dict[str, dict] = {}
+        for msg in reader.messages([topics.GROUND_TRUTH]):
+            for ent in msg.message.entities:
+                if ent.entity_id not in names:
+                    continue
+                entry = out.setdefault(ent.entity_id, {"track": {}})
+                if "start" not in entry:
+                    entry["start"] = (ent.position_m.x, ent.position_m.y, ent.yaw_rad or 0.0)
+                entry["track"][msg.log_time_ns] = (ent.position_m.x, ent.position_m.y)
+        return out
+
+
+register_processor(
+    ProcessorInfo(
+        name="dead-reckoning",
+        description="Wheel dead reckoning of each robot -> /robot/NAME/dead_reckoning poses",
+        factory=DeadReckoningProcessor,
     )
 )

@@ -132,6 +132,11 @@ def _render(
     return buf.tobytes(), boxes
 
 
+def _heading(path: object, t: float, eps: float = 1e-3) -> float:
+    a, b = path(np.array([t - eps, t + eps]))  # type: ignore[operator]
+    return float(math.atan2(b[1] - a[1], b[0] - a[0]))
+
+
 def simulate_demo(out: str, cfg: DemoConfig | None = None) -> dict[str, int]:
     """Write the demo log to ``out``; returns message counts per topic."""
     cfg = cfg or DemoConfig()
@@ -164,6 +169,7 @@ def simulate_demo(out: str, cfg: DemoConfig | None = None) -> dict[str, int]:
                 "field": "office 6x5 m",
             },
         )
+        w.add_metadata("robot/r1", {"ticks_per_m": ticks_per_m, "wheel_base_m": wheel_base})
         put(w, topics.calibration("cam0"), to_foxglove_calibration(model), 0)
         put(w, topics.camera_model("cam0"), model)
         events: list[tuple[int, int, str, object]] = []
@@ -235,8 +241,6 @@ def simulate_demo(out: str, cfg: DemoConfig | None = None) -> dict[str, int]:
                         "robot/r1",
                         int(left[k]),
                         int(right[k]),
-                        float(v[k]),
-                        float(om[k]),
                     ),
                 )
             )
@@ -251,7 +255,9 @@ def simulate_demo(out: str, cfg: DemoConfig | None = None) -> dict[str, int]:
                     visual_id="v1",
                 ),
                 GroundTruthEntity("p2", Vec3(*map(float, person(ts, 1)[0]), 0.0), visual_id="v2"),
-                GroundTruthEntity("r1", Vec3(*map(float, robot(ts)[0]), 0.0)),
+                GroundTruthEntity(
+                    "r1", Vec3(*map(float, robot(ts)[0]), 0.0), yaw_rad=_heading(robot, tk)
+                ),
             )
             events.append(
                 (
