@@ -25,11 +25,42 @@ class CheckConfig:
     """A gap counts when it exceeds this many times the topic's median period."""
 
 
+_MEDIAN_WINDOW = 256
+
+
 @dataclass
 class _TopicState:
+    """Per-topic state with bounded memory: the median period is fixed from the first
+    ``_MEDIAN_WINDOW`` periods; later periods are judged against it as they come."""
+
     last_stamp: int | None = None
     last_log: int | None = None
-    periods: list[int] = field(default_factory=list)
+    first_periods: list[int] = field(default_factory=list)
+    median: int | None = None
+    gaps: int = 0
+    max_period: int = 0
+
+    def add_period(self, period: int, factor: float) -> None:
+        self.max_period = max(self.max_period, period)
+        if self.median is None:
+            self.first_periods.append(period)
+            if len(self.first_periods) >= _MEDIAN_WINDOW:
+                self._settle(factor)
+        elif self.median > 0 and period > factor * self.median:
+            self.gaps += 1
+
+    def _settle(self, factor: float) -> None:
+        ordered = sorted(self.first_periods)
+        self.median = ordered[len(ordered) // 2]
+        self.gaps += sum(
+            1 for p in self.first_periods if self.median > 0 and p > factor * self.median
+        )
+        self.first_periods = []
+
+    def finish(self, factor: float) -> int:
+        if self.median is None and len(self.first_periods) >= 3:
+            self._settle(factor)
+        return self.gaps
 
 
 class CheckProcessor:
@@ -57,7 +88,7 @@ class CheckProcessor:
                 progress(messages, total)
             st = states[raw.topic]
             if st.last_log is not None:
-                st.periods.append(raw.log_time_ns - st.last_log)
+                st.add_period(raw.log_time_ns - st.last_log, self.config.gap_factor)
             st.last_log = raw.log_time_ns
             try:
                 msg = reader.codec(raw).decode(raw.data)
@@ -80,15 +111,8 @@ class CheckProcessor:
                     if not math.isfinite(value):
                         nonfinite += 1
                         first_problem = first_problem or f"{raw.topic}: {key} = {value}"
-        gaps = 0
-        max_gap_s = 0.0
-        for st in states.values():
-            if len(st.periods) < 3:
-                continue
-            periods = sorted(st.periods)
-            median = periods[len(periods) // 2]
-            gaps += sum(1 for p in st.periods if median > 0 and p > self.config.gap_factor * median)
-            max_gap_s = max(max_gap_s, periods[-1] / 1e9)
+        gaps = sum(st.finish(self.config.gap_factor) for st in states.values())
+        max_gap_s = max((st.max_period for st in states.values()), default=0) / 1e9
         return MetricReport(
             t_ns=reader.end_ns or 0,
             processor=self.name,
@@ -153,24 +177,41 @@ class DeadReckoningProcessor:
         if not odom_topics:
             reader.require([topics.odom("<NAME>")], self.name, "wheel odometry to integrate")
         robots = {t.split("/")[2]: t for t in odom_topics}
-        truth = self._truth(reader, set(robots))
+        has_truth = topics.GROUND_TRUTH in reader.topics()
+        starts = self._start_poses(reader, set(robots)) if has_truth else {}
         metadata = reader.metadata()
-        errors: list[float] = []
+        errors = _ErrorStats()
         path_m = 0.0
         poses = 0
         state: dict[str, tuple[float, float, float, int, WheelOdometry]] = {}
-        for msg in reader.messages(odom_topics):
+        # Ground-truth samples wait (a few at a time) for the dead-reckoned poses around them.
+        pending: dict[str, list[tuple[int, float, float]]] = {name: [] for name in robots}
+        stream = reader.messages(odom_topics + ([topics.GROUND_TRUTH] if has_truth else []))
+        for msg in stream:
+            if msg.topic == topics.GROUND_TRUTH:
+                for ent in msg.message.entities:
+                    if ent.entity_id not in pending:
+                        continue
+                    gt = (msg.log_time_ns, ent.position_m.x, ent.position_m.y)
+                    latest = state.get(ent.entity_id)
+                    if latest is not None and latest[3] >= msg.log_time_ns:
+                        # same stamp as the pose already integrated (log-time order)
+                        errors.add(math.hypot(latest[0] - gt[1], latest[1] - gt[2]))
+                    else:
+                        pending[ent.entity_id].append(gt)
+                continue
             name = msg.topic.split("/")[2]
             odo: WheelOdometry = msg.message
             prev = state.get(name)
             if prev is None:
-                start = truth.get(name, {}).get("start", (0.0, 0.0, 0.0))
-                x, y, yaw = start
+                x, y, yaw = starts.get(name, (0.0, 0.0, 0.0))
+                pending[name] = [g for g in pending[name] if g[0] >= msg.log_time_ns]
             else:
                 x, y, yaw, t_prev, last = prev
                 ds, dyaw = self._motion(name, last, odo, (msg.log_time_ns - t_prev) / 1e9, metadata)
                 path_m += abs(ds)
                 x, y, yaw = integrate_step(x, y, yaw, ds, dyaw)
+            self._score(pending[name], prev, (msg.log_time_ns, x, y), errors)
             state[name] = (x, y, yaw, msg.log_time_ns, odo)
             writer.write(
                 f"/robot/{name}/dead_reckoning",
@@ -178,18 +219,15 @@ class DeadReckoningProcessor:
                 msg.log_time_ns,
             )
             poses += 1
-            gt = truth.get(name, {}).get("track")
-            if gt is not None:
-                ref = gt.get(msg.log_time_ns)
-                if ref is not None:
-                    errors.append(math.hypot(x - ref[0], y - ref[1]))
+            if progress is not None and poses % 5000 == 0:
+                progress(poses, None)
         metrics: dict[str, float | int | None] = {
             "robots": len(robots),
             "poses": poses,
             "path_m": round(path_m, 4),
-            "error_m_mean": round(sum(errors) / len(errors), 4) if errors else None,
-            "error_m_max": round(max(errors), 4) if errors else None,
-            "error_m_final": round(errors[-1], 4) if errors else None,
+            "error_m_mean": errors.mean(),
+            "error_m_max": None if errors.n == 0 else round(errors.max, 4),
+            "error_m_final": None if errors.n == 0 else round(errors.last, 4),
         }
         return MetricReport(
             t_ns=reader.end_ns or 0,
@@ -225,19 +263,53 @@ class DeadReckoningProcessor:
         return last.v_mps * dt, last.omega_rps * dt  # type: ignore[operator]
 
     @staticmethod
-    def _truth(reader: LogReader, names: set[str]) -> dict[str, dict]:
-        if topics.GROUND_TRUTH not in reader.topics():
-            return {}
-        out: dict[str, dict] = {}
+    def _score(
+        waiting: list[tuple[int, float, float]],
+        prev: tuple[float, float, float, int, WheelOdometry] | None,
+        now: tuple[int, float, float],
+        errors: _ErrorStats,
+    ) -> None:
+        """Score ground-truth samples that fall between the previous and the current pose."""
+        t1, x1, y1 = now
+        while waiting and waiting[0][0] <= t1:
+            t_gt, gx, gy = waiting.pop(0)
+            if prev is None or t1 == prev[3]:
+                x, y = x1, y1
+            else:
+                a = (t_gt - prev[3]) / (t1 - prev[3])
+                x, y = prev[0] + a * (x1 - prev[0]), prev[1] + a * (y1 - prev[1])
+            errors.add(math.hypot(x - gx, y - gy))
+
+    @staticmethod
+    def _start_poses(reader: LogReader, names: set[str]) -> dict[str, tuple[float, float, float]]:
+        """First ground-truth pose of each robot (stops reading once all are found)."""
+        out: dict[str, tuple[float, float, float]] = {}
         for msg in reader.messages([topics.GROUND_TRUTH]):
             for ent in msg.message.entities:
-                if ent.entity_id not in names:
-                    continue
-                entry = out.setdefault(ent.entity_id, {"track": {}})
-                if "start" not in entry:
-                    entry["start"] = (ent.position_m.x, ent.position_m.y, ent.yaw_rad or 0.0)
-                entry["track"][msg.log_time_ns] = (ent.position_m.x, ent.position_m.y)
+                if ent.entity_id in names and ent.entity_id not in out:
+                    out[ent.entity_id] = (ent.position_m.x, ent.position_m.y, ent.yaw_rad or 0.0)
+            if len(out) == len(names):
+                break
         return out
+
+
+@dataclass
+class _ErrorStats:
+    """Running error statistics (constant memory)."""
+
+    n: int = 0
+    total: float = 0.0
+    max: float = 0.0
+    last: float = 0.0
+
+    def add(self, err: float) -> None:
+        self.n += 1
+        self.total += err
+        self.max = max(self.max, err)
+        self.last = err
+
+    def mean(self) -> float | None:
+        return None if self.n == 0 else round(self.total / self.n, 4)
 
 
 register_processor(
