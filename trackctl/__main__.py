@@ -1,0 +1,5 @@
+"""``python -m trackctl``."""
+
+from trackctl.cli.main import main
+
+main()
