@@ -14,8 +14,16 @@ def test_ci_runs_the_readme_test_command() -> None:
 
 
 def test_required_top_level_layout() -> None:
-    for name in ("pyproject.toml", "trackctl", "formats", "sample_logs", "tests", "docs",
-                 "README.md", ".ci/run"):
+    for name in (
+        "pyproject.toml",
+        "trackctl",
+        "formats",
+        "sample_logs",
+        "tests",
+        "docs",
+        "README.md",
+        ".ci/run",
+    ):
         assert (ROOT / name).exists(), name
 
 

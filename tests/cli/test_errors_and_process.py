@@ -45,8 +45,12 @@ def test_not_an_mcap(tmp_path: Path) -> None:
 
 def test_unknown_schema_on_stdin_is_rejected_and_others_kept(tmp_path: Path) -> None:
     out = tmp_path / "o.mcap"
-    good = {"topic": "/x", "log_time_ns": 1, "schema": "trackctl.MetricReport",
-            "message": {"timestamp": {"sec": 0, "nsec": 1}, "processor": "p", "metrics": {}}}
+    good = {
+        "topic": "/x",
+        "log_time_ns": 1,
+        "schema": "trackctl.MetricReport",
+        "message": {"timestamp": {"sec": 0, "nsec": 1}, "processor": "p", "metrics": {}},
+    }
     bad = dict(good, schema="acme.Thing")
     data = (json.dumps(bad) + "\n" + json.dumps(good) + "\n").encode()
     proc = run_cli("record", str(out), "--stdin", input=data)
@@ -108,8 +112,9 @@ def test_output_equal_to_input_is_refused(sample_log: Path, tmp_path: Path) -> N
 
 
 def test_unknown_processor(sample_log: Path, tmp_path: Path) -> None:
-    code, _, err = _cli("process", str(sample_log), "--with", "nope", "--out",
-                        str(tmp_path / "o.mcap"))
+    code, _, err = _cli(
+        "process", str(sample_log), "--with", "nope", "--out", str(tmp_path / "o.mcap")
+    )
     assert code == 2
     _one_line_error(err, "unknown processor 'nope'", "check")
 
@@ -122,8 +127,9 @@ def test_bad_named_option(tmp_path: Path) -> None:
 
 def test_process_check_writes_input_plus_report(sample_log: Path, tmp_path: Path) -> None:
     out = tmp_path / "checked.mcap"
-    proc = run_cli("process", str(sample_log), "--with", "check", "--out", str(out), "--json",
-                   check=True)
+    proc = run_cli(
+        "process", str(sample_log), "--with", "check", "--out", str(out), "--json", check=True
+    )
     obj = json.loads(proc.stdout)
     rep = obj["reports"][0]
     assert rep["processor"] == "check"
@@ -140,8 +146,17 @@ def test_process_check_writes_input_plus_report(sample_log: Path, tmp_path: Path
 
 def test_process_chain_and_fail_if(sample_log: Path, tmp_path: Path) -> None:
     out = tmp_path / "o.mcap"
-    ok = run_cli("process", str(sample_log), "--with", "check,check", "--out", str(out),
-                 "--fail-if", "nonfinite_values>0", "--json")
+    ok = run_cli(
+        "process",
+        str(sample_log),
+        "--with",
+        "check,check",
+        "--out",
+        str(out),
+        "--fail-if",
+        "nonfinite_values>0",
+        "--json",
+    )
     assert ok.returncode == 0, ok.stderr.decode()
     assert len(json.loads(ok.stdout)["reports"]) == 2
     gate = run_cli("report", str(out), "--fail-if", "messages>=100")
@@ -171,8 +186,17 @@ def test_check_finds_nan_written_by_a_foreign_tool(tmp_path: Path) -> None:
         w.add_message(cid, 0, json.dumps(good).encode(), 0)
         w.add_message(cid, 1, json.dumps(bad).encode(), 1)
         w.finish()
-    proc = run_cli("process", str(path), "--with", "check", "--out", str(tmp_path / "o.mcap"),
-                   "--json", "--fail-if", "nonfinite_values>0")
+    proc = run_cli(
+        "process",
+        str(path),
+        "--with",
+        "check",
+        "--out",
+        str(tmp_path / "o.mcap"),
+        "--json",
+        "--fail-if",
+        "nonfinite_values>0",
+    )
     assert proc.returncode == 1
     metrics = json.loads(proc.stdout)["reports"][0]["metrics"]
     assert metrics["nonfinite_values"] == 1
@@ -195,16 +219,19 @@ def test_report_on_a_log_without_reports(sample_log: Path) -> None:
 
 
 # -- smoke: every command on the sample log, in-process through Typer's runner -------------
-@pytest.mark.parametrize("args", [
-    ["info", "{log}"],
-    ["info", "{log}", "--json"],
-    ["replay", "{log}", "--speed", "0", "--topics", "/rssi"],
-    ["replay", "{log}", "--speed", "0", "--format", "table", "--topics", "/rssi"],
-    ["process", "--list"],
-    ["process", "{log}", "--with", "check", "--out", "{tmp}/o.mcap", "--quiet"],
-    ["simulate", "demo", "--out", "{tmp}/d.mcap", "--duration", "2"],
-    ["--version"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["info", "{log}"],
+        ["info", "{log}", "--json"],
+        ["replay", "{log}", "--speed", "0", "--topics", "/rssi"],
+        ["replay", "{log}", "--speed", "0", "--format", "table", "--topics", "/rssi"],
+        ["process", "--list"],
+        ["process", "{log}", "--with", "check", "--out", "{tmp}/o.mcap", "--quiet"],
+        ["simulate", "demo", "--out", "{tmp}/d.mcap", "--duration", "2"],
+        ["--version"],
+    ],
+)
 def test_commands_in_process(args: list[str], sample_log: Path, tmp_path: Path) -> None:
     argv = [a.format(log=sample_log, tmp=tmp_path) for a in args]
     result = runner.invoke(app, argv)
@@ -212,9 +239,11 @@ def test_commands_in_process(args: list[str], sample_log: Path, tmp_path: Path) 
 
 
 def test_json_options_print_exactly_one_object(sample_log: Path, tmp_path: Path) -> None:
-    for argv in (["info", str(sample_log), "--json"], ["process", "--list", "--json"],
-                 ["simulate", "demo", "--out", str(tmp_path / "d.mcap"), "--duration", "1",
-                  "--json"]):
+    for argv in (
+        ["info", str(sample_log), "--json"],
+        ["process", "--list", "--json"],
+        ["simulate", "demo", "--out", str(tmp_path / "d.mcap"), "--duration", "1", "--json"],
+    ):
         result = runner.invoke(app, argv)
         assert result.exit_code == 0
         lines = result.stdout.strip().splitlines()
@@ -225,5 +254,3 @@ def test_error_exit_code_in_process(tmp_path: Path) -> None:
     result = runner.invoke(app, ["info", str(tmp_path / "nope.mcap")])
     assert result.exit_code == 2
     assert "no such file" in result.output
-
-

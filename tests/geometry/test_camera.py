@@ -11,21 +11,23 @@ from trackctl.geometry import PinholeCamera, look_at
 from trackctl.logs.messages import CameraModel
 
 
-def _camera(eye: tuple[float, float, float], dist: tuple[float, ...] = (0.0,) * 5
-            ) -> PinholeCamera:
+def _camera(eye: tuple[float, float, float], dist: tuple[float, ...] = (0.0,) * 5) -> PinholeCamera:
     pose = look_at(np.array(eye), np.array([5.0, 4.0, 0.0]))
-    return PinholeCamera(CameraModel(0, "c", 640, 480, 500.0, 500.0, 320.0, 240.0, "plumb_bob",
-                                     dist, pose))
+    return PinholeCamera(
+        CameraModel(0, "c", 640, 480, 500.0, 500.0, 320.0, 240.0, "plumb_bob", dist, pose)
+    )
 
 
 @settings(max_examples=60, deadline=None)
 @given(
-    x=st.floats(2.0, 9.0), y=st.floats(1.0, 8.0),
+    x=st.floats(2.0, 9.0),
+    y=st.floats(1.0, 8.0),
     eye=st.tuples(st.floats(-2, 0), st.floats(-2, 0), st.floats(2.0, 5.0)),
     k1=st.floats(-0.05, 0.05),
 )
-def test_ground_point_inverts_projection(x: float, y: float, eye: tuple[float, float, float],
-                                         k1: float) -> None:
+def test_ground_point_inverts_projection(
+    x: float, y: float, eye: tuple[float, float, float], k1: float
+) -> None:
     cam = _camera(eye, (k1, 0.0, 0.0, 0.0, 0.0))
     world = np.array([[x, y, 0.0]])
     px, front = cam.project(world)

@@ -34,7 +34,8 @@ def assert_plain_decodable(path: Path) -> dict[str, int]:
                 validator = validators.get(schema.id)
                 if validator is None:
                     validator = validators[schema.id] = jsonschema.Draft202012Validator(
-                        json.loads(schema.data))
+                        json.loads(schema.data)
+                    )
                 validator.validate(json.loads(message.data))
             if channel.topic.endswith("/image"):
                 assert schema.name == "foxglove.CompressedImage"
@@ -50,19 +51,33 @@ def test_sample_log(sample_log: Path) -> None:
 @pytest.mark.parametrize("processors", ["check", "dead-reckoning"])
 def test_processor_outputs(sample_log: Path, tmp_path: Path, processors: str) -> None:
     out = tmp_path / "o.mcap"
-    run_cli("process", str(sample_log), "--with", processors, "--out", str(out), "--quiet",
-            check=True)
+    run_cli(
+        "process", str(sample_log), "--with", processors, "--out", str(out), "--quiet", check=True
+    )
     counts = assert_plain_decodable(out)
     assert counts["trackctl.MetricReport"] == 1
     if processors == "dead-reckoning":
         assert counts["foxglove.PoseInFrame"] == 500
 
 
-def test_recorded_log(tmp_path: Path, imu_csv: Path, rssi_csv: Path, odom_csv: Path,
-                      video_mp4: Path, calib_yaml: Path) -> None:
+def test_recorded_log(
+    tmp_path: Path, imu_csv: Path, rssi_csv: Path, odom_csv: Path, video_mp4: Path, calib_yaml: Path
+) -> None:
     out = tmp_path / "r.mcap"
-    run_cli("record", str(out), "--imu", f"p={imu_csv}", "--rssi", str(rssi_csv), "--odom",
-            f"r={odom_csv}", "--video", f"cam0={video_mp4}", "--calib", f"cam0={calib_yaml}",
-            check=True)
+    run_cli(
+        "record",
+        str(out),
+        "--imu",
+        f"p={imu_csv}",
+        "--rssi",
+        str(rssi_csv),
+        "--odom",
+        f"r={odom_csv}",
+        "--video",
+        f"cam0={video_mp4}",
+        "--calib",
+        f"cam0={calib_yaml}",
+        check=True,
+    )
     counts = assert_plain_decodable(out)
     assert counts["foxglove.CameraCalibration"] == 1 and counts["trackctl.CameraModel"] == 1

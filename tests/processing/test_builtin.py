@@ -56,8 +56,12 @@ def _straight_log(path: Path, with_metadata: bool) -> None:
             t = k * 100_000_000
             # 0.1 m per step at 500 ticks/m = 50 ticks per wheel
             w.write("/robot/r1/odom", WheelOdometry(t, "robot/r1", 50 * k, 50 * k))
-            w.write("/ground_truth", GroundTruth(t, (
-                GroundTruthEntity("r1", Vec3(1.0 + 0.1 * k, 2.0, 0.0), yaw_rad=0.0),)))
+            w.write(
+                "/ground_truth",
+                GroundTruth(
+                    t, (GroundTruthEntity("r1", Vec3(1.0 + 0.1 * k, 2.0, 0.0), yaw_rad=0.0),)
+                ),
+            )
 
 
 def test_dead_reckoning_uses_log_geometry_and_ground_truth_start(tmp_path: Path) -> None:
@@ -82,8 +86,16 @@ def test_dead_reckoning_default_geometry_differs(tmp_path: Path) -> None:
 
 
 def test_dead_reckoning_on_sample_log_drifts(sample_log: Path, tmp_path: Path) -> None:
-    proc = run_cli("process", str(sample_log), "--with", "dead-reckoning", "--out",
-                   str(tmp_path / "o.mcap"), "--json", check=True)
+    proc = run_cli(
+        "process",
+        str(sample_log),
+        "--with",
+        "dead-reckoning",
+        "--out",
+        str(tmp_path / "o.mcap"),
+        "--json",
+        check=True,
+    )
     m = json.loads(proc.stdout)["reports"][0]["metrics"]
     assert m["robots"] == 1 and m["path_m"] > 3.0
     # 1% opposite wheel-scale errors: drift is visible but bounded over ~4 m
@@ -94,8 +106,9 @@ def test_dead_reckoning_without_odometry_names_the_missing_topic(tmp_path: Path)
     src = tmp_path / "imu_only.mcap"
     with LogWriter(src) as w:
         w.write("/phone/p1/imu", Imu(0, "phone/p1", Vec3(0, 0, 9.8), Vec3(0, 0, 0)))
-    proc = run_cli("process", str(src), "--with", "dead-reckoning", "--out",
-                   str(tmp_path / "o.mcap"))
+    proc = run_cli(
+        "process", str(src), "--with", "dead-reckoning", "--out", str(tmp_path / "o.mcap")
+    )
     assert proc.returncode == 2
     lines = proc.stderr.decode().strip().splitlines()
     assert len(lines) == 1

@@ -21,14 +21,22 @@ def test_shipped_sample_log_is_regenerable(sample_log: Path, tmp_path: Path) -> 
     fresh = tmp_path / "demo.mcap"
     simulate_demo(str(fresh), DemoConfig())
     assert fresh.read_bytes() == sample_log.read_bytes(), (
-        "sample_logs/demo.mcap is stale: regenerate with `make sample-logs`")
+        "sample_logs/demo.mcap is stale: regenerate with `make sample-logs`"
+    )
 
 
 def test_demo_has_every_format(sample_log: Path) -> None:
     schemas = {t.schema_name for t in LogReader(sample_log).topics().values()}
-    assert {"trackctl.Imu", "trackctl.RssiScan", "trackctl.WheelOdometry", "trackctl.Detections",
-            "trackctl.GroundTruth", "trackctl.CameraModel", "foxglove.CompressedImage",
-            "foxglove.CameraCalibration"} <= schemas
+    assert {
+        "trackctl.Imu",
+        "trackctl.RssiScan",
+        "trackctl.WheelOdometry",
+        "trackctl.Detections",
+        "trackctl.GroundTruth",
+        "trackctl.CameraModel",
+        "foxglove.CompressedImage",
+        "foxglove.CameraCalibration",
+    } <= schemas
 
 
 def test_detection_ground_error_matches_configured_mean(sample_log: Path) -> None:

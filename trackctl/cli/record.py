@@ -118,7 +118,10 @@ def record(
     if udp is not None:
         source = UdpSource(udp)
     # SIGTERM (a supervisor stopping us) ends a live recording like Ctrl-C: with a valid log.
+    # SIGINT too, explicitly: a shell starts background jobs with SIGINT ignored, and then
+    # `kill -INT` would not stop the recording.
     previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         # Live logs use smaller chunks: a recorder killed with SIGKILL loses at most one chunk.
         chunk = 256 * 1024 if (stdin or source is not None) else 1 << 20
@@ -142,6 +145,7 @@ def record(
                 rejected, interrupted = stats.rejected, stats.interrupted
     finally:
         signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)
         if source is not None:
             source.close()
     summary = {

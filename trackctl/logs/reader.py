@@ -187,9 +187,14 @@ class LogReader:
                 yield schemas.get(channel.schema_id), channel, record
         if end.reason != "end":
             partial = (
-                f", {end.partial_chunk_messages} of them from the cut-off last chunk"
+                f", {end.partial_chunk_messages} of them recovered from the cut-off chunk"
                 if end.partial_chunk_messages
                 else ""
+            )
+            size = self.path.stat().st_size
+            self._warn(
+                f"{self.path}: log is cut at byte {size}, {end.reason} starting at byte "
+                f"{end.offset}; read {count} messages{partial}; the rest is lost"
             )
             self._warn(
                 f"{self.path}: log ends early at byte {end.offset} ({end.reason}); "

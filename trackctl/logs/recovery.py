@@ -22,6 +22,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 __all__ = ["scan_damaged", "ScanEnd"]
 
 _HEAD = struct.Struct("<BQ")
+_NAMES = {int(op): op.name.lower() for op in Opcode}
 _MAGIC_LEN = 8
 
 
@@ -79,12 +80,12 @@ def scan_damaged(f: IO[bytes], end: ScanEnd) -> Iterator[Any]:
         start = f.tell()
         head = f.read(_HEAD.size)
         if len(head) < _HEAD.size:
-            end.offset, end.reason = start, "end of file inside a record header" if head else "end"
+            end.offset, end.reason = start, "inside a record header" if head else "end"
             return
         opcode, length = _HEAD.unpack(head)
         body = f.read(length)
         if len(body) < length:
-            end.offset, end.reason = start, f"end of file inside a record (opcode {opcode:#x})"
+            end.offset, end.reason = start, f"inside a {_NAMES.get(opcode, hex(opcode))} record"
             if opcode == Opcode.CHUNK:
                 for record in _partial_chunk(body):
                     if isinstance(record, Message):
