@@ -196,10 +196,6 @@ class LogReader:
                 f"{self.path}: log is cut at byte {size}, {end.reason} starting at byte "
                 f"{end.offset}; read {count} messages{partial}; the rest is lost"
             )
-            self._warn(
-                f"{self.path}: log ends early at byte {end.offset} ({end.reason}); "
-                f"read {count} messages before the damage{partial}, the rest is lost"
-            )
 
     def raw(
         self,
