@@ -212,7 +212,7 @@ def test_udp_record_stopped_by_sigint_keeps_every_message(
 def test_stdin_record_stopped_by_sigterm_is_valid(tmp_path: Path) -> None:
     out = tmp_path / "live.mcap"
     proc = subprocess.Popen(
-        [*trackctl_exe(), "record", str(out), "--stdin", "--quiet"],
+        [*trackctl_exe(), "record", str(out), "--stdin"],
         stdin=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
@@ -231,7 +231,9 @@ def test_stdin_record_stopped_by_sigterm_is_valid(tmp_path: Path) -> None:
     )
     proc.stdin.write((line + "\n").encode() * 5)  # type: ignore[union-attr]
     proc.stdin.flush()  # type: ignore[union-attr]
-    time.sleep(1.0)
+    ready = proc.stderr.readline().decode()  # type: ignore[union-attr]
+    assert ready.startswith("recording JSON lines from stdin"), ready
+    time.sleep(0.5)
     os.kill(proc.pid, signal.SIGTERM)
     proc.wait(timeout=30)
     assert proc.returncode == 0

@@ -6,7 +6,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated
 
-import pandas as pd
 import typer
 from rich.console import Console
 from rich.table import Table
@@ -89,6 +88,8 @@ def report(
             "run a processor on it first"
         )
     if csv is not None:
+        import pandas as pd  # only for --csv
+
         rows = [{"processor": r.processor, "t_ns": r.t_ns, **dict(r.metrics)} for r in reports]
         pd.DataFrame(rows).to_csv(csv, index=False)
     if json_out:

@@ -12,7 +12,6 @@ import typer
 
 from trackctl.cli.common import print_json, progress, stderr
 from trackctl.errors import InputError
-from trackctl.ingest.record import RecordConfig, UdpSource, parse_named, record_files, record_live
 from trackctl.logs.writer import COMPRESSIONS, LogWriter
 
 
@@ -91,6 +90,15 @@ def record(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress or notes.")] = False,
 ) -> None:
     """Ingest video, calibration, IMU/RSSI/odometry CSV or live JSON lines into an MCAP log."""
+    # Imported here: OpenCV/pandas/SciPy cost ~0.5 s and other commands do not need them.
+    from trackctl.ingest.record import (
+        RecordConfig,
+        UdpSource,
+        parse_named,
+        record_files,
+        record_live,
+    )
+
     cfg = RecordConfig(
         imu=parse_named(imu or [], "--imu"),
         rssi=tuple(rssi or ()),
@@ -114,7 +122,7 @@ def record(
     counts: Counter[str] = Counter()
     rejected = 0
     interrupted = False
-    source: UdpSource | None = None
+    source = None
     if udp is not None:
         source = UdpSource(udp)
     # SIGTERM (a supervisor stopping us) ends a live recording like Ctrl-C: with a valid log.
@@ -135,11 +143,13 @@ def record(
                     if not quiet:
                         stderr.print(f"[yellow]rejected:[/] {msg}", markup=True)
 
+                # The ready line goes out even with --quiet: with --udp 0 it carries the port.
                 if source is not None:
-                    if not quiet or not json_out:
-                        stderr.print(f"listening on udp {source.address[0]}:{source.address[1]}")
+                    stderr.print(f"listening on udp {source.address[0]}:{source.address[1]}")
                     stats = record_live(writer, source, reject, drain=source.drain)
                 else:
+                    if not quiet:
+                        stderr.print("recording JSON lines from stdin until EOF or Ctrl-C")
                     stats = record_live(writer, _stdin_lines(), reject)
                 counts.update(stats.counts)
                 rejected, interrupted = stats.rejected, stats.interrupted

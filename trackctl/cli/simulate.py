@@ -8,7 +8,6 @@ from typing import Annotated
 import typer
 
 from trackctl.cli.common import print_json, stderr
-from trackctl.sim.demo import DemoConfig, simulate_demo
 
 simulate_app = typer.Typer(help="Generate scenario logs with ground truth.", no_args_is_help=True)
 
@@ -22,6 +21,8 @@ def demo(
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
     """A small office scene using every trackctl format (the shipped sample log)."""
+    from trackctl.sim.demo import DemoConfig, simulate_demo
+
     counts = simulate_demo(str(out), DemoConfig(duration_s=duration, seed=seed))
     if json_out:
         print_json({"out": str(out), "topics": counts})
