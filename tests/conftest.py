@@ -105,3 +105,28 @@ def calib_yaml(tmp_path: Path) -> Path:
 def sample_log() -> Path:
     assert SAMPLE_LOG.exists(), "sample_logs/demo.mcap missing: run `make sample-logs`"
     return SAMPLE_LOG
+
+
+@pytest.fixture
+def recorded(  # noqa: PLR0913 - one fixture per source file
+    tmp_path: Path, imu_csv: Path, rssi_csv: Path, odom_csv: Path, video_mp4: Path, calib_yaml: Path
+) -> Path:
+    out = tmp_path / "r.mcap"
+    run_cli(
+        "record",
+        str(out),
+        "--imu",
+        f"phone1={imu_csv}",
+        "--rssi",
+        str(rssi_csv),
+        "--odom",
+        f"robot1={odom_csv}",
+        "--video",
+        f"cam0={video_mp4}",
+        "--calib",
+        f"cam0={calib_yaml}",
+        "--quiet",
+        check=True,
+    )
+    """A log recorded from every file source (IMU, RSSI, odometry, video + calibration)."""
+    return out

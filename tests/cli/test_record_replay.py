@@ -21,30 +21,6 @@ def _info(path: Path) -> dict:
     return json.loads(proc.stdout)
 
 
-@pytest.fixture
-def recorded(
-    tmp_path: Path, imu_csv: Path, rssi_csv: Path, odom_csv: Path, video_mp4: Path, calib_yaml: Path
-) -> Path:
-    out = tmp_path / "r.mcap"
-    run_cli(
-        "record",
-        str(out),
-        "--imu",
-        f"phone1={imu_csv}",
-        "--rssi",
-        str(rssi_csv),
-        "--odom",
-        f"robot1={odom_csv}",
-        "--video",
-        f"cam0={video_mp4}",
-        "--calib",
-        f"cam0={calib_yaml}",
-        "--quiet",
-        check=True,
-    )
-    return out
-
-
 def test_record_then_info_lists_every_topic_with_counts(recorded: Path) -> None:
     info = _info(recorded)
     counts = {t: v["count"] for t, v in info["topics"].items()}
