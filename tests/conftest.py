@@ -108,7 +108,7 @@ def sample_log() -> Path:
 
 
 @pytest.fixture
-def recorded(  # noqa: PLR0913 - one fixture per source file
+def recorded(
     tmp_path: Path, imu_csv: Path, rssi_csv: Path, odom_csv: Path, video_mp4: Path, calib_yaml: Path
 ) -> Path:
     out = tmp_path / "r.mcap"
