@@ -1,0 +1,379 @@
+"""VM-Tracking scenarios: people walking under calibrated cameras, some carrying phones.
+
+Sensor models (documented in docs/vmtrack.md):
+
+* cameras at ``fps`` (3): pinhole 640x480, mounted 3.5 m high on a grid over the field with small
+  overlaps; a person is detected when foot and head are in the image, unless a nearer person's
+  box covers more than half of theirs (occlusion) or the detector misses (``miss_rate``); the
+  ground point carries a 2-D Gaussian error whose mean length is ``det_noise_m`` (0.35 m, the
+  paper's visual noise); false positives appear with probability ``fp_rate`` per camera frame;
+* phones at ``imu_hz`` (5): specific force in a device frame that yaws with the walking direction
+  (gravity + horizontal acceleration + a vertical step bounce at cadence speed / 0.7 m), gyro with
+  bias, and a rotation-vector orientation whose yaw drifts as a random walk; white noise on all;
+* check-point APs at the entries: RSSI of every phone at 1 Hz, log-distance path loss
+  (-40 dBm at 1 m, exponent 2.5) with 3 dB shadowing;
+* ground truth at every frame time: position and the phone MAC (EID) of each person.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from trackctl.errors import InputError
+from trackctl.geometry.camera import PinholeCamera, look_at
+from trackctl.ingest.calibration import to_foxglove_calibration
+from trackctl.logs import topics
+from trackctl.logs.messages import (
+    BBox,
+    CameraModel,
+    Detection,
+    Detections,
+    GroundTruth,
+    GroundTruthEntity,
+    Imu,
+    Quat,
+    RssiReading,
+    RssiScan,
+    Vec3,
+)
+from trackctl.logs.writer import LogWriter
+from trackctl.sim.walkers import Trajectory, load_trajectories_csv, random_waypoint
+
+__all__ = ["VmScenario", "simulate_vm", "FIELDS", "mac_of"]
+
+G = 9.80665
+S = 1_000_000_000
+STEP_LENGTH_M = 0.7
+PERSON_HEIGHT_M = 1.7
+PERSON_WIDTH_M = 0.5
+
+FIELDS = {"lobby": ((20.0, 15.0), (3, 2)), "office": ((6.0, 5.0), (2, 1))}
+_MOUNT = {"lobby": (6.0, 0.5, 1.5), "office": (4.0, 1.5, 1.5)}
+
+
+def mac_of(i: int) -> str:
+    """The phone MAC of user ``i``."""
+    return f"02:00:00:00:00:{i + 1:02x}"
+
+
+@dataclass(frozen=True, slots=True)
+class VmScenario:
+    """Parameters of a VM-Tracking scenario."""
+
+    field: str = "lobby"
+    users: int = 5
+    nonusers: int = 2
+    duration_s: float = 60.0
+    speed_mps: tuple[float, float] = (0.5, 1.5)
+    seed: int = 0
+    fps: float = 3.0
+    imu_hz: float = 5.0
+    det_noise_m: float = 0.35
+    miss_rate: float = 0.05
+    fp_rate: float = 0.02
+    heading_drift_deg_per_sqrt_s: float = 0.5
+    trajectories: str | None = None
+    phones: tuple[str, ...] = ()
+    size_m: tuple[float, float] | None = None
+    cameras_grid: tuple[int, int] | None = None
+
+    def __post_init__(self) -> None:
+        if self.field not in FIELDS:
+            raise InputError(f"--field {self.field!r}: expected one of {', '.join(FIELDS)}")
+        if self.users < 0 or self.nonusers < 0:
+            raise InputError("--users and --nonusers must be >= 0")
+        if self.duration_s <= 0:
+            raise InputError(f"--duration must be positive, got {self.duration_s}")
+
+
+def _cameras(
+    size: tuple[float, float],
+    grid: tuple[int, int],
+    height_m: float = 6.0,
+    back_m: float = 0.5,
+    zoom_out: float = 1.5,
+    width: int = 640,
+    height: int = 480,
+) -> list[CameraModel]:
+    """One camera per grid tile, mounted ``back_m`` outside the field edge nearest its tile at
+    ``height_m``, looking at the tile centre; the field of view spans ``zoom_out`` tiles, which
+    covers the field with small overlaps (lobby: full coverage, about a third seen twice)."""
+    nx, ny = grid
+    tw, th = size[0] / nx, size[1] / ny
+    out = []
+    for j in range(ny):
+        for i in range(nx):
+            cx, cy = (i + 0.5) * tw, (j + 0.5) * th
+            edge_y = -back_m if (j == 0 or ny == 1) else size[1] + back_m
+            eye = np.array([cx, edge_y, height_m])
+            target = np.array([cx, cy, 0.0])
+            depth = float(np.linalg.norm(target - eye))
+            f = 0.5 * width * depth / (0.5 * max(tw, 0.9 * th) * zoom_out)
+            out.append(
+                CameraModel(
+                    0,
+                    f"cam{len(out)}",
+                    width,
+                    height,
+                    f,
+                    f,
+                    width / 2,
+                    height / 2,
+                    "plumb_bob",
+                    (0.0,) * 5,
+                    look_at(eye, target),
+                )
+            )
+    return out
+
+
+def _person_box(cam: PinholeCamera, xy: np.ndarray) -> tuple[BBox, float] | None:
+    """Image box of a person standing at ``xy`` and its depth, or None when not fully visible."""
+    foot = np.array([xy[0], xy[1], 0.0])
+    head = np.array([xy[0], xy[1], PERSON_HEIGHT_M])
+    px, front = cam.project(np.stack([foot, head]))
+    if not front.all():
+        return None
+    (fx, fy), (hx, hy) = px
+    depth = float(cam.to_camera(foot[None])[0, 2])
+    h = fy - hy
+    w = h * PERSON_WIDTH_M / PERSON_HEIGHT_M
+    box = BBox(float(fx - w / 2), float(hy), float(w), float(h))
+    m = cam.model
+    if box.x_px < 0 or box.y_px < 0 or box.x_px + box.w_px > m.width_px or fy > m.height_px:
+        return None
+    return box, depth
+
+
+def _overlap(a: BBox, b: BBox) -> float:
+    """Share of ``a``'s area covered by ``b``."""
+    ix = max(0.0, min(a.x_px + a.w_px, b.x_px + b.w_px) - max(a.x_px, b.x_px))
+    iy = max(0.0, min(a.y_px + a.h_px, b.y_px + b.h_px) - max(a.y_px, b.y_px))
+    return ix * iy / max(a.w_px * a.h_px, 1e-9)
+
+
+def _people(
+    cfg: VmScenario, rng: np.random.Generator, size: tuple[float, float]
+) -> tuple[list[Trajectory], dict[str, str]]:
+    if cfg.trajectories:
+        trajs = load_trajectories_csv(cfg.trajectories)
+        known = {t.person for t in trajs}
+        for p in cfg.phones:
+            if p not in known:
+                raise InputError(f"--phones: no trajectory with id {p!r} in {cfg.trajectories}")
+        phones = {p: mac_of(i) for i, p in enumerate(cfg.phones)}
+        return trajs, phones
+    trajs = []
+    phones = {}
+    for i in range(cfg.users + cfg.nonusers):
+        name = f"u{i}" if i < cfg.users else f"n{i - cfg.users}"
+        trajs.append(random_waypoint(name, rng, size, cfg.duration_s, speed_range=cfg.speed_mps))
+        if i < cfg.users:
+            phones[name] = mac_of(i)
+    return trajs, phones
+
+
+def _imu_samples(
+    traj: Trajectory, mac: str, t_grid: np.ndarray, rng: np.random.Generator, cfg: VmScenario
+) -> list[Imu]:
+    """IMU of the phone carried along ``traj`` at times ``t_grid`` (inside the trajectory)."""
+    vel = traj.velocity()
+    acc = np.gradient(vel, traj.dt_s, axis=0)
+    speed = np.linalg.norm(vel, axis=1)
+    heading = np.arctan2(vel[:, 1], vel[:, 0])
+    # keep the last heading while standing still
+    moving = speed > 0.1
+    for k in range(1, len(heading)):
+        if not moving[k]:
+            heading[k] = heading[k - 1]
+    heading = np.unwrap(heading)
+    yaw_rate = np.gradient(heading, traj.dt_s)
+    # step phase: cadence = speed / step length
+    phase = 2 * math.pi * np.cumsum(speed / STEP_LENGTH_M) * traj.dt_s
+    idx = np.clip(np.round((t_grid - traj.t0_s) / traj.dt_s).astype(int), 0, len(traj.xy) - 1)
+    drift_sigma = math.radians(cfg.heading_drift_deg_per_sqrt_s) * math.sqrt(1.0 / cfg.imu_hz)
+    drift = np.cumsum(rng.normal(0, drift_sigma, len(t_grid)))
+    gyro_bias = rng.normal(0, 0.01, 3)
+    out = []
+    frame = f"phone/{mac}"
+    for k, i in enumerate(idx):
+        yaw_dev = heading[i] + drift[k]
+        rot = Rotation.from_euler("z", yaw_dev)
+        bounce = 1.5 * min(speed[i], 1.5) * math.sin(phase[i])
+        f_world = np.array([acc[i, 0], acc[i, 1], G + bounce])
+        f_dev = rot.inv().apply(f_world) + rng.normal(0, 0.15, 3)
+        gyro = np.array([0.0, 0.0, yaw_rate[i]]) + gyro_bias + rng.normal(0, 0.02, 3)
+        q = rot.as_quat()
+        t_ns = int(round(t_grid[k] * S))
+        out.append(
+            Imu(
+                t_ns, frame, Vec3(*map(float, f_dev)), Vec3(*map(float, gyro)), Quat(*map(float, q))
+            )
+        )
+    return out
+
+
+def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
+    """Write a VM-Tracking scenario log to ``out``; returns message counts per topic."""
+    rng = np.random.default_rng(cfg.seed)
+    size, grid = FIELDS[cfg.field]
+    if cfg.size_m is not None:
+        size = cfg.size_m
+    if cfg.cameras_grid is not None:
+        grid = cfg.cameras_grid
+    trajs, phones = _people(cfg, rng, size)
+    if cfg.trajectories:
+        allxy = np.vstack([t.xy for t in trajs])
+        lo, hi = allxy.min(axis=0) - 1.0, allxy.max(axis=0) + 1.0
+        offset = -lo
+        trajs = [replace(t, xy=t.xy + offset) for t in trajs]
+        size = tuple(float(v) for v in (hi - lo))  # type: ignore[assignment]
+        grid = (max(1, round(size[0] / 7)), 2 if size[1] > 8 else 1)
+    t_end = max(t.t0_s + t.dt_s * (len(t.xy) - 1) for t in trajs)
+    duration = min(cfg.duration_s, t_end) if cfg.trajectories else cfg.duration_s
+    models = _cameras(size, grid, *_MOUNT[cfg.field])
+    cams = [PinholeCamera(m) for m in models]
+    aps = [
+        ("ap-entry-0", np.array([0.3, size[1] / 2])),
+        ("ap-entry-1", np.array([size[0] - 0.3, size[1] / 2])),
+    ]
+    if cfg.field == "office" and not cfg.trajectories:
+        aps = aps[:1]
+    counts: dict[str, int] = {}
+    events: list[tuple[int, int, str, object]] = []
+    frame_times = np.arange(0.0, duration, 1.0 / cfg.fps)
+    sigma = cfg.det_noise_m / math.sqrt(math.pi / 2)
+    for t in frame_times:
+        t_ns = int(round(t * S))
+        pos = {tr.person: tr.at(t)[0] for tr in trajs}
+        present = {p: xy for p, xy in pos.items() if not np.isnan(xy).any()}
+        events.append(
+            (
+                t_ns,
+                9,
+                topics.GROUND_TRUTH,
+                GroundTruth(
+                    t_ns,
+                    tuple(
+                        GroundTruthEntity(
+                            p,
+                            Vec3(float(xy[0]), float(xy[1]), 0.0),
+                            electronic_id=phones.get(p),
+                            visual_id=p,
+                        )
+                        for p, xy in sorted(present.items())
+                    ),
+                ),
+            )
+        )
+        for cam in cams:
+            seen = []
+            for p, xy in present.items():
+                box = _person_box(cam, xy)
+                if box is not None:
+                    seen.append((box[1], p, xy, box[0]))
+            seen.sort()
+            dets = []
+            for k, (_, p, xy, box) in enumerate(seen):
+                if any(_overlap(box, seen[j][3]) > 0.5 for j in range(k)):
+                    continue  # occluded by a nearer person
+                if rng.random() < cfg.miss_rate:
+                    continue
+                err = rng.normal(0, sigma, 2)
+                dets.append(
+                    Detection(
+                        box,
+                        round(float(rng.uniform(0.5, 1.0)), 3),
+                        "person",
+                        Vec3(float(xy[0] + err[0]), float(xy[1] + err[1]), 0.0),
+                    )
+                )
+            if rng.random() < cfg.fp_rate:
+                fx, fy = (
+                    rng.uniform(0.1, 0.9) * cam.model.width_px,
+                    rng.uniform(0.5, 0.95) * cam.model.height_px,
+                )
+                g = cam.ground_point(np.array([[fx, fy]]))[0]
+                if not np.isnan(g).any():
+                    dets.append(
+                        Detection(
+                            BBox(float(fx) - 10, float(fy) - 60, 20.0, 60.0),
+                            round(float(rng.uniform(0.3, 0.6)), 3),
+                            "person",
+                            Vec3(float(g[0]), float(g[1]), 0.0),
+                        )
+                    )
+            events.append(
+                (
+                    t_ns,
+                    5,
+                    topics.detections(cam.model.camera),
+                    Detections(t_ns, cam.model.camera, tuple(dets)),
+                )
+            )
+    for tr in trajs:
+        mac = phones.get(tr.person)
+        if mac is None:
+            continue
+        t0 = max(tr.t0_s, 0.0)
+        t1 = min(tr.t0_s + tr.dt_s * (len(tr.xy) - 1), duration)
+        grid_t = np.arange(math.ceil(t0 * cfg.imu_hz) / cfg.imu_hz, t1, 1.0 / cfg.imu_hz)
+        for imu in _imu_samples(tr, mac, grid_t, rng, cfg):
+            events.append((imu.t_ns, 1, topics.imu(mac.replace(":", "")), imu))
+    for t in np.arange(0.0, duration, 1.0):
+        t_ns = int(round(t * S))
+        for ap, ap_xy in aps:
+            readings = []
+            for tr in trajs:
+                mac = phones.get(tr.person)
+                xy = tr.at(t)[0]
+                if mac is None or np.isnan(xy).any():
+                    continue
+                d = max(0.3, float(np.hypot(*(xy - ap_xy))))
+                rssi = -40.0 - 25.0 * math.log10(d) + rng.normal(0, 3.0)
+                if rssi > -90:
+                    readings.append(RssiReading(mac, round(rssi, 1)))
+            events.append(
+                (
+                    t_ns,
+                    2,
+                    topics.RSSI,
+                    RssiScan(
+                        t_ns, ap, tuple(readings), Vec3(float(ap_xy[0]), float(ap_xy[1]), 2.0)
+                    ),
+                )
+            )
+    events.sort(key=lambda e: (e[0], e[1], e[2]))
+    with LogWriter(out) as w:
+        w.add_metadata(
+            "scenario",
+            {
+                "generator": "trackctl simulate vm",
+                "field": cfg.field,
+                "seed": cfg.seed,
+                "users": len(phones),
+                "people": len(trajs),
+                "duration_s": duration,
+                "size_m": f"{size[0]:.2f}x{size[1]:.2f}",
+                "det_noise_m": cfg.det_noise_m,
+                "miss_rate": cfg.miss_rate,
+                "fp_rate": cfg.fp_rate,
+                "fps": cfg.fps,
+                "imu_hz": cfg.imu_hz,
+                "trajectories": cfg.trajectories or "random-waypoint",
+            },
+        )
+        w.add_metadata("phones", {mac: person for person, mac in phones.items()})
+        for m in models:
+            w.write(topics.calibration(m.camera), to_foxglove_calibration(m), 0)
+            w.write(topics.camera_model(m.camera), m)
+            counts[topics.calibration(m.camera)] = 1
+            counts[topics.camera_model(m.camera)] = 1
+        for t_ns, _, topic, msg in events:
+            w.write(topic, msg, t_ns)
+            counts[topic] = counts.get(topic, 0) + 1
+    return counts
