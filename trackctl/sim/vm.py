@@ -278,7 +278,7 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
                     seen.append((box[1], p, xy, box[0]))
             seen.sort()
             dets = []
-            for k, (_, p, xy, box) in enumerate(seen):
+            for k, (_, _p, xy, box) in enumerate(seen):
                 if any(_overlap(box, seen[j][3]) > 0.5 for j in range(k)):
                     continue  # occluded by a nearer person
                 if rng.random() < cfg.miss_rate:

@@ -1,0 +1,40 @@
+"""VM-Tracking (dissertation §3.1): people identified by fusing camera detections with their
+phones' motion sensors."""
+
+from trackctl.processing.base import ProcessorInfo, register_processor
+from trackctl.vmtrack.motion import MotionConfig, PhoneMotion
+from trackctl.vmtrack.pipeline import TRACKS_TOPIC, Mode, VmTrackConfig, run
+from trackctl.vmtrack.tracker import TrackerConfig, fused_probability
+
+__all__ = [
+    "TRACKS_TOPIC",
+    "Mode",
+    "MotionConfig",
+    "PhoneMotion",
+    "TrackerConfig",
+    "VmTrackConfig",
+    "VmTrackProcessor",
+    "fused_probability",
+    "run",
+]
+
+
+class VmTrackProcessor:
+    """The ``vm-track`` processor (registry entry of :func:`run`)."""
+
+    name = "vm-track"
+
+    def __init__(self, config: VmTrackConfig | None = None) -> None:
+        self.config = config or VmTrackConfig()
+
+    def run(self, reader, writer, progress=None):  # type: ignore[no-untyped-def]
+        return run(reader, writer, self.config, progress)
+
+
+register_processor(
+    ProcessorInfo(
+        name="vm-track",
+        description="VM-Tracking: identified people tracks from detections + phone IMU (§3.1)",
+        factory=VmTrackProcessor,
+    )
+)
