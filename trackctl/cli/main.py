@@ -11,6 +11,7 @@ from trackctl.cli.process import process, report
 from trackctl.cli.record import record
 from trackctl.cli.replay import replay
 from trackctl.cli.simulate import simulate_app
+from trackctl.cli.vmtrack import simulate_vm, vm_track
 
 app = typer.Typer(
     cls=TrackctlGroup,
@@ -42,6 +43,8 @@ app.command()(record)
 app.command()(replay)
 app.command()(process)
 app.command()(report)
+app.command("vm-track")(vm_track)
+simulate_app.command("vm")(simulate_vm)
 app.add_typer(simulate_app, name="simulate")
 
 

@@ -171,7 +171,7 @@ def run(
         t0 = time.perf_counter()
         stats["frames"] += 1
         dets = merge_detections(points, cfg.merge_m)
-        raw_points[t_ns] = dets
+        raw_points[t_ns] = np.array([xy for _, xy in points]).reshape(-1, 2)
         track_mids = [next((m for m, tr in bound.items() if tr is trk), None) for trk in tracks]
         v_m = [velocity(m, t_ns) if m else None for m in track_mids]
         dts = [(t_ns - trk.t_ns) / 1e9 for trk in tracks]
@@ -282,7 +282,7 @@ def run(
                 stats["losses"] += 1
         # candidate filtering for unbound phones (initialization and loss recovery)
         wants: dict[str, tuple[GroundTrack, float]] = {}
-        for mid, phone in phones.items():
+        for mid in phones:
             if mid in bound:
                 continue
             v = velocity(mid, t_ns)

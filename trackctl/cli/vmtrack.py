@@ -1,0 +1,107 @@
+"""``trackctl vm-track`` and ``trackctl simulate vm``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from trackctl.cli.common import apply_fail_if, print_json, progress, stderr
+from trackctl.cli.process import print_reports
+from trackctl.metrics.report import jsonable_metrics
+
+
+def vm_track(
+    log: Annotated[Path, typer.Argument(help="MCAP log with detections (+ phone IMU, RSSI).")],
+    out: Annotated[Path, typer.Option(help="Output MCAP: input + /vmtrack/tracks + report.")],
+    mode: Annotated[str, typer.Option(help="vm (visual + motion) or v-af (visual only).")] = "vm",
+    smooth: Annotated[
+        bool, typer.Option("--smooth/--no-smooth", help="RTS-smooth every track (offline).")
+    ] = True,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    fail_if: Annotated[
+        str | None,
+        typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "error_m_mean>0.3".'),
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """VM-Tracking: identify and track people by fusing detections with phone motion sensors."""
+    from trackctl.errors import InputError
+    from trackctl.processing import run_processors
+    from trackctl.vmtrack import Mode, VmTrackConfig, VmTrackProcessor
+
+    try:
+        mode_value = Mode(mode)
+    except ValueError:
+        raise InputError(f"--mode {mode!r}: expected vm or v-af") from None
+    proc = VmTrackProcessor(VmTrackConfig(mode=mode_value, smooth=smooth))
+    with progress("vm-track", quiet) as bar:
+        (report,) = run_processors(log, out, [proc], bar)
+    if json_out:
+        print_json(jsonable_metrics(report.metrics))
+    else:
+        print_reports([report])
+    apply_fail_if(fail_if, [report])
+
+
+def simulate_vm(
+    out: Annotated[Path, typer.Option(help="MCAP log to write.")],
+    field: Annotated[
+        str, typer.Option(help="lobby (20x15 m, 6 cameras) or office (6x5 m, 2).")
+    ] = "lobby",
+    users: Annotated[int, typer.Option(help="People carrying a phone.")] = 5,
+    nonusers: Annotated[int, typer.Option(help="People without a phone.")] = 2,
+    duration: Annotated[float, typer.Option(help="Seconds.")] = 60.0,
+    speed: Annotated[
+        str, typer.Option(help="Walking speed m/s: MIN,MAX or one value.")
+    ] = "0.5,1.5",
+    seed: Annotated[int, typer.Option(help="Random seed (same seed, same log).")] = 0,
+    det_noise: Annotated[float, typer.Option(help="Mean ground error of detections, m.")] = 0.35,
+    trajectories: Annotated[
+        Path | None,
+        typer.Option(help="Drive people by a t_s,id,x_m,y_m CSV (or ETH/UCY text) instead."),
+    ] = None,
+    phones: Annotated[
+        str | None,
+        typer.Option(
+            help="With --trajectories: ids of the people who carry a phone, comma-separated."
+        ),
+    ] = None,
+    frames: Annotated[
+        bool, typer.Option("--frames/--no-frames", help="Render camera frames (not yet available).")
+    ] = False,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """People walking under calibrated cameras, some with phones (VM-Tracking scenarios)."""
+    from trackctl.errors import InputError
+    from trackctl.sim.vm import VmScenario
+    from trackctl.sim.vm import simulate_vm as simulate
+
+    if frames:
+        raise InputError(
+            "--frames: rendered frames for VM scenarios are not implemented yet; "
+            "detections are simulated directly (use --no-frames)"
+        )
+    try:
+        parts = [float(x) for x in speed.split(",")]
+    except ValueError:
+        raise InputError(f"--speed {speed!r}: expected MIN,MAX or one number") from None
+    rng = (parts[0], parts[-1])
+    cfg = VmScenario(
+        field=field,
+        users=users,
+        nonusers=nonusers,
+        duration_s=duration,
+        speed_mps=rng,
+        seed=seed,
+        det_noise_m=det_noise,
+        trajectories=str(trajectories) if trajectories else None,
+        phones=tuple(p.strip() for p in (phones or "").split(",") if p.strip()),
+    )
+    counts = simulate(str(out), cfg)
+    if json_out:
+        print_json({"out": str(out), "topics": counts})
+    elif not quiet:
+        stderr.print(f"wrote {sum(counts.values())} messages on {len(counts)} topics to {out}")
