@@ -90,7 +90,7 @@ class _Candidate:
 @dataclass
 class _FrameOut:
     t_ns: int
-    rows: list[tuple[GroundTrack, str, TrackState, int]]  # track, output id, state, history index
+    rows: list[tuple[GroundTrack, str | None, TrackState, int]]  # track, MID now, state, index
 
 
 def _detection_points(reader: LogReader, det_topics: list[str]) -> dict[str, PinholeCamera]:
@@ -217,7 +217,7 @@ def run(
             if trk.state is TrackState.TENTATIVE:
                 continue
             mid = next((m for m, tr in bound.items() if tr is trk), None)
-            out_rows.append((trk, mid or trk.vid, trk.state, len(trk.history)))
+            out_rows.append((trk, mid, trk.state, len(trk.history)))
         frames.append(_FrameOut(t_ns, out_rows))
         t_assoc += time.perf_counter() - t0
 
@@ -241,6 +241,11 @@ def run(
         if doomed:
             tracks[:] = [tr for tr in tracks if id(tr) not in doomed]
 
+    def _bind_track(mid: str, trk: GroundTrack, t_ns: int) -> None:
+        bound[mid] = trk
+        if trk.first_mid is None:
+            trk.first_mid, trk.first_bound_ns = mid, t_ns
+
     def _bind(t_ns: int) -> None:
         free = [
             trk
@@ -262,16 +267,20 @@ def run(
                     trk for trk in free if np.linalg.norm(trk.xy - ap) < cfg.checkpoint_radius_m
                 ]
                 if len(near) == 1:
-                    bound[mid] = near[0]
+                    _bind_track(mid, near[0], t_ns)
                     free.remove(near[0])
                     candidates.pop(mid, None)
                     stats["bindings"] += 1
                     stats["checkpoint_bindings"] += 1
         pending_rssi.clear()
-        # loss detection: a bound track whose motion keeps disagreeing with its phone
+        # loss detection: a bound track whose motion keeps disagreeing with its phone, or whose
+        # phone stopped reporting (its carrier left, or the app was closed)
         for mid, trk in list(bound.items()):
             v = velocity(mid, t_ns)
-            if v is None or trk.last_hit_ns != t_ns:
+            if v is None:
+                del bound[mid]
+                continue
+            if trk.last_hit_ns != t_ns:
                 continue
             hist = disagreement[mid]
             hist.append(float(np.sum((trk.v - v) ** 2)))
@@ -320,7 +329,7 @@ def run(
                 taken[trk.vid] = (mid, score)
         for vid, (mid, _) in taken.items():
             trk = next(t for t in free if t.vid == vid)
-            bound[mid] = trk
+            _bind_track(mid, trk, t_ns)
             candidates.pop(mid, None)
             disagreement[mid].clear()
             stats["bindings"] += 1
@@ -452,7 +461,15 @@ def _write_and_score(
     for fr in frames:
         tracks = []
         hyp: dict[str, tuple[float, float]] = {}
-        for trk, out_id, state, k in fr.rows:
+        for trk, mid_now, state, k in fr.rows:
+            out_id = mid_now or trk.vid
+            if (
+                mid_now is None
+                and trk.first_mid is not None
+                and (fr.t_ns < (trk.first_bound_ns or 0))
+            ):
+                # offline: the identity found later holds from the track's birth
+                out_id = trk.first_mid
             # entry k of a track's history is its state at this frame (snapshotted before the
             # next frame's prediction, or when the log ends)
             xy = positions.get((id(trk), k), trk.xy)

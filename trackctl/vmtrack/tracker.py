@@ -60,6 +60,9 @@ class GroundTrack:
     hits: int = 1
     last_hit_ns: int = 0
     state: TrackState = TrackState.TENTATIVE
+    first_mid: str | None = None
+    """The phone this track was first bound to; offline, it names the track from its birth."""
+    first_bound_ns: int | None = None
     history: list[tuple[int, np.ndarray, np.ndarray, bool]] = field(default_factory=list)
 
     @classmethod
