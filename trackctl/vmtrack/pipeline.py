@@ -94,7 +94,12 @@ class _FrameOut:
 
 
 def _detection_points(reader: LogReader, det_topics: list[str]) -> dict[str, PinholeCamera]:
-    """Cameras needed to place box-only detections on the ground (checked up front)."""
+    """Cameras needed to place box-only detections on the ground (checked up front).
+
+    Raises:
+        MissingTopicError: a detections topic holds boxes without ground points and its camera
+            has no calibrated world pose (``/<camera>/camera_model``).
+    """
     cams: dict[str, PinholeCamera] = {}
     present = reader.topics()
     for topic in det_topics:
@@ -106,6 +111,19 @@ def _detection_points(reader: LogReader, det_topics: list[str]) -> dict[str, Pin
                 if model.world_from_camera is not None:
                     cams[cam] = PinholeCamera(model)
                 break
+        if cam in cams:
+            continue
+        # Fail before any work when the first frame with boxes already needs the calibration.
+        for m in reader.messages([topic]):
+            dets: Detections = m.message
+            if not dets.detections:
+                continue
+            if any(d.ground_m is None for d in dets.detections):
+                raise MissingTopicError(
+                    f"{reader.path}: {model_topic} is missing or has no world pose; vm-track "
+                    f"needs it to place {topic} boxes on the ground"
+                )
+            break
     return cams
 
 
@@ -125,6 +143,7 @@ def run(
             f"{reader.path}: no trackctl.Detections topic (/<camera>/detections); vm-track "
             f"needs person detections. The log has: {', '.join(sorted(present))}"
         )
+    cams = _detection_points(reader, det_topics)
     imu_topics = sorted(t for t, i in present.items() if i.schema_name == Imu.SCHEMA)
     mode = cfg.mode
     if mode is Mode.VM and not imu_topics:
@@ -132,7 +151,6 @@ def run(
             f"{reader.path}: no IMU topic: running as V-AF (visual only)", UserWarning, stacklevel=2
         )
         mode = Mode.V_AF
-    cams = _detection_points(reader, det_topics)
     tcfg = cfg.tracker
 
     # pass 1: phone motion (PDR velocity series per MID)

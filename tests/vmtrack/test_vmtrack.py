@@ -1,0 +1,182 @@
+"""VM-Tracking: fusion formula, PDR, and the pipeline on short simulated scenes."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.conftest import run_cli
+from trackctl.logs import LogReader, LogWriter
+from trackctl.processing import run_processors
+from trackctl.sim.vm import VmScenario, simulate_vm
+from trackctl.vmtrack import Mode, PhoneMotion, VmTrackConfig, VmTrackProcessor, fused_probability
+
+
+def test_fused_probability_is_the_papers_formula() -> None:
+    q, r = np.array([0.5]), np.array([0.2])
+    assert fused_probability(q, r, 1.0, 1.0)[0] == pytest.approx(math.sqrt(0.1))
+    assert fused_probability(q, r, 3.0, 1.0)[0] == pytest.approx(0.5**0.75 * 0.2**0.25)
+
+
+@pytest.fixture(scope="module")
+def office_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("vm") / "office.mcap"
+    simulate_vm(str(path), VmScenario(field="office", users=3, nonusers=1, duration_s=90, seed=5))
+    return path
+
+
+def test_simulation_is_deterministic(tmp_path: Path) -> None:
+    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    for p in (a, b):
+        simulate_vm(str(p), VmScenario(field="office", users=1, nonusers=1, duration_s=5, seed=2))
+    assert a.read_bytes() == b.read_bytes()
+
+
+def test_pdr_velocity_tracks_the_true_velocity(office_log: Path) -> None:
+    reader = LogReader(office_log)
+    phones: dict[str, PhoneMotion] = {}
+    for m in reader.messages([t for t in reader.topics() if t.startswith("/phone/")]):
+        mid = m.message.frame_id.split("/", 1)[1]
+        phones.setdefault(mid, PhoneMotion(mid)).add(m.message)
+    rows: dict[str, list[tuple[int, float, float]]] = {}
+    for m in reader.messages(["/ground_truth"]):
+        for e in m.message.entities:
+            if e.electronic_id:
+                rows.setdefault(e.electronic_id, []).append(
+                    (m.log_time_ns, e.position_m.x, e.position_m.y)
+                )
+    errs = []
+    for mid, pm in phones.items():
+        pm.finish()
+        a = np.array(rows[mid])
+        v_true = np.gradient(a[:, 1:], a[:, 0] / 1e9, axis=0)
+        est = np.array([pm.velocity_at(int(t)) for t in a[:, 0]])
+        errs.append(np.median(np.linalg.norm(est - v_true, axis=1)))
+    assert max(errs) < 0.2
+
+
+def test_vm_identifies_users_better_than_v_af(office_log: Path, tmp_path: Path) -> None:
+    (vm,) = run_processors(office_log, tmp_path / "vm.mcap", [VmTrackProcessor()])
+    (vaf,) = run_processors(
+        office_log, tmp_path / "vaf.mcap", [VmTrackProcessor(VmTrackConfig(mode=Mode.V_AF))]
+    )
+    m = vm.metrics
+    assert m["system"] == "vm-tracking" and m["mode"] == "vm" and m["users"] == 3
+    assert 0.25 < m["det_error_m_mean"] < 0.45
+    assert m["error_m_mean"] < m["det_error_m_mean"]  # fusion + smoothing beat the raw noise
+    assert m["idf1"] > 0.85
+    assert m["idf1"] > vaf.metrics["idf1"] + 0.1
+    tracks = [x.message for x in LogReader(tmp_path / "vm.mcap").messages(["/vmtrack/tracks"])]
+    assert len(tracks) == m["frames"]
+    ids = {t.track_id for msg in tracks for t in msg.tracks}
+    assert {"02:00:00:00:00:01", "02:00:00:00:00:02", "02:00:00:00:00:03"} <= ids
+
+
+def _lines_csv(path: Path, gap_m: float, duration_s: float = 60.0) -> None:
+    rows = ["t_s,id,x_m,y_m"]
+    for k in range(int(duration_s / 0.1)):
+        t = k * 0.1
+        ph = t % 12.0
+        x = ph if ph < 6 else 12 - ph
+        rows += [f"{t:.2f},1,{x:.3f},0.0", f"{t:.2f},2,{6 - x:.3f},{gap_m}"]
+    path.write_text("\n".join(rows) + "\n")
+
+
+def test_two_users_on_close_lines_keep_their_identities(tmp_path: Path) -> None:
+    csv = tmp_path / "lines.csv"
+    _lines_csv(csv, 0.6)
+    log = tmp_path / "lines.mcap"
+    simulate_vm(
+        str(log), VmScenario(trajectories=str(csv), phones=("1", "2"), duration_s=60, seed=3)
+    )
+    (rep,) = run_processors(log, tmp_path / "out.mcap", [VmTrackProcessor()])
+    assert rep.metrics["error_m_mean"] <= 0.6
+    assert rep.metrics["id_switches"] == 0
+    assert rep.metrics["idf1"] > 0.9
+
+
+def test_cli_json_report_keys(office_log: Path, tmp_path: Path) -> None:
+    proc = run_cli(
+        "vm-track",
+        str(office_log),
+        "--out",
+        str(tmp_path / "o.mcap"),
+        "--json",
+        "--fail-if",
+        "idf1<0.5",
+        check=True,
+    )
+    obj = json.loads(proc.stdout)
+    for key in (
+        "system",
+        "mode",
+        "frames",
+        "people",
+        "users",
+        "error_m_mean",
+        "error_m_median",
+        "idf1",
+        "mota",
+        "id_switches",
+        "loss_events",
+        "recovery_s_mean",
+        "det_error_m_mean",
+        "ms_per_frame",
+    ):
+        assert key in obj, key
+
+
+def test_log_without_imu_runs_as_v_af_with_a_warning(office_log: Path, tmp_path: Path) -> None:
+    reader = LogReader(office_log)
+    stripped = tmp_path / "noimu.mcap"
+    with LogWriter(stripped) as w:
+        for raw in reader.raw():
+            if not raw.topic.startswith("/phone/"):
+                w.write_raw(raw)
+    proc = run_cli(
+        "vm-track", str(stripped), "--out", str(tmp_path / "o.mcap"), "--json", check=True
+    )
+    assert json.loads(proc.stdout)["mode"] == "v-af"
+    assert "no IMU topic: running as V-AF" in proc.stderr.decode()
+
+
+def test_boxes_without_calibration_are_a_one_line_error(tmp_path: Path) -> None:
+    from trackctl.logs import BBox, Detection, Detections
+
+    log = tmp_path / "boxes.mcap"
+    with LogWriter(log) as w:
+        w.write("/camA/detections", Detections(0, "camA", (Detection(BBox(1, 2, 3, 4), 0.9),)))
+    proc = run_cli("vm-track", str(log), "--out", str(tmp_path / "o.mcap"))
+    assert proc.returncode == 2
+    lines = proc.stderr.decode().strip().splitlines()
+    assert len(lines) == 1 and "/camA/camera_model is missing" in lines[0]
+
+
+def test_imu_nans_and_gaps_are_survived_and_counted(office_log: Path, tmp_path: Path) -> None:
+    reader = LogReader(office_log)
+    damaged = tmp_path / "nan.mcap"
+    n_bad = 0
+    with LogWriter(damaged) as w:
+        for raw in reader.raw():
+            if raw.topic.startswith("/phone/"):
+                k = raw.log_time_ns // 200_000_000
+                if 100 <= k < 120:
+                    continue  # a 4 s gap
+                if k % 50 == 7:
+                    obj = json.loads(raw.data)
+                    obj["accel_mps2"]["x"] = float("nan")
+                    raw = type(raw)(
+                        **{
+                            **{f: getattr(raw, f) for f in raw.__dataclass_fields__},
+                            "data": json.dumps(obj).encode(),
+                        }
+                    )
+                    n_bad += 1
+            w.write_raw(raw)
+    (rep,) = run_processors(damaged, tmp_path / "o.mcap", [VmTrackProcessor()])
+    assert rep.metrics["imu_bad_samples"] == n_bad > 0
+    assert rep.metrics["idf1"] > 0.7
