@@ -92,6 +92,8 @@ class PinholeCamera:
         Rays that do not meet the plane in front of the camera give NaN rows.
         """
         px = np.asarray(pixels, float).reshape(-1, 1, 2)
+        if len(px) == 0:
+            return np.empty((0, 3))
         norm = cv2.undistortPoints(px, self.K, self.dist).reshape(-1, 2)
         rays_c = np.column_stack([norm, np.ones(len(norm))])
         rays_w = rays_c @ self.world_R_cam.T

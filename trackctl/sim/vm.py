@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -41,6 +42,8 @@ from trackctl.logs.messages import (
     Vec3,
 )
 from trackctl.logs.writer import LogWriter
+from trackctl.ingest.video import make_compressed_image
+from trackctl.sim.render import PersonLook, floor_image, render_frame
 from trackctl.sim.walkers import Trajectory, load_trajectories_csv, random_waypoint
 
 __all__ = ["VmScenario", "simulate_vm", "FIELDS", "mac_of"]
@@ -80,6 +83,9 @@ class VmScenario:
     phones: tuple[str, ...] = ()
     size_m: tuple[float, float] | None = None
     cameras_grid: tuple[int, int] | None = None
+    frames: bool = False
+    """Render JPEG frames (/camN/image) instead of writing simulated detections."""
+    jpeg_quality: int = 70
 
     def __post_init__(self) -> None:
         if self.field not in FIELDS:
@@ -88,6 +94,14 @@ class VmScenario:
             raise InputError("--users and --nonusers must be >= 0")
         if self.duration_s <= 0:
             raise InputError(f"--duration must be positive, got {self.duration_s}")
+
+
+@dataclass(frozen=True, slots=True)
+class _Frame:
+    """A camera frame to render when it is written."""
+
+    cam: PinholeCamera
+    t_s: float
 
 
 def _cameras(
@@ -307,6 +321,11 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
                             Vec3(float(g[0]), float(g[1]), 0.0),
                         )
                     )
+            if cfg.frames:
+                # the detector finds people in the pixels; the simulated detections above only
+                # keep the random stream (and so every other topic) identical to a --no-frames log
+                events.append((t_ns, 5, topics.image(cam.model.camera), _Frame(cam, t)))
+                continue
             events.append(
                 (
                     t_ns,
@@ -348,6 +367,23 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
                 )
             )
     events.sort(key=lambda e: (e[0], e[1], e[2]))
+    draw_rng = np.random.default_rng([cfg.seed, 1])
+    looks = {tr.person: PersonLook.random(draw_rng) for tr in trajs}
+    floors = {id(cam): floor_image(cam, draw_rng) for cam in cams} if cfg.frames else {}
+
+    def render(frame: _Frame) -> object:
+        people = []
+        for tr in trajs:
+            xy = tr.at(frame.t_s)[0]
+            if not np.isnan(xy).any():
+                people.append((xy, looks[tr.person]))
+        img = render_frame(frame.cam, floors[id(frame.cam)], people, draw_rng)
+        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, cfg.jpeg_quality])
+        if not ok:  # pragma: no cover - OpenCV always encodes a uint8 BGR image
+            raise RuntimeError("JPEG encoding failed")
+        t_ns = int(round(frame.t_s * S))
+        return make_compressed_image(t_ns, frame.cam.model.camera, buf.tobytes(), "jpeg")
+
     with LogWriter(out) as w:
         w.add_metadata(
             "scenario",
@@ -365,6 +401,7 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
                 "fps": cfg.fps,
                 "imu_hz": cfg.imu_hz,
                 "trajectories": cfg.trajectories or "random-waypoint",
+                "frames": cfg.frames,
             },
         )
         w.add_metadata("phones", {mac: person for person, mac in phones.items()})
@@ -374,6 +411,8 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
             counts[topics.calibration(m.camera)] = 1
             counts[topics.camera_model(m.camera)] = 1
         for t_ns, _, topic, msg in events:
+            if isinstance(msg, _Frame):
+                msg = render(msg)  # rendered while writing: frames never pile up in memory
             w.write(topic, msg, t_ns)
             counts[topic] = counts.get(topic, 0) + 1
     return counts

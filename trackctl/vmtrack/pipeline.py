@@ -35,10 +35,11 @@ from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.metrics.tracking import MotAccumulator
 from trackctl.processing.base import Progress
+from trackctl.vmtrack.frames import FrameConfig, FrameDetector, detections_topic, image_cameras
 from trackctl.vmtrack.motion import MotionConfig, PhoneMotion
 from trackctl.vmtrack.tracker import GroundTrack, TrackerConfig, associate, merge_detections
 
-__all__ = ["Mode", "VmTrackConfig", "run", "TRACKS_TOPIC"]
+__all__ = ["Mode", "Source", "VmTrackConfig", "run", "TRACKS_TOPIC"]
 
 TRACKS_TOPIC = "/vmtrack/tracks"
 
@@ -48,6 +49,14 @@ class Mode(StrEnum):
 
     VM = "vm"
     V_AF = "v-af"
+
+
+class Source(StrEnum):
+    """Where person detections come from."""
+
+    AUTO = "auto"
+    FRAMES = "frames"
+    DETECTIONS = "detections"
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,17 +83,48 @@ class VmTrackConfig:
     """Bind early when the best candidate's disagreement is this many times below the next."""
     checkpoint_dbm: float = -45.0
     checkpoint_radius_m: float = 1.5
+    rssi_at_1m_dbm: float = -40.0
+    """Check-point AP path-loss model: RSSI at 1 m, exponent, shadowing std (calibrate per site)."""
+    path_loss_exponent: float = 2.5
+    shadowing_db: float = 3.0
+    rssi_evidence_m: float = 4.0
+    """Tracks within this distance of an AP compare their distance with a phone's RSSI there."""
     eval_threshold_m: float = 1.0
+    source: Source = Source.AUTO
+    """Detections from camera frames or from detections topics (auto: frames when present)."""
+    frames: FrameConfig = field(default_factory=FrameConfig)
 
 
 @dataclass
 class _Candidate:
+    """Evidence that a phone (MID) is carried by the person of one visual track (VID)."""
+
     n: int = 0
     d2: float = 0.0
+    """Sum of squared velocity disagreements (m/s)^2 over ``n`` frames."""
+    rssi_n: int = 0
+    rssi_z2: float = 0.0
+    """Sum of squared normalised RSSI residuals (observed - path loss at the track's distance)."""
 
     @property
     def mean(self) -> float:
-        return self.d2 / self.n if self.n else 0.0
+        """Mean squared velocity disagreement plus the RSSI penalty, in (m/s)^2."""
+        return (self.d2 / self.n if self.n else 0.0) + self.rssi_penalty
+
+    @property
+    def rssi_penalty(self) -> float:
+        # chi-square excess of the RSSI residuals (expected 1 per reading for the right person),
+        # in units of the rejection threshold's scale so one incompatible AP pass rejects
+        if self.rssi_n < 2:
+            return 0.0
+        return _RSSI_WEIGHT * max(0.0, self.rssi_z2 / self.rssi_n - 1.0)
+
+    def add_rssi(self, z2: float) -> None:
+        self.rssi_n += 1
+        self.rssi_z2 += z2
+
+
+_RSSI_WEIGHT = 0.05
 
 
 @dataclass
@@ -138,12 +178,28 @@ def run(
     started = time.perf_counter()
     present = reader.topics()
     det_topics = sorted(t for t, i in present.items() if i.schema_name == Detections.SCHEMA)
-    if not det_topics:
-        raise MissingTopicError(
-            f"{reader.path}: no trackctl.Detections topic (/<camera>/detections); vm-track "
-            f"needs person detections. The log has: {', '.join(sorted(present))}"
-        )
-    cams = _detection_points(reader, det_topics)
+    det_topics = [t for t in det_topics if not t.startswith("/vmtrack/")]
+    has_images = any(i.schema_name == "foxglove.CompressedImage" for i in present.values())
+    use_frames = cfg.source is Source.FRAMES or (cfg.source is Source.AUTO and has_images)
+    detector: FrameDetector | None = None
+    if use_frames:
+        frame_cams = image_cameras(reader, present)
+        if not frame_cams:
+            raise MissingTopicError(
+                f"{reader.path}: no foxglove.CompressedImage topic (/<camera>/image); "
+                "--source frames needs camera frames"
+            )
+        detector = FrameDetector(reader, frame_cams, cfg.frames)
+        det_topics = [topics.image(c) for c in sorted(frame_cams)]
+        cams: dict[str, PinholeCamera] = {}
+    else:
+        if not det_topics:
+            raise MissingTopicError(
+                f"{reader.path}: no trackctl.Detections topic (/<camera>/detections) and no "
+                f"camera frames; vm-track needs person detections. The log has: "
+                f"{', '.join(sorted(present))}"
+            )
+        cams = _detection_points(reader, det_topics)
     imu_topics = sorted(t for t, i in present.items() if i.schema_name == Imu.SCHEMA)
     mode = cfg.mode
     if mode is Mode.VM and not imu_topics:
@@ -167,6 +223,9 @@ def run(
     tracks: list[GroundTrack] = []
     bound: dict[str, GroundTrack] = {}
     candidates: dict[str, dict[str, _Candidate]] = defaultdict(dict)
+    # whole-log evidence of (never-bound phone, track) agreement, for the offline resolution
+    evidence: dict[str, dict[str, _Candidate]] = defaultdict(dict)
+    by_vid: dict[str, GroundTrack] = {}
     disagreement: dict[str, list[float]] = defaultdict(list)
     frames: list[_FrameOut] = []
     truth: dict[int, GroundTruth] = {}
@@ -290,6 +349,27 @@ def run(
                     candidates.pop(mid, None)
                     stats["bindings"] += 1
                     stats["checkpoint_bindings"] += 1
+        # RSSI evidence for the candidate filter: people walking side by side move alike, but
+        # the one nearer an AP is heard louder (log-distance path loss with shadowing)
+        for scan in pending_rssi:
+            if scan.observer_position_m is None:
+                continue
+            ap = np.array([scan.observer_position_m.x, scan.observer_position_m.y])
+            near = [
+                trk for trk in free if np.linalg.norm(trk.xy - ap) < cfg.rssi_evidence_m
+            ]
+            for reading in scan.readings:
+                mid = reading.eid
+                if mid in bound or mid not in phones:
+                    continue
+                for trk in near:
+                    d = max(0.3, float(np.linalg.norm(trk.xy - ap)))
+                    expect = cfg.rssi_at_1m_dbm - 10 * cfg.path_loss_exponent * math.log10(d)
+                    z2 = ((reading.rssi_dbm - expect) / cfg.shadowing_db) ** 2
+                    candidates[mid].setdefault(trk.vid, _Candidate()).add_rssi(z2)
+                    if trk.first_mid is None:
+                        evidence[mid].setdefault(trk.vid, _Candidate()).add_rssi(z2)
+                        by_vid[trk.vid] = trk
         pending_rssi.clear()
         # loss detection: a bound track whose motion keeps disagreeing with its phone, or whose
         # phone stopped reporting (its carrier left, or the app was closed)
@@ -324,9 +404,15 @@ def run(
             for trk in free:
                 if trk.hits < cfg.converge_hits:
                     continue  # its velocity estimate has not converged yet
+                d2 = float(np.sum((trk.v - v) ** 2))
                 c = cands.setdefault(trk.vid, _Candidate())
                 c.n += 1
-                c.d2 += float(np.sum((trk.v - v) ** 2))
+                c.d2 += d2
+                if trk.first_mid is None:
+                    e = evidence[mid].setdefault(trk.vid, _Candidate())
+                    e.n += 1
+                    e.d2 += d2
+                    by_vid[trk.vid] = trk
             alive = sorted(
                 (
                     (c.mean, vid, c)
@@ -360,6 +446,33 @@ def run(
     frame_t: int | None = None
     points: list[tuple[str, np.ndarray]] = []
     n_msgs = 0
+    frame_index = 0
+    search_full = True
+
+    def predictions(t_ns: int) -> list[tuple[np.ndarray, float]]:
+        """Where each live track can be at ``t_ns`` (ground xy, radius m): motion sensors for
+        tracks with a phone, the visual velocity otherwise."""
+        fcfg = cfg.frames
+        owner = {id(tr): m for m, tr in bound.items()}
+        out = []
+        for trk in tracks:
+            dt = max(0.0, (t_ns - trk.t_ns) / 1e9)
+            mid = owner.get(id(trk))
+            v = velocity(mid, t_ns) if mid else None
+            sigma = tcfg.pdr_sigma_mps if v is not None else fcfg.visual_speed_sigma_mps
+            v = trk.v if v is None else v
+            var = float(np.trace(trk.kf.P[:2, :2]) / 2) + (sigma * dt) ** 2
+            out.append((trk.xy + v * dt, fcfg.region_m + 2.0 * math.sqrt(var)))
+        return out
+
+    def plan_search(t_ns: int) -> bool:
+        """Full search for initialization, periodically for people entering, and for recovery
+        when a phone's track went undetected in the previous frame."""
+        if not tracks or frame_index % max(1, cfg.frames.full_search_every) == 0:
+            return True
+        if not cfg.frames.predicted:
+            return True
+        return any(trk.last_hit_ns != trk.t_ns for trk in bound.values())
     for msg in reader.messages(stream_topics):
         n_msgs += 1
         if progress is not None and n_msgs % 2000 == 0:
@@ -370,11 +483,23 @@ def run(
         if msg.topic == topics.RSSI:
             pending_rssi.append(msg.message)
             continue
-        dets: Detections = msg.message
         if frame_t is not None and msg.log_time_ns != frame_t:
             process_frame(frame_t, points)
             points = []
+            frame_index += 1
+        if msg.log_time_ns != frame_t:
+            search_full = plan_search(msg.log_time_ns) if detector is not None else True
         frame_t = msg.log_time_ns
+        if detector is not None:
+            camera = msg.topic.strip("/").split("/")[0]
+            preds = None if search_full else predictions(msg.log_time_ns)
+            found, ground = detector.detect(
+                msg.log_time_ns, camera, bytes(msg.message.data), preds
+            )
+            writer.write(detections_topic(camera), found, msg.log_time_ns)
+            points.extend((camera, g) for g in ground)
+            continue
+        dets: Detections = msg.message
         for d in dets.detections:
             if d.ground_m is not None:
                 points.append((dets.camera, np.array([d.ground_m.x, d.ground_m.y])))
@@ -393,6 +518,8 @@ def run(
         process_frame(frame_t, points)
     for trk in tracks:
         trk.history.append((trk.t_ns, trk.kf.x.copy(), trk.kf.P.copy(), True))
+    if mode is Mode.VM:
+        stats["offline_bindings"] = _resolve_offline(evidence, by_vid, phones, cfg)
     t_track = time.perf_counter()
 
     positions = _positions(frames, cfg.smooth, tcfg)
@@ -409,6 +536,15 @@ def run(
         1000 * (time.perf_counter() - t_track) / n_frames, 3
     )
     report_metrics["imu_bad_samples"] = sum(p.bad_samples for p in phones.values())
+    report_metrics["source"] = "frames" if detector is not None else "detections"
+    if detector is not None:
+        report_metrics["ms_per_frame_decode"] = round(1000 * detector.seconds_decode / n_frames, 3)
+        report_metrics["ms_per_frame_detection"] = round(
+            1000 * detector.seconds_detect / n_frames, 3
+        )
+        report_metrics["full_searches"] = detector.full_searches
+        report_metrics["region_searches"] = detector.region_searches
+        report_metrics["bad_frames"] = detector.bad_frames
     return MetricReport(
         t_ns=reader.end_ns or 0,
         processor="vm-track",
@@ -423,6 +559,47 @@ def run(
             "pdr_sigma_mps": tcfg.pdr_sigma_mps,
         },
     )
+
+
+def _resolve_offline(
+    evidence: dict[str, dict[str, _Candidate]],
+    by_vid: dict[str, GroundTrack],
+    phones: dict[str, PhoneMotion],
+    cfg: VmTrackConfig,
+) -> int:
+    """Name still-anonymous tracks after phones that were never bound online.
+
+    Online binding waits until one candidate clearly beats the others (Theorem 1); people who walk
+    together for their whole visit never separate, so it never happens. Offline we know every
+    track's whole life, so the most consistent pairs are taken first (lowest mean velocity
+    disagreement, gated by the paper's rejection threshold): a track goes to at most one phone and
+    a phone takes several tracks only when they do not overlap in time (a person whose track broke
+    up in a crowd). The identity then holds for each chosen track's whole life.
+    """
+    ever_bound = {trk.first_mid for trk in by_vid.values() if trk.first_mid is not None}
+    pairs = sorted(
+        (c.mean, mid, vid)
+        for mid, cands in evidence.items()
+        if mid in phones and mid not in ever_bound
+        for vid, c in cands.items()
+        if by_vid[vid].first_mid is None
+        and c.n >= cfg.bind_frames
+        and c.mean <= cfg.reject_mps**2
+    )
+    spans: dict[str, list[tuple[int, int]]] = defaultdict(list)
+    made = 0
+    for _, mid, vid in pairs:
+        trk = by_vid[vid]
+        if trk.first_mid is not None:
+            continue
+        span = (trk.history[0][0] if trk.history else trk.t_ns, trk.t_ns)
+        if any(span[0] <= b and a <= span[1] for a, b in spans[mid]):
+            continue
+        spans[mid].append(span)
+        trk.first_mid = mid
+        trk.first_bound_ns = trk.t_ns + 1  # the identity covers the whole track
+        made += 1
+    return made
 
 
 def _positions(
@@ -468,6 +645,7 @@ def _write_and_score(
     all_acc = MotAccumulator(cfg.eval_threshold_m)
     errors: list[float] = []
     det_err: list[float] = []
+    det_hits = det_people = 0
     people: set[str] = set()
     users: set[str] = set()
     ok_since: dict[str, bool] = {}
@@ -508,6 +686,10 @@ def _write_and_score(
             g = np.array(list(gtf.values()))
             d = np.linalg.norm(pts[:, None, :] - g[None, :, :], axis=2).min(axis=1)
             det_err.extend(float(x) for x in d if x < 2.0)
+            # recall: people with a raw detection within the evaluation threshold
+            near = np.linalg.norm(g[:, None, :] - pts[None, :, :], axis=2).min(axis=1)
+            det_hits += int(np.sum(near < cfg.eval_threshold_m))
+        det_people += len(gtf)
         all_acc.update(gtf, hyp)
         nonusers = [p for p in gtf if p not in carriers]
         if mode is Mode.VM:
@@ -557,5 +739,7 @@ def _write_and_score(
         else None,
         "bindings": stats["bindings"],
         "checkpoint_bindings": stats["checkpoint_bindings"],
+        "offline_bindings": stats.get("offline_bindings", 0),
         "det_error_m_mean": round(float(np.mean(det_err)), 4) if det_err else None,
+        "det_recall": round(det_hits / det_people, 4) if det_people else None,
     }
