@@ -106,7 +106,7 @@ def simulate_vm(
             "--frames/--no-frames",
             help="Render JPEG camera frames (the detector finds people in them) instead of "
             "writing simulated ground-plane detections.",
-        )
+        ),
     ] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,

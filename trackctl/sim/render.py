@@ -109,17 +109,30 @@ def render_frame(
         hip = foot + up * hpx * 0.47
         half = wpx / 2
         torso = np.array(
-            [hip - side * half * 0.85, hip + side * half * 0.85, neck + side * half, neck - side * half]
+            [
+                hip - side * half * 0.85,
+                hip + side * half * 0.85,
+                neck + side * half,
+                neck - side * half,
+            ]
         )
         legs = np.array(
-            [foot - side * half * 0.7, foot + side * half * 0.7, hip + side * half * 0.85,
-             hip - side * half * 0.85]
+            [
+                foot - side * half * 0.7,
+                foot + side * half * 0.7,
+                hip + side * half * 0.85,
+                hip - side * half * 0.85,
+            ]
         )
         cv2.fillConvexPoly(img, np.round(legs).astype(np.int32), look.trousers, cv2.LINE_AA)
         cv2.fillConvexPoly(img, np.round(torso).astype(np.int32), look.shirt, cv2.LINE_AA)
         centre = foot + up * (hpx - r_head)
         cv2.circle(
-            img, tuple(int(v) for v in np.round(centre)), int(round(r_head)), (60, 80, 120), -1,
+            img,
+            tuple(int(v) for v in np.round(centre)),
+            int(round(r_head)),
+            (60, 80, 120),
+            -1,
             cv2.LINE_AA,
         )
     if noise_std > 0:

@@ -27,6 +27,7 @@ from scipy.spatial.transform import Rotation
 from trackctl.errors import InputError
 from trackctl.geometry.camera import PinholeCamera, look_at
 from trackctl.ingest.calibration import to_foxglove_calibration
+from trackctl.ingest.video import make_compressed_image
 from trackctl.logs import topics
 from trackctl.logs.messages import (
     BBox,
@@ -42,7 +43,6 @@ from trackctl.logs.messages import (
     Vec3,
 )
 from trackctl.logs.writer import LogWriter
-from trackctl.ingest.video import make_compressed_image
 from trackctl.sim.render import PersonLook, floor_image, render_frame
 from trackctl.sim.walkers import Trajectory, load_trajectories_csv, random_waypoint
 
@@ -85,7 +85,7 @@ class VmScenario:
     cameras_grid: tuple[int, int] | None = None
     frames: bool = False
     """Render JPEG frames (/camN/image) instead of writing simulated detections."""
-    jpeg_quality: int = 70
+    jpeg_quality: int = 60
 
     def __post_init__(self) -> None:
         if self.field not in FIELDS:

@@ -16,6 +16,7 @@ recovery.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -25,6 +26,7 @@ from trackctl.geometry.camera import PinholeCamera
 
 __all__ = [
     "DetectorConfig",
+    "person_height_px",
     "Region",
     "BackgroundModel",
     "detect_people",
@@ -55,6 +57,8 @@ class DetectorConfig:
     """Motion-predicted search also tries this many levels either side of the predicted one."""
     person_height_m: float = 1.7
     """Body height used to predict a person's image height from the ground position."""
+    height_tolerance: float = 1.45
+    """A window may be this factor taller or shorter than a person standing at its foot point."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,16 +84,25 @@ class BackgroundModel:
             raise ValueError("BackgroundModel needs at least one frame")
         self.image = np.median(np.stack(frames), axis=0).astype(np.uint8)
 
-    def foreground(self, gray: np.ndarray, cfg: DetectorConfig, box: Region | None = None) -> np.ndarray:
-        """Binary (0/1) foreground mask of ``gray``, over ``box`` only when given."""
+    def foreground(
+        self, image: np.ndarray, cfg: DetectorConfig, box: Region | None = None
+    ) -> np.ndarray:
+        """Foreground mask (float32 0/1) of ``image``, over ``box`` only when given.
+
+        Colour frames compare every channel (the largest difference counts): clothes as bright
+        as the floor still differ in hue.
+        """
         if box is None:
-            img, bg = gray, self.image
+            img, bg = image, self.image
         else:
-            img = gray[box.y0 : box.y1, box.x0 : box.x1]
+            img = image[box.y0 : box.y1, box.x0 : box.x1]
             bg = self.image[box.y0 : box.y1, box.x0 : box.x1]
         diff = cv2.absdiff(img, bg)
+        if diff.ndim == 3:
+            diff = np.max(diff, axis=2)
         _, mask = cv2.threshold(diff, cfg.diff_threshold, 1, cv2.THRESH_BINARY)
-        return cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+        return mask.astype(np.float32)
 
 
 def _level_boxes(
@@ -98,7 +111,8 @@ def _level_boxes(
     """Scored window boxes (x, y, w, h in the mask's pixels) at one pyramid level."""
     h_img, w_img = mask.shape
     sw, sh = max(1, round(w_img / scale)), max(1, round(h_img / scale))
-    level = mask if scale == 1.0 else cv2.resize(mask, (sw, sh), interpolation=cv2.INTER_AREA)
+    # the mask is float (0/1), so bilinear shrinking keeps partial coverage and is fast
+    level = mask if scale == 1.0 else cv2.resize(mask, (sw, sh), interpolation=cv2.INTER_LINEAR)
     wh = cfg.window_h_px
     ww = max(3, round(wh * cfg.aspect))
     pad_x, pad_y = ww // 2 + 1, wh // 6 + 1
@@ -107,35 +121,33 @@ def _level_boxes(
     H, W = level.shape
     if H < wh + 2 * pad_y or W < ww + 2 * pad_x:  # pragma: no cover - padding makes room
         return np.empty((0, 4)), np.empty(0)
-    integral = cv2.integral(level, sdepth=cv2.CV_32F)
-    s = cfg.stride_px
-    ys = np.arange(pad_y, H - wh - pad_y + 1, s)
-    xs = np.arange(pad_x, W - ww - pad_x + 1, s)
-    if len(ys) == 0 or len(xs) == 0:
-        return np.empty((0, 4)), np.empty(0)
-    y0, x0 = np.meshgrid(ys, xs, indexing="ij")
-
-    def box_sum(ya: np.ndarray, xa: np.ndarray, hh: int, wwid: int) -> np.ndarray:
-        return (
-            integral[ya + hh, xa + wwid]
-            - integral[ya, xa + wwid]
-            - integral[ya + hh, xa]
-            + integral[ya, xa]
-        )
-
-    inner = box_sum(y0, x0, wh, ww)
-    outer = box_sum(y0 - pad_y, x0 - pad_x, wh + 2 * pad_y, ww + 2 * pad_x)
+    # window sums by OpenCV box filters (centred windows), evaluated on a stride grid
+    lv = level
     a_in = wh * ww
-    a_ring = (wh + 2 * pad_y) * (ww + 2 * pad_x) - a_in
-    score = inner / a_in - (outer - inner) / a_ring
+    a_out = (wh + 2 * pad_y) * (ww + 2 * pad_x)
+    inner = cv2.boxFilter(lv, cv2.CV_32F, (ww, wh), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    outer = cv2.boxFilter(
+        lv,
+        cv2.CV_32F,
+        (ww + 2 * pad_x, wh + 2 * pad_y),
+        normalize=False,
+        borderType=cv2.BORDER_CONSTANT,
+    )
+    s = cfg.stride_px
+    score = (inner / a_in - (outer - inner) / (a_out - a_in))[::s, ::s]
     # local maxima only (one window per person per level)
-    peak = cv2.dilate(score.astype(np.float32), np.ones((3, 3), np.uint8))
+    peak = cv2.dilate(score, np.ones((3, 3), np.uint8))
     keep = (score >= cfg.threshold) & (score >= peak)
     if not keep.any():
         return np.empty((0, 4)), np.empty(0)
-    ky, kx = y0[keep] - pad_y, x0[keep] - pad_x
+    cy, cx = np.nonzero(keep)
+    # centre of the window -> top-left corner in the unpadded level, then in the input's pixels
+    ky = cy * s - wh // 2 - pad_y
+    kx = cx * s - ww // 2 - pad_x
     fx, fy = w_img / sw, h_img / sh
-    boxes = np.column_stack([kx * fx, ky * fy, np.full(len(kx), ww * fx), np.full(len(kx), wh * fy)])
+    boxes = np.column_stack(
+        [kx * fx, ky * fy, np.full(len(kx), ww * fx), np.full(len(kx), wh * fy)]
+    )
     return boxes, score[keep]
 
 
@@ -152,27 +164,30 @@ def _levels_for(height_px: float, cfg: DetectorConfig) -> list[float]:
 
 
 def detect_people(
-    gray: np.ndarray,
+    image: np.ndarray,
     background: BackgroundModel,
     cfg: DetectorConfig,
     regions: list[Region] | None = None,
+    expected_height: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Person boxes (N, 4: x, y, w, h pixels) and scores in one grey frame.
+    """Person boxes (N, 4: x, y, w, h pixels) and scores in one frame (grey or BGR).
 
     ``regions`` None is the full search (whole frame, every pyramid level); otherwise only the
-    given regions at their predicted levels are searched.
+    given regions at their predicted levels are searched. ``expected_height`` maps foot pixels
+    (N, 2) to the image height of a person standing there (from the calibration): windows whose
+    size disagrees by more than ``cfg.height_tolerance`` are body parts or clutter, not people.
     """
     all_boxes: list[np.ndarray] = []
     all_scores: list[np.ndarray] = []
     if regions is None:
-        mask = background.foreground(gray, cfg)
+        mask = background.foreground(image, cfg)
         for lv in range(cfg.max_levels):
             boxes, scores = _level_boxes(mask, cfg.scale_step**lv, cfg)
             all_boxes.append(boxes)
             all_scores.append(scores)
     else:
         for reg in regions:
-            mask = background.foreground(gray, cfg, reg)
+            mask = background.foreground(image, cfg, reg)
             for scale in _levels_for(reg.height_px, cfg):
                 boxes, scores = _level_boxes(mask, scale, cfg)
                 if len(boxes):
@@ -184,13 +199,22 @@ def detect_people(
     if len(boxes) == 0:
         return boxes, scores
     keep = cv2.dnn.NMSBoxes(
-        boxes.round().astype(int).tolist(), scores.astype(float).tolist(), cfg.threshold, cfg.nms_iou
+        boxes.round().astype(int).tolist(),
+        scores.astype(float).tolist(),
+        cfg.threshold,
+        cfg.nms_iou,
     )
     idx = np.array(keep, int).reshape(-1)
     boxes, scores = _suppress_parts(boxes[idx], scores[idx], cfg.contained)
     # a person cut by the bottom edge has no visible foot point to place on the ground
-    whole = boxes[:, 1] + boxes[:, 3] < gray.shape[0] - 2
-    return boxes[whole], scores[whole]
+    keep = boxes[:, 1] + boxes[:, 3] < image.shape[0] - 2
+    if expected_height is not None and len(boxes):
+        feet = np.column_stack([boxes[:, 0] + boxes[:, 2] / 2, boxes[:, 1] + boxes[:, 3]])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = boxes[:, 3] / expected_height(feet)
+        tol = cfg.height_tolerance
+        keep &= (ratio > 1 / tol) & (ratio < tol)
+    return boxes[keep], scores[keep]
 
 
 def _suppress_parts(
@@ -229,8 +253,12 @@ def predict_region(
     """
     m = cam.model
     ring = np.array(
-        [[xy[0] + dx, xy[1] + dy, z] for dx in (-radius_m, radius_m) for dy in (-radius_m, radius_m)
-         for z in (0.0, person_height_m)]
+        [
+            [xy[0] + dx, xy[1] + dy, z]
+            for dx in (-radius_m, radius_m)
+            for dy in (-radius_m, radius_m)
+            for z in (0.0, person_height_m)
+        ]
     )
     px, front = cam.project(ring)
     if not front.all():
@@ -246,3 +274,12 @@ def predict_region(
     if x1 - x0 < 8 or y1 - y0 < 16:
         return None
     return Region(x0, y0, x1, y1, height)
+
+
+def person_height_px(cam: PinholeCamera, feet_px: np.ndarray, person_height_m: float) -> np.ndarray:
+    """Image height of a person whose foot is at each pixel of ``feet_px`` (NaN off the floor)."""
+    ground = cam.ground_point(feet_px)
+    heads = ground + np.array([0.0, 0.0, person_height_m])
+    px, front = cam.project(np.nan_to_num(heads))
+    height = np.linalg.norm(px - np.asarray(feet_px, float).reshape(-1, 2), axis=1)
+    return np.where(front & ~np.isnan(ground).any(axis=1), height, np.nan)

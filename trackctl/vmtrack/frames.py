@@ -24,6 +24,7 @@ from trackctl.vmtrack.detect import (
     DetectorConfig,
     Region,
     detect_people,
+    person_height_px,
     predict_region,
 )
 
@@ -81,9 +82,11 @@ def image_cameras(reader: LogReader, present: dict[str, TopicInfo]) -> dict[str,
     return cams
 
 
-def _decode_gray(data: bytes, topic: str) -> np.ndarray | None:
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
-    return img
+def _decode(data: bytes) -> np.ndarray | None:
+    """BGR image of an encoded frame, or None when the bytes do not decode."""
+    if not data:
+        return None
+    return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
 
 
 class FrameDetector:
@@ -100,7 +103,9 @@ class FrameDetector:
         self.bad_frames = 0
         self.seconds_decode = 0.0
         self.seconds_detect = 0.0
+        started = time.perf_counter()
         self._build_backgrounds(reader)
+        self.seconds_background = time.perf_counter() - started
 
     def _build_backgrounds(self, reader: LogReader) -> None:
         present = reader.topics()
@@ -112,16 +117,14 @@ class FrameDetector:
             for k, m in enumerate(reader.messages([topic])):
                 if k % step:
                     continue
-                gray = _decode_gray(bytes(m.message.data), topic)
-                if gray is not None:
-                    samples.append(gray)
+                image = _decode(bytes(m.message.data))
+                if image is not None:
+                    samples.append(image)
             if not samples:
                 raise InputError(f"{reader.path}: {topic}: no frame decodes as an image")
             self.backgrounds[name] = BackgroundModel(samples)
 
-    def regions(
-        self, camera: str, predictions: list[tuple[np.ndarray, float]]
-    ) -> list[Region]:
+    def regions(self, camera: str, predictions: list[tuple[np.ndarray, float]]) -> list[Region]:
         """Image regions of the predicted people (ground xy, radius m) seen by ``camera``."""
         cam = self.cams[camera]
         h = self.config.detector.person_height_m
@@ -145,10 +148,10 @@ class FrameDetector:
         A frame that does not decode is skipped and counted.
         """
         t0 = time.perf_counter()
-        gray = _decode_gray(data, topics.image(camera))
+        image = _decode(data)
         t1 = time.perf_counter()
         self.seconds_decode += t1 - t0
-        if gray is None:
+        if image is None:
             self.bad_frames += 1
             return Detections(t_ns, camera, ()), []
         cam = self.cams[camera]
@@ -157,8 +160,13 @@ class FrameDetector:
             self.full_searches += 1
         else:
             self.region_searches += 1
+        dcfg = self.config.detector
         boxes, scores = detect_people(
-            gray, self.backgrounds[camera], self.config.detector, regions
+            image,
+            self.backgrounds[camera],
+            dcfg,
+            regions,
+            lambda feet: person_height_px(cam, feet, dcfg.person_height_m),
         )
         feet = np.column_stack([boxes[:, 0] + boxes[:, 2] / 2, boxes[:, 1] + boxes[:, 3]])
         ground = cam.ground_point(feet)

@@ -210,6 +210,7 @@ def run(
     tcfg = cfg.tracker
 
     # pass 1: phone motion (PDR velocity series per MID)
+    t_pass1 = time.perf_counter()
     phones: dict[str, PhoneMotion] = {}
     if mode is Mode.VM:
         for msg in reader.messages(imu_topics):
@@ -355,9 +356,7 @@ def run(
             if scan.observer_position_m is None:
                 continue
             ap = np.array([scan.observer_position_m.x, scan.observer_position_m.y])
-            near = [
-                trk for trk in free if np.linalg.norm(trk.xy - ap) < cfg.rssi_evidence_m
-            ]
+            near = [trk for trk in free if np.linalg.norm(trk.xy - ap) < cfg.rssi_evidence_m]
             for reading in scan.readings:
                 mid = reading.eid
                 if mid in bound or mid not in phones:
@@ -465,14 +464,14 @@ def run(
             out.append((trk.xy + v * dt, fcfg.region_m + 2.0 * math.sqrt(var)))
         return out
 
-    def plan_search(t_ns: int) -> bool:
-        """Full search for initialization, periodically for people entering, and for recovery
-        when a phone's track went undetected in the previous frame."""
-        if not tracks or frame_index % max(1, cfg.frames.full_search_every) == 0:
+    def plan_search() -> bool:
+        """Full search to initialize, and periodically for people entering the views; in
+        between only predicted regions. A track that goes undetected keeps being predicted, and
+        its region grows with its uncertainty until it is found again (recovery)."""
+        if not cfg.frames.predicted or not tracks:
             return True
-        if not cfg.frames.predicted:
-            return True
-        return any(trk.last_hit_ns != trk.t_ns for trk in bound.values())
+        return frame_index % max(1, cfg.frames.full_search_every) == 0
+
     for msg in reader.messages(stream_topics):
         n_msgs += 1
         if progress is not None and n_msgs % 2000 == 0:
@@ -488,14 +487,12 @@ def run(
             points = []
             frame_index += 1
         if msg.log_time_ns != frame_t:
-            search_full = plan_search(msg.log_time_ns) if detector is not None else True
+            search_full = plan_search() if detector is not None else True
         frame_t = msg.log_time_ns
         if detector is not None:
             camera = msg.topic.strip("/").split("/")[0]
             preds = None if search_full else predictions(msg.log_time_ns)
-            found, ground = detector.detect(
-                msg.log_time_ns, camera, bytes(msg.message.data), preds
-            )
+            found, ground = detector.detect(msg.log_time_ns, camera, bytes(msg.message.data), preds)
             writer.write(detections_topic(camera), found, msg.log_time_ns)
             points.extend((camera, g) for g in ground)
             continue
@@ -520,6 +517,10 @@ def run(
         trk.history.append((trk.t_ns, trk.kf.x.copy(), trk.kf.P.copy(), True))
     if mode is Mode.VM:
         stats["offline_bindings"] = _resolve_offline(evidence, by_vid, phones, cfg)
+        for trk in by_vid.values():
+            _backdate_identity(trk, phones, cfg)
+        for m_trk in bound.values():
+            _backdate_identity(m_trk, phones, cfg)
     t_track = time.perf_counter()
 
     positions = _positions(frames, cfg.smooth, tcfg)
@@ -530,7 +531,7 @@ def run(
     report_metrics = dict(report)
     n_frames = max(stats["frames"], 1)
     report_metrics["ms_per_frame"] = round(1000 * elapsed / n_frames, 3)
-    report_metrics["ms_per_frame_motion"] = round(1000 * (t_motion - started) / n_frames, 3)
+    report_metrics["ms_per_frame_motion"] = round(1000 * (t_motion - t_pass1) / n_frames, 3)
     report_metrics["ms_per_frame_association"] = round(1000 * t_assoc / n_frames, 3)
     report_metrics["ms_per_frame_smoothing"] = round(
         1000 * (time.perf_counter() - t_track) / n_frames, 3
@@ -542,6 +543,7 @@ def run(
         report_metrics["ms_per_frame_detection"] = round(
             1000 * detector.seconds_detect / n_frames, 3
         )
+        report_metrics["background_s"] = round(detector.seconds_background, 3)
         report_metrics["full_searches"] = detector.full_searches
         report_metrics["region_searches"] = detector.region_searches
         report_metrics["bad_frames"] = detector.bad_frames
@@ -582,9 +584,7 @@ def _resolve_offline(
         for mid, cands in evidence.items()
         if mid in phones and mid not in ever_bound
         for vid, c in cands.items()
-        if by_vid[vid].first_mid is None
-        and c.n >= cfg.bind_frames
-        and c.mean <= cfg.reject_mps**2
+        if by_vid[vid].first_mid is None and c.n >= cfg.bind_frames and c.mean <= cfg.reject_mps**2
     )
     spans: dict[str, list[tuple[int, int]]] = defaultdict(list)
     made = 0
@@ -600,6 +600,38 @@ def _resolve_offline(
         trk.first_bound_ns = trk.t_ns + 1  # the identity covers the whole track
         made += 1
     return made
+
+
+def _backdate_identity(
+    trk: GroundTrack, phones: dict[str, PhoneMotion], cfg: VmTrackConfig
+) -> None:
+    """Set how far back before its binding a track carries its phone's identity.
+
+    Walking back from the binding, the track's velocity is compared with the phone's over a
+    sliding window of ``bind_frames`` frames; where the mean disagreement exceeds the loss
+    threshold the track was following somebody else (visual tracks can swap people before a phone
+    anchors them), and the identity stops there.
+    """
+    if trk.first_mid is None or trk.first_bound_ns is None or not trk.history:
+        return
+    phone = phones.get(trk.first_mid)
+    if phone is None:
+        return
+    limit = (1.6 * cfg.reject_mps) ** 2
+    window: list[float] = []
+    start = trk.first_bound_ns
+    for t_ns, x, _, _ in reversed(trk.history):
+        if t_ns >= trk.first_bound_ns:
+            continue
+        v = phone.velocity_at(t_ns)
+        if v is None:
+            break
+        window.append(float(np.sum((x[2:, 0] - v) ** 2)))
+        del window[: -cfg.bind_frames]
+        if len(window) == cfg.bind_frames and float(np.mean(window)) > limit:
+            break
+        start = t_ns
+    trk.identity_from_ns = start
 
 
 def _positions(
@@ -662,9 +694,10 @@ def _write_and_score(
             if (
                 mid_now is None
                 and trk.first_mid is not None
-                and (fr.t_ns < (trk.first_bound_ns or 0))
+                and trk.identity_from_ns <= fr.t_ns < (trk.first_bound_ns or 0)
             ):
-                # offline: the identity found later holds from the track's birth
+                # offline: the identity found later holds back to where the track's motion
+                # stops agreeing with the phone (the track's birth, unless it switched people)
                 out_id = trk.first_mid
             # entry k of a track's history is its state at this frame (snapshotted before the
             # next frame's prediction, or when the log ends)

@@ -63,6 +63,8 @@ class GroundTrack:
     first_mid: str | None = None
     """The phone this track was first bound to; offline, it names the track from its birth."""
     first_bound_ns: int | None = None
+    identity_from_ns: int = 0
+    """Offline: from when before its binding the track carries ``first_mid``."""
     history: list[tuple[int, np.ndarray, np.ndarray, bool]] = field(default_factory=list)
 
     @classmethod

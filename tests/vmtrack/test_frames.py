@@ -1,0 +1,96 @@
+"""vm-track on rendered camera frames (sim --frames): detection source, errors, bad frames."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+
+from tests.conftest import run_cli
+from trackctl.logs import LogReader, LogWriter
+from trackctl.processing import run_processors
+from trackctl.sim.vm import VmScenario, simulate_vm
+from trackctl.vmtrack import FrameConfig, VmTrackConfig, VmTrackProcessor
+from trackctl.vmtrack.frames import detections_topic
+
+
+@pytest.fixture(scope="module")
+def frames_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("vmf") / "frames.mcap"
+    simulate_vm(
+        str(path),
+        VmScenario(field="office", users=2, nonusers=0, duration_s=40, seed=4, frames=True),
+    )
+    return path
+
+
+def test_frames_log_has_images_and_no_simulated_detections(frames_log: Path) -> None:
+    schemas = {t: i.schema_name for t, i in LogReader(frames_log).topics().items()}
+    assert schemas["/cam0/image"] == "foxglove.CompressedImage"
+    assert not any(s == "trackctl.Detections" for s in schemas.values())
+
+
+def test_vm_track_detects_in_frames_and_identifies_users(frames_log: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out.mcap"
+    (rep,) = run_processors(frames_log, out, [VmTrackProcessor()])
+    m = rep.metrics
+    assert m["source"] == "frames"
+    assert m["det_recall"] >= 0.9
+    assert m["idf1"] >= 0.9
+    assert m["error_m_mean"] <= 0.3
+    assert m["region_searches"] > m["full_searches"] > 0
+    topics = LogReader(out).topics()
+    assert topics[detections_topic("cam0")].count == 120
+
+
+def test_full_search_mode_searches_every_frame_whole(frames_log: Path, tmp_path: Path) -> None:
+    cfg = VmTrackConfig(frames=FrameConfig(predicted=False))
+    (rep,) = run_processors(frames_log, tmp_path / "o.mcap", [VmTrackProcessor(cfg)])
+    assert rep.metrics["region_searches"] == 0
+    assert rep.metrics["full_searches"] == 240
+
+
+def test_undecodable_frame_is_skipped_and_counted(frames_log: Path, tmp_path: Path) -> None:
+    damaged = tmp_path / "damaged.mcap"
+    reader = LogReader(frames_log)
+    with LogWriter(damaged) as w:
+        broken = 0
+        for raw in reader.raw():
+            if raw.topic == "/cam1/image" and broken < 3 and raw.log_time_ns > 5_000_000_000:
+                msg = CompressedImage()
+                msg.ParseFromString(raw.data)
+                msg.data = b"\xff\xd8 not a jpeg"
+                raw = replace(raw, data=msg.SerializeToString())
+                broken += 1
+            w.write_raw(raw)
+    (rep,) = run_processors(damaged, tmp_path / "o.mcap", [VmTrackProcessor()])
+    assert rep.metrics["bad_frames"] == 3
+    assert rep.metrics["idf1"] >= 0.9
+
+
+def test_image_topic_without_calibration_is_a_one_line_error(
+    frames_log: Path, tmp_path: Path
+) -> None:
+    stripped = tmp_path / "nocal.mcap"
+    reader = LogReader(frames_log)
+    with LogWriter(stripped) as w:
+        for raw in reader.raw():
+            if raw.topic != "/cam1/camera_model":
+                w.write_raw(raw)
+    proc = run_cli("vm-track", str(stripped), "--out", str(tmp_path / "o.mcap"))
+    assert proc.returncode == 2
+    lines = proc.stderr.decode().strip().splitlines()
+    assert len(lines) == 1
+    assert "/cam1/camera_model is missing" in lines[0] and "/cam1/image" in lines[0]
+
+
+def test_source_detections_on_a_frames_log_is_a_clear_error(
+    frames_log: Path, tmp_path: Path
+) -> None:
+    proc = run_cli(
+        "vm-track", str(frames_log), "--out", str(tmp_path / "o.mcap"), "--source", "detections"
+    )
+    assert proc.returncode == 2
+    assert "no trackctl.Detections topic" in proc.stderr.decode()
