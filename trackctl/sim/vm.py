@@ -393,7 +393,7 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
                 "seed": cfg.seed,
                 "users": len(phones),
                 "people": len(trajs),
-                "duration_s": duration,
+                "duration_s": float(duration),
                 "size_m": f"{size[0]:.2f}x{size[1]:.2f}",
                 "det_noise_m": cfg.det_noise_m,
                 "miss_rate": cfg.miss_rate,

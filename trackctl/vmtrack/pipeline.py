@@ -37,11 +37,13 @@ from trackctl.metrics.tracking import MotAccumulator
 from trackctl.processing.base import Progress
 from trackctl.vmtrack.frames import FrameConfig, FrameDetector, detections_topic, image_cameras
 from trackctl.vmtrack.motion import MotionConfig, PhoneMotion
+from trackctl.vmtrack.scene import scene_update
 from trackctl.vmtrack.tracker import GroundTrack, TrackerConfig, associate, merge_detections
 
-__all__ = ["Mode", "Source", "VmTrackConfig", "run", "TRACKS_TOPIC"]
+__all__ = ["Mode", "Source", "VmTrackConfig", "run", "TRACKS_TOPIC", "SCENE_TOPIC"]
 
 TRACKS_TOPIC = "/vmtrack/tracks"
+SCENE_TOPIC = "/vmtrack/scene"
 
 
 class Mode(StrEnum):
@@ -636,9 +638,10 @@ def _backdate_identity(
 
 def _positions(
     frames: list[_FrameOut], smooth: bool, cfg: TrackerConfig
-) -> dict[tuple[int, int], np.ndarray]:
-    """Position of every (track, history index): RTS-smoothed when asked (offline advantage)."""
-    out: dict[tuple[int, int], np.ndarray] = {}
+) -> dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]:
+    """State (x, y, vx, vy) and covariance of every (track, history index): RTS-smoothed when
+    asked (filterpy; the offline advantage the paper's real-time system did not have)."""
+    out: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
     seen: dict[int, GroundTrack] = {}
     for fr in frames:
         for trk, _, _, _ in fr.rows:
@@ -658,8 +661,28 @@ def _positions(
                 qs.append(q)
             xs, ps, _, _ = rts_smoother(xs, ps, np.array(fs), np.array(qs))
         for k in range(len(hist)):
-            out[(key, k)] = xs[k][:2, 0]
+            out[(key, k)] = (xs[k][:, 0], ps[k])
     return out
+
+
+def _track_message(
+    out_id: str, trk: GroundTrack, state: TrackState, est: tuple[np.ndarray, np.ndarray] | None
+) -> Track:
+    """A trackctl.Track from an estimated state (x, y, vx, vy) and its covariance."""
+    if est is None:
+        x, p = trk.kf.x[:, 0], trk.kf.P
+    else:
+        x, p = est
+    cov = np.zeros((3, 3))
+    cov[:2, :2] = p[:2, :2]
+    return Track(
+        out_id,
+        Vec3(float(x[0]), float(x[1]), 0.0),
+        Vec3(float(x[2]), float(x[3]), 0.0),
+        tuple(float(c) for c in cov.ravel()),
+        state=state,
+        visual_id=trk.vid,
+    )
 
 
 def _write_and_score(
@@ -701,12 +724,11 @@ def _write_and_score(
                 out_id = trk.first_mid
             # entry k of a track's history is its state at this frame (snapshotted before the
             # next frame's prediction, or when the log ends)
-            xy = positions.get((id(trk), k), trk.xy)
-            tracks.append(
-                Track(out_id, Vec3(float(xy[0]), float(xy[1]), 0.0), state=state, visual_id=trk.vid)
-            )
-            hyp[out_id] = (float(xy[0]), float(xy[1]))
+            msg = _track_message(out_id, trk, state, positions.get((id(trk), k)))
+            tracks.append(msg)
+            hyp[out_id] = (msg.position_m.x, msg.position_m.y)
         writer.write(TRACKS_TOPIC, Tracks(fr.t_ns, tuple(tracks)))
+        writer.write(SCENE_TOPIC, scene_update(fr.t_ns, tracks, set(phones)), fr.t_ns)
         gt = truth.get(fr.t_ns)
         if gt is None:
             continue
