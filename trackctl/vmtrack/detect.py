@@ -70,6 +70,8 @@ class Region:
     x1: int
     y1: int
     height_px: float
+    extra_levels: int = 0
+    """Pyramid levels searched beyond ``level_margin`` either side (recovery)."""
 
 
 class BackgroundModel:
@@ -151,14 +153,14 @@ def _level_boxes(
     return boxes, score[keep]
 
 
-def _levels_for(height_px: float, cfg: DetectorConfig) -> list[float]:
+def _levels_for(height_px: float, cfg: DetectorConfig, extra: int = 0) -> list[float]:
     """Pyramid scales whose window matches a person ``height_px`` tall (the paper's predicted
     pyramid levels), with ``level_margin`` neighbours either side."""
     k = math.log(max(height_px, 1.0) / cfg.window_h_px) / math.log(cfg.scale_step)
     centre = round(k)
     return [
         cfg.scale_step**lv
-        for lv in range(centre - cfg.level_margin, centre + cfg.level_margin + 1)
+        for lv in range(centre - cfg.level_margin - extra, centre + cfg.level_margin + extra + 1)
         if 0 <= lv < cfg.max_levels
     ]
 
@@ -188,7 +190,7 @@ def detect_people(
     else:
         for reg in regions:
             mask = background.foreground(image, cfg, reg)
-            for scale in _levels_for(reg.height_px, cfg):
+            for scale in _levels_for(reg.height_px, cfg, reg.extra_levels):
                 boxes, scores = _level_boxes(mask, scale, cfg)
                 if len(boxes):
                     boxes = boxes + np.array([reg.x0, reg.y0, 0, 0])
@@ -246,6 +248,7 @@ def predict_region(
     radius_m: float,
     person_height_m: float = 1.7,
     margin_px: int = 6,
+    extra_levels: int = 0,
 ) -> Region | None:
     """Image region of a person predicted at ``xy`` (ground, metres) within ``radius_m``.
 
@@ -273,7 +276,7 @@ def predict_region(
     x1, y1 = min(m.width_px, int(math.ceil(x1))), min(m.height_px, int(math.ceil(y1)))
     if x1 - x0 < 8 or y1 - y0 < 16:
         return None
-    return Region(x0, y0, x1, y1, height)
+    return Region(x0, y0, x1, y1, height, extra_levels)
 
 
 def person_height_px(cam: PinholeCamera, feet_px: np.ndarray, person_height_m: float) -> np.ndarray:

@@ -44,7 +44,7 @@ class FrameConfig:
 
     predicted: bool = True
     """Confine the search to motion-predicted regions (False: full search of every frame)."""
-    full_search_every: int = 9
+    full_search_every: int = 6
     """Frames between full searches that pick up people entering the view."""
     region_m: float = 0.4
     """Ground radius of a predicted region on top of the prediction's uncertainty."""
@@ -124,13 +124,18 @@ class FrameDetector:
                 raise InputError(f"{reader.path}: {topic}: no frame decodes as an image")
             self.backgrounds[name] = BackgroundModel(samples)
 
-    def regions(self, camera: str, predictions: list[tuple[np.ndarray, float]]) -> list[Region]:
-        """Image regions of the predicted people (ground xy, radius m) seen by ``camera``."""
+    def regions(
+        self, camera: str, predictions: list[tuple[np.ndarray, float, bool]]
+    ) -> list[Region]:
+        """Image regions of the predicted people seen by ``camera``: (ground xy, radius m,
+        recovering). A recovering track's region is searched at one more level either side."""
         cam = self.cams[camera]
-        h = self.config.detector.person_height_m
+        dcfg = self.config.detector
         out = []
-        for xy, radius in predictions:
-            reg = predict_region(cam, xy, radius, h)
+        for xy, radius, recovering in predictions:
+            reg = predict_region(
+                cam, xy, radius, dcfg.person_height_m, extra_levels=1 if recovering else 0
+            )
             if reg is not None:
                 out.append(reg)
         return out
@@ -140,7 +145,7 @@ class FrameDetector:
         t_ns: int,
         camera: str,
         data: bytes,
-        predictions: list[tuple[np.ndarray, float]] | None,
+        predictions: list[tuple[np.ndarray, float, bool]] | None,
     ) -> tuple[Detections, list[np.ndarray]]:
         """People in one frame: the Detections message and their ground points.
 

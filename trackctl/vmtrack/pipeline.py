@@ -450,9 +450,9 @@ def run(
     frame_index = 0
     search_full = True
 
-    def predictions(t_ns: int) -> list[tuple[np.ndarray, float]]:
-        """Where each live track can be at ``t_ns`` (ground xy, radius m): motion sensors for
-        tracks with a phone, the visual velocity otherwise."""
+    def predictions(t_ns: int) -> list[tuple[np.ndarray, float, bool]]:
+        """Where each live track can be at ``t_ns`` (ground xy, radius m, undetected in the last
+        frame): motion sensors for tracks with a phone, the visual velocity otherwise."""
         fcfg = cfg.frames
         owner = {id(tr): m for m, tr in bound.items()}
         out = []
@@ -463,13 +463,14 @@ def run(
             sigma = tcfg.pdr_sigma_mps if v is not None else fcfg.visual_speed_sigma_mps
             v = trk.v if v is None else v
             var = float(np.trace(trk.kf.P[:2, :2]) / 2) + (sigma * dt) ** 2
-            out.append((trk.xy + v * dt, fcfg.region_m + 2.0 * math.sqrt(var)))
+            missed = trk.state is not TrackState.TENTATIVE and trk.last_hit_ns != trk.t_ns
+            out.append((trk.xy + v * dt, fcfg.region_m + 2.0 * math.sqrt(var), missed))
         return out
 
     def plan_search() -> bool:
         """Full search to initialize, and periodically for people entering the views; in
-        between only predicted regions. A track that goes undetected keeps being predicted, and
-        its region grows with its uncertainty until it is found again (recovery)."""
+        between only predicted regions. A track that went undetected keeps being predicted; its
+        region grows with its uncertainty and is searched at more pyramid levels (recovery)."""
         if not cfg.frames.predicted or not tracks:
             return True
         return frame_index % max(1, cfg.frames.full_search_every) == 0
