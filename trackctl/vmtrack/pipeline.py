@@ -33,7 +33,7 @@ from trackctl.logs.messages import (
 )
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
-from trackctl.metrics.tracking import MotAccumulator
+from trackctl.metrics.tracking import InitialIdentity, MotAccumulator
 from trackctl.processing.base import Progress
 from trackctl.vmtrack.frames import FrameConfig, FrameDetector, detections_topic, image_cameras
 from trackctl.vmtrack.motion import MotionConfig, PhoneMotion
@@ -702,6 +702,7 @@ def _write_and_score(
     errors: list[float] = []
     det_err: list[float] = []
     det_hits = det_people = 0
+    followed = InitialIdentity(cfg.eval_threshold_m)
     people: set[str] = set()
     users: set[str] = set()
     ok_since: dict[str, bool] = {}
@@ -768,11 +769,11 @@ def _write_and_score(
                     recovery.append((fr.t_ns - lost_at.pop(person)) / 1e9)
                 ok_since[person] = good
         else:
-            matches = users_acc.update({p: gtf[p] for p in carriers}, hyp, ignore=nonusers)
+            users_acc.update({p: gtf[p] for p in carriers}, hyp, ignore=nonusers)
             for person in carriers:
-                h = matches.get(person)
-                if h is not None:
-                    errors.append(math.dist(hyp[h], gtf[person]))
+                err = followed.error(person, gtf[person], hyp)
+                if err is not None:
+                    errors.append(err)
     s_users = users_acc.summary()
     s_all = all_acc.summary()
     return {
