@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
+from scipy.cluster.vq import kmeans2
 from scipy.spatial.transform import Rotation
 
 from trackctl.errors import InputError
@@ -231,6 +232,21 @@ def _imu_samples(
     return out
 
 
+def _entries(trajs: list[Trajectory], size: tuple[float, float], k: int = 2) -> list[np.ndarray]:
+    """Where people enter the scene: the ``k`` densest spots among the trajectories' first
+    points (the paper puts its check-point APs at the entries), by deterministic k-means."""
+    first = np.array([t.xy[0] for t in trajs])
+    if len(first) <= k:
+        return [np.clip(p, 0.3, np.array(size) - 0.3) for p in first]
+    # farthest-point initialisation from the first point keeps k-means deterministic
+    centres = [first[0]]
+    for _ in range(1, k):
+        d = np.min([np.linalg.norm(first - c, axis=1) for c in centres], axis=0)
+        centres.append(first[int(np.argmax(d))])
+    cent, _ = kmeans2(first, np.array(centres), iter=20, minit="matrix")
+    return [np.clip(c, 0.3, np.array(size) - 0.3) for c in cent]
+
+
 def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
     """Write a VM-Tracking scenario log to ``out``; returns message counts per topic."""
     rng = np.random.default_rng(cfg.seed)
@@ -257,6 +273,8 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
     ]
     if cfg.field == "office" and not cfg.trajectories:
         aps = aps[:1]
+    if cfg.trajectories:
+        aps = [(f"ap-entry-{k}", xy) for k, xy in enumerate(_entries(trajs, size))]
     counts: dict[str, int] = {}
     events: list[tuple[int, int, str, object]] = []
     frame_times = np.arange(0.0, duration, 1.0 / cfg.fps)

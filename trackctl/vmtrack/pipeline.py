@@ -83,7 +83,8 @@ class VmTrackConfig:
     """Detections a track needs before its velocity is compared with phones."""
     ratio: float = 3.0
     """Bind early when the best candidate's disagreement is this many times below the next."""
-    checkpoint_dbm: float = -45.0
+    checkpoint_dbm: float = -40.0
+    """RSSI of a phone held within ~1 m of a check-point AP (the paper: "less than 1 meter")."""
     checkpoint_radius_m: float = 1.5
     rssi_at_1m_dbm: float = -40.0
     """Check-point AP path-loss model: RSSI at 1 m, exponent, shadowing std (calibrate per site)."""
