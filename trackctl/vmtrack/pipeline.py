@@ -82,6 +82,8 @@ class VmTrackConfig:
     converge_hits: int = 6
     """Detections a track needs before its velocity is compared with phones."""
     ratio: float = 3.0
+    offline_reject_mps: float = 0.6
+    """Offline pass: a never-bound phone takes its clear best track if it disagrees less."""
     """Bind early when the best candidate's disagreement is this many times below the next."""
     checkpoint_dbm: float = -40.0
     """RSSI of a phone held within ~1 m of a check-point AP (the paper: "less than 1 meter")."""
@@ -575,33 +577,35 @@ def _resolve_offline(
 ) -> int:
     """Name still-anonymous tracks after phones that were never bound online.
 
-    Online binding waits until one candidate clearly beats the others (Theorem 1); people who walk
-    together for their whole visit never separate, so it never happens. Offline we know every
-    track's whole life, so the most consistent pairs are taken first (lowest mean velocity
-    disagreement, gated by the paper's rejection threshold): a track goes to at most one phone and
-    a phone takes several tracks only when they do not overlap in time (a person whose track broke
-    up in a crowd). The identity then holds for each chosen track's whole life.
+    Online binding waits until one candidate clearly beats the others within a tight gate
+    (Theorem 1); in a short visit, or with noisy motion, it may never happen. Offline we know
+    every track's whole life: each never-bound phone whose best anonymous track clearly beats the
+    runner-up (the online ratio test) and stays within a wider gate takes it, the most consistent
+    pairs first; a track goes to at most one phone. The identity then holds back along the track
+    as far as its motion agreed with the phone (:func:`_backdate_identity`).
     """
     ever_bound = {trk.first_mid for trk in by_vid.values() if trk.first_mid is not None}
-    pairs = sorted(
-        (c.mean, mid, vid)
-        for mid, cands in evidence.items()
-        if mid in phones and mid not in ever_bound
-        for vid, c in cands.items()
-        if by_vid[vid].first_mid is None and c.n >= cfg.bind_frames and c.mean <= cfg.reject_mps**2
-    )
-    spans: dict[str, list[tuple[int, int]]] = defaultdict(list)
+    pairs = []
+    for mid, cands in evidence.items():
+        if mid not in phones or mid in ever_bound:
+            continue
+        scored = sorted(
+            (c.mean, vid)
+            for vid, c in cands.items()
+            if by_vid[vid].first_mid is None and c.n >= cfg.bind_frames
+        )
+        if not scored or scored[0][0] > cfg.offline_reject_mps**2:
+            continue
+        if len(scored) > 1 and scored[1][0] <= cfg.ratio * scored[0][0] + 0.02:
+            continue  # ambiguous (people walking together): leave the phone unbound
+        pairs.append((scored[0][0], mid, scored[0][1]))
     made = 0
-    for _, mid, vid in pairs:
+    for _, mid, vid in sorted(pairs):
         trk = by_vid[vid]
         if trk.first_mid is not None:
             continue
-        span = (trk.history[0][0] if trk.history else trk.t_ns, trk.t_ns)
-        if any(span[0] <= b and a <= span[1] for a, b in spans[mid]):
-            continue
-        spans[mid].append(span)
         trk.first_mid = mid
-        trk.first_bound_ns = trk.t_ns + 1  # the identity covers the whole track
+        trk.first_bound_ns = trk.t_ns + 1  # the identity covers the whole track (back-dated)
         made += 1
     return made
 
@@ -621,7 +625,7 @@ def _backdate_identity(
     phone = phones.get(trk.first_mid)
     if phone is None:
         return
-    limit = (1.6 * cfg.reject_mps) ** 2
+    limit = (1.6 * cfg.offline_reject_mps) ** 2  # whole-life evidence: the offline gate
     window: list[float] = []
     start = trk.first_bound_ns
     for t_ns, x, _, _ in reversed(trk.history):

@@ -14,7 +14,6 @@ and everyone in V-AF mode) are associated by q_ij alone.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
