@@ -1,0 +1,198 @@
+"""EV data as the matcher sees it: the E-scenario table (read in full, it is light) and a V-scenario
+store that reads one (cell topic, window) at a time and counts what it read."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from trackctl.errors import InputError
+from trackctl.logs import topics
+from trackctl.logs.messages import GroundTruth, VScenario
+from trackctl.logs.reader import LogReader
+
+__all__ = ["EData", "VStore", "load_e", "load_ground_truth"]
+
+
+@dataclass
+class EData:
+    """Every E-scenario of a log, as integer codes.
+
+    Attributes:
+        eids: EID names, sorted; an EID's code is its index.
+        cells: cell names, sorted; a cell's code is its index.
+        windows_ns: window start times, sorted; a window's code is its index.
+        window_ns: window length (ns).
+        rows: one row per (window, cell, EID) listing: columns ``w``, ``cell``, ``eid`` (codes)
+            and ``vague`` (bool). A scenario's id is ``w * len(cells) + cell``.
+    """
+
+    eids: np.ndarray
+    cells: list[str]
+    windows_ns: np.ndarray
+    window_ns: int
+    rows: pd.DataFrame
+
+    @property
+    def n_cells(self) -> int:
+        return len(self.cells)
+
+    def scenario_id(self, w: np.ndarray | int, cell: np.ndarray | int) -> np.ndarray | int:
+        return w * self.n_cells + cell
+
+    def scenario_name(self, s: int) -> str:
+        """``<cell>@<window start ns>`` (how matches name their evidence)."""
+        w, c = divmod(int(s), self.n_cells)
+        return f"{self.cells[c]}@{int(self.windows_ns[w])}"
+
+    def eid_codes(self, names: Iterable[str]) -> tuple[np.ndarray, list[str]]:
+        """Codes of the known names (in the given order) and the names that never appear."""
+        names = list(names)
+        idx = pd.Index(self.eids).get_indexer(names) if names else np.zeros(0, np.int64)
+        missing = [n for n, i in zip(names, idx, strict=True) if i < 0]
+        return idx[idx >= 0].astype(np.int64), missing
+
+
+def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
+    """Read every E-scenario on ``topic`` (streamed; memory grows with the listings only).
+
+    Raises:
+        MissingTopicError: the log has no E-observations.
+        InputError: windows of different lengths.
+    """
+    reader.require([topic], "ev-match", "the E-scenarios: EIDs heard per cell and window")
+    w_list: list[np.ndarray] = []
+    c_list: list[str] = []
+    e_list: list[tuple[str, ...]] = []
+    v_list: list[tuple[bool, ...]] = []
+    t_list: list[int] = []
+    window_ns = None
+    for msg in reader.messages([topic]):
+        obs = msg.message
+        if window_ns is None:
+            window_ns = obs.window_ns
+        elif obs.window_ns != window_ns:
+            raise InputError(
+                f"{reader.path}: {topic} at {msg.log_time_ns} ns: window_ns {obs.window_ns} "
+                f"differs from the first message's {window_ns}; EV-Matching needs one window length"
+            )
+        t_list.append(obs.t_ns)
+        c_list.append(obs.cell)
+        e_list.append(obs.eids)
+        v_list.append(obs.vague)
+    windows = np.unique(np.array(t_list, dtype=np.int64))
+    cells = sorted(set(c_list))
+    cell_code = {c: i for i, c in enumerate(cells)}
+    lengths = np.fromiter((len(e) for e in e_list), dtype=np.int64, count=len(e_list))
+    flat_e = np.array([e for es in e_list for e in es], dtype=object)
+    eids, eid_code = np.unique(flat_e.astype(str), return_inverse=True) if flat_e.size else (
+        np.array([], dtype=str),
+        np.array([], dtype=np.int64),
+    )
+    w_code = np.searchsorted(windows, np.array(t_list, dtype=np.int64))
+    c_codes = np.array([cell_code[c] for c in c_list], dtype=np.int64)
+    rows = pd.DataFrame(
+        {
+            "w": np.repeat(w_code, lengths).astype(np.int32),
+            "cell": np.repeat(c_codes, lengths).astype(np.int32),
+            "eid": np.asarray(eid_code, dtype=np.int32),
+            "vague": np.fromiter(
+                (v for vs in v_list for v in vs), dtype=bool, count=int(lengths.sum())
+            ),
+        }
+    )
+    # an EID listed twice in one scenario keeps its strongest (inclusive) flag
+    rows = (
+        rows.sort_values(["w", "cell", "eid", "vague"], kind="stable")
+        .drop_duplicates(["w", "cell", "eid"])
+        .reset_index(drop=True)
+    )
+    return EData(
+        eids=eids.astype(object),
+        cells=cells,
+        windows_ns=windows,
+        window_ns=int(window_ns or 0),
+        rows=rows,
+    )
+
+
+def load_ground_truth(reader: LogReader, topic: str = topics.EV_GROUND_TRUTH) -> dict[str, str]:
+    """EID -> true VID from the ground-truth topic (empty when the log has none)."""
+    if topic not in reader.topics():
+        return {}
+    out: dict[str, str] = {}
+    for msg in reader.messages([topic]):
+        gt: GroundTruth = msg.message
+        for ent in gt.entities:
+            if ent.electronic_id is not None and ent.visual_id is not None:
+                out[ent.electronic_id] = ent.visual_id
+    return out
+
+
+@dataclass
+class VStore:
+    """Reads V-scenarios on demand, one (cell topic, window) each, and keeps what it read.
+
+    Each scenario is fetched through the MCAP index with a topic filter and the window's time
+    range, so the messages decoded are exactly the V-scenarios asked for; ``reads`` and
+    ``bytes_read`` count those messages and their encoded sizes.
+    """
+
+    reader: LogReader
+    data: EData
+    cache: dict[int, tuple[str, ...]] = field(default_factory=dict)
+    sizes: dict[int, int] = field(default_factory=dict)
+    reads: int = 0
+    bytes_read: int = 0
+
+    def total(self) -> tuple[int, int | None]:
+        """V-scenarios in the log (messages on the cell V topics) and their bytes (None: unknown)."""
+        n = sum(
+            info.count
+            for name, info in self.reader.topics().items()
+            if name.startswith(topics.EV_V_PREFIX)
+        )
+        return n, None
+
+    def fetch(self, scenarios: Iterable[int]) -> dict[int, tuple[str, ...]]:
+        """VIDs of each scenario id (read from the log the first time, cached after).
+
+        Raises:
+            MissingTopicError: a cell's V topic is absent.
+            InputError: the topic has no V-scenario for the window.
+        """
+        wanted = sorted({int(s) for s in scenarios} - self.cache.keys())
+        n_cells = self.data.n_cells
+        by_window: dict[int, list[int]] = {}
+        for s in wanted:
+            by_window.setdefault(s // n_cells, []).append(s % n_cells)
+        present = self.reader.topics()
+        for w, cells in by_window.items():
+            names = {topics.ev_v(self.data.cells[c]): c for c in cells}
+            for name, c in names.items():
+                if name not in present:
+                    self.reader.require(
+                        [name], "ev-match", f"V-scenarios of cell {self.data.cells[c]}"
+                    )
+            start = int(self.data.windows_ns[w])
+            got: set[int] = set()
+            for raw in self.reader.raw(names, start, start + max(self.data.window_ns, 1)):
+                c = names[raw.topic]
+                scen: VScenario = self.reader.codec(raw).decode(raw.data)
+                self.reads += 1
+                self.bytes_read += len(raw.data)
+                s = w * n_cells + c
+                self.sizes[s] = self.sizes.get(s, 0) + len(raw.data)
+                prev = self.cache.get(s, ())
+                self.cache[s] = tuple(sorted(set(prev) | set(scen.vids)))
+                got.add(c)
+            for name, c in names.items():
+                if c not in got:
+                    raise InputError(
+                        f"{self.reader.path}: {name} has no V-scenario in the window starting at "
+                        f"{start} ns (cell {self.data.cells[c]} listed EIDs then)"
+                    )
+        return {int(s): self.cache[int(s)] for s in scenarios}
