@@ -9,10 +9,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from trackctl.errors import InputError
+from trackctl.errors import InputError, LogError
 from trackctl.logs import topics
 from trackctl.logs.messages import GroundTruth, VScenario
-from trackctl.logs.reader import LogReader
+from trackctl.logs.codecs import Codec
+from trackctl.logs.reader import IndexedWindowReader, LogReader, RawMessage
 
 __all__ = ["EData", "VStore", "load_e", "load_ground_truth"]
 
@@ -145,6 +146,8 @@ class VStore:
     data: EData
     cache: dict[int, tuple[str, ...]] = field(default_factory=dict)
     sizes: dict[int, int] = field(default_factory=dict)
+    _indexed: IndexedWindowReader | None = None
+    _codecs: dict[tuple[str, str, bytes], Codec] = field(default_factory=dict)
     reads: int = 0
     bytes_read: int = 0
 
@@ -157,6 +160,26 @@ class VStore:
         )
         return n, None
 
+    def _window_reader(self) -> IndexedWindowReader | None:
+        if self._indexed is None and not self.reader.truncated:
+            try:
+                self._indexed = IndexedWindowReader(self.reader)
+            except LogError:
+                self._indexed = None
+        return self._indexed
+
+    def close(self) -> None:
+        """Close the indexed reader, if one was opened."""
+        if self._indexed is not None:
+            self._indexed.close()
+            self._indexed = None
+
+    def _read(self, topic: str, start: int, end: int) -> list[RawMessage]:
+        indexed = self._window_reader()
+        if indexed is not None:
+            return indexed.read(topic, start, end)
+        return list(self.reader.raw([topic], start, end))
+
     def fetch(self, scenarios: Iterable[int]) -> dict[int, tuple[str, ...]]:
         """VIDs of each scenario id (read from the log the first time, cached after).
 
@@ -164,35 +187,33 @@ class VStore:
             MissingTopicError: a cell's V topic is absent.
             InputError: the topic has no V-scenario for the window.
         """
-        wanted = sorted({int(s) for s in scenarios} - self.cache.keys())
+        scenarios = [int(s) for s in scenarios]
+        wanted = sorted(set(scenarios) - self.cache.keys())
         n_cells = self.data.n_cells
-        by_window: dict[int, list[int]] = {}
-        for s in wanted:
-            by_window.setdefault(s // n_cells, []).append(s % n_cells)
         present = self.reader.topics()
-        for w, cells in by_window.items():
-            names = {topics.ev_v(self.data.cells[c]): c for c in cells}
-            for name, c in names.items():
-                if name not in present:
-                    self.reader.require(
-                        [name], "ev-match", f"V-scenarios of cell {self.data.cells[c]}"
-                    )
+        for s in wanted:
+            w, c = divmod(s, n_cells)
+            cell = self.data.cells[c]
+            name = topics.ev_v(cell)
+            if name not in present:
+                self.reader.require([name], "ev-match", f"the V-scenarios of cell {cell}")
             start = int(self.data.windows_ns[w])
-            got: set[int] = set()
-            for raw in self.reader.raw(names, start, start + max(self.data.window_ns, 1)):
-                c = names[raw.topic]
-                scen: VScenario = self.reader.codec(raw).decode(raw.data)
+            raws = self._read(name, start, start + max(self.data.window_ns, 1))
+            if not raws:
+                raise InputError(
+                    f"{self.reader.path}: {name} has no V-scenario in the window starting at "
+                    f"{start} ns (cell {cell} listed EIDs then)"
+                )
+            vids: set[str] = set()
+            for raw in raws:
+                key = (raw.schema_name, raw.message_encoding, raw.schema_data)
+                codec = self._codecs.get(key)
+                if codec is None:
+                    codec = self._codecs[key] = self.reader.codec(raw)
+                scen: VScenario = codec.decode(raw.data)
+                vids.update(scen.vids)
                 self.reads += 1
                 self.bytes_read += len(raw.data)
-                s = w * n_cells + c
                 self.sizes[s] = self.sizes.get(s, 0) + len(raw.data)
-                prev = self.cache.get(s, ())
-                self.cache[s] = tuple(sorted(set(prev) | set(scen.vids)))
-                got.add(c)
-            for name, c in names.items():
-                if c not in got:
-                    raise InputError(
-                        f"{self.reader.path}: {name} has no V-scenario in the window starting at "
-                        f"{start} ns (cell {self.data.cells[c]} listed EIDs then)"
-                    )
-        return {int(s): self.cache[int(s)] for s in scenarios}
+            self.cache[s] = tuple(sorted(vids))
+        return {s: self.cache[s] for s in scenarios}

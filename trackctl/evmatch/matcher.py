@@ -196,31 +196,56 @@ def _set_split(
     return evidence, distinguished, iterations
 
 
-def _ranked(counts: pd.DataFrame) -> dict[int, list[tuple[str, int]]]:
-    out: dict[int, list[tuple[str, int]]] = {}
+_Verdict = tuple[str | None, int, int, str]
+
+
+def _judge_all(
+    counts: pd.DataFrame,
+    evidence: dict[int, list[int]],
+    pending: Sequence[int],
+    taken: set[str],
+    params: MatchParams,
+) -> dict[int, _Verdict]:
+    """Per pending EID: best free VID, its count, the runner-up's count and why the result is not
+    acceptable ('' when it is). ``counts`` is sorted by eid, count desc, vid."""
+    if taken and len(counts):
+        counts = counts[~counts["vid"].isin(taken)]
+    top = counts.groupby("eid", sort=False).head(2)
+    e_arr = top["eid"].to_numpy()
+    best: dict[int, list[tuple[str, int]]] = {}
     for e, v, c in zip(
-        counts["eid"].tolist(), counts["vid"].tolist(), counts["count"].tolist(), strict=True
+        e_arr.tolist(), top["vid"].tolist(), top["count"].tolist(), strict=True
     ):
-        out.setdefault(int(e), []).append((str(v), int(c)))
+        best.setdefault(int(e), []).append((str(v), int(c)))
+    out: dict[int, _Verdict] = {}
+    for e in pending:
+        n = len(evidence[e])
+        free = best.get(e, [])
+        if not free:
+            out[e] = (None, 0, 0, f"no free VID in its {n} V-scenarios")
+            continue
+        (v1, c1), c2 = free[0], (free[1][1] if len(free) > 1 else 0)
+        why = ""
+        if n < params.min_evidence:
+            why = f"only {n} evidence scenario(s) (need {params.min_evidence})"
+        elif c1 - c2 < params.margin:
+            second = free[1][0] if len(free) > 1 else "-"
+            why = f"ambiguous after {n} scenarios: {v1} in {c1}, {second} in {c2}"
+        elif c1 < params.support * n:
+            why = f"weak: best VID {v1} in only {c1} of {n} scenarios"
+        out[e] = (v1, c1, c2, why)
     return out
 
 
-def _judge(
-    ranked: list[tuple[str, int]], n: int, taken: set[str], params: MatchParams
-) -> tuple[str | None, int, int, str]:
-    """Best VID, its count, the runner-up's count and why it is not acceptable ('' if it is)."""
-    free = [(v, c) for v, c in ranked if v not in taken]
-    if not free:
-        return None, 0, 0, f"no free VID in its {n} V-scenarios"
-    (v1, c1), c2 = free[0], (free[1][1] if len(free) > 1 else 0)
-    if n < params.min_evidence:
-        return v1, c1, c2, f"only {n} evidence scenario(s) (need {params.min_evidence})"
-    if c1 - c2 < params.margin:
-        second = free[1][0] if len(free) > 1 else "-"
-        return v1, c1, c2, f"ambiguous after {n} scenarios: {v1} in {c1}, {second} in {c2}"
-    if c1 < params.support * n:
-        return v1, c1, c2, f"weak: best VID {v1} in only {c1} of {n} scenarios"
-    return v1, c1, c2, ""
+def _ranked(counts: pd.DataFrame) -> dict[int, list[tuple[str, int]]]:
+    """Top two (VID, count) per EID."""
+    top = counts.groupby("eid", sort=False).head(2)
+    out: dict[int, list[tuple[str, int]]] = {}
+    for e, v, c in zip(
+        top["eid"].tolist(), top["vid"].tolist(), top["count"].tolist(), strict=True
+    ):
+        out.setdefault(int(e), []).append((str(v), int(c)))
+    return out
 
 
 def _confidence(c1: int, c2: int, n: int) -> float:
@@ -265,10 +290,7 @@ def match_ss(
         ev_e = np.array([e for e in pending for _ in evidence[e]], np.int64)
         ev_s = np.array([s for e in pending for s in evidence[e]], np.int64)
         vids = vstore.fetch(ev_s.tolist())
-        ranked = _ranked(engine.vote(ev_e, ev_s, vids))
-        verdicts = {
-            e: _judge(ranked.get(e, []), len(evidence[e]), taken, params) for e in pending
-        }
+        verdicts = _judge_all(engine.vote(ev_e, ev_s, vids), evidence, pending, taken, params)
         ok = sorted(
             (e for e in pending if not verdicts[e][3]),
             key=lambda e: (-(verdicts[e][1] - verdicts[e][2]), -verdicts[e][1], e),

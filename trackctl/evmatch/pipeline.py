@@ -66,6 +66,7 @@ def match_log(
         outcome = algo(data, vstore, requested, engine, config.params, config.seed, progress)
     finally:
         engine.close()
+        vstore.close()
     stages = {"seconds_load_e": t1 - t0, **outcome.stage_seconds}
     return outcome, data, vstore, stages
 
