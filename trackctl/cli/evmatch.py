@@ -48,7 +48,7 @@ def ev_match(
     seed: Annotated[int, typer.Option(help="Order of the random windows.")] = 0,
     margin: Annotated[
         int, typer.Option(help="Votes the best VID must lead the runner-up by.")
-    ] = 2,
+    ] = 1,
     max_evidence: Annotated[
         int, typer.Option(help="Most evidence scenarios per EID before giving up.")
     ] = 12,

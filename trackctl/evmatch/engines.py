@@ -16,6 +16,7 @@ and therefore the matches, are identical whichever engine ran them.
 from __future__ import annotations
 
 import operator
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Protocol
 
@@ -117,7 +118,10 @@ class SparkEngine:
 
     def __init__(self, master: str = "local[2]", partitions: int | None = None) -> None:
         try:
-            from pyspark.sql import SparkSession
+            with warnings.catch_warnings():
+                # pyspark warns about pandas >= 3 for its pandas API, which trackctl does not use
+                warnings.filterwarnings("ignore", message=".*pandas.*", category=UserWarning)
+                from pyspark.sql import SparkSession
         except ImportError as err:
             raise InputError(
                 "--engine spark needs pyspark (and Java 17+): pip install 'trackctl[spark]'"

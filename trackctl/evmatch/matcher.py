@@ -51,7 +51,7 @@ REASON_NO_INCLUSIVE = "never in an inclusive zone: only vague E-observations, no
 class MatchParams:
     """Acceptance rule of VID filtering and limits of refining."""
 
-    margin: int = 2
+    margin: int = 1
     min_evidence: int = 2
     support: float = 0.5
     max_evidence: int = 12
@@ -95,6 +95,7 @@ class _Inclusive:
         self.eid_sorted = e[by]
         self.scen_sorted = s[by]
         self.bounds = np.searchsorted(self.eid_sorted, np.arange(n_e + 1))
+        self.n_cells = data.n_cells
 
     def has(self, s: int, e: int) -> bool:
         k = s * self.n_e + e
@@ -270,7 +271,6 @@ def match_ss(
     evidence, distinguished, iterations = _set_split(data, targets, order, engine, inc, progress)
     t1 = time.perf_counter()
     result: dict[int, EvMatch] = {}
-    cursor = {int(e): 0 for e in targets}
     pending: list[int] = []
     for e in targets.tolist():
         ev = evidence.get(e, [])
@@ -286,7 +286,7 @@ def match_ss(
         # add one scenario to EIDs short of evidence before filtering (free of a V read if shared)
         for e in pending:
             if len(evidence[e]) < params.min_evidence:
-                _extend(e, evidence, cursor, inc, params)
+                _extend(e, evidence, inc, params, vstore.cache)
         ev_e = np.array([e for e in pending for _ in evidence[e]], np.int64)
         ev_s = np.array([s for e in pending for s in evidence[e]], np.int64)
         vids = vstore.fetch(ev_s.tolist())
@@ -314,7 +314,7 @@ def match_ss(
         for e in pending:
             if e in result or e in still:
                 continue
-            if not _extend(e, evidence, cursor, inc, params):
+            if not _extend(e, evidence, inc, params, vstore.cache):
                 v, c1, c2, why = verdicts[e]
                 result[e] = EvMatch(
                     str(data.eids[e]),
@@ -354,20 +354,36 @@ def _in_request_order(
 
 
 def _extend(
-    e: int, evidence: dict[int, list[int]], cursor: dict[int, int], inc: _Inclusive, p: MatchParams
+    e: int,
+    evidence: dict[int, list[int]],
+    inc: _Inclusive,
+    p: MatchParams,
+    read: set[int] | dict[int, object] | None = None,
 ) -> bool:
-    """Add the EID's next inclusive scenario (in window order) not yet in its evidence."""
+    """Give the EID more evidence: every V-scenario already read where it is inclusive (no extra
+    video to process), else the inclusive scenario farthest in time from its evidence (people
+    who share a cell now likely share it a minute later, so a near window rarely tells them
+    apart); ties go to the earlier window in the random order."""
     if len(evidence[e]) >= p.max_evidence:
         return False
     mine = inc.scenarios_of(e)
     have = set(evidence[e])
-    i = cursor[e]
-    while i < len(mine) and int(mine[i]) in have:
-        i += 1
-    cursor[e] = i + 1
-    if i >= len(mine):
+    fresh = np.array([int(s) not in have for s in mine.tolist()], bool)
+    if not fresh.any():
         return False
-    evidence[e].append(int(mine[i]))
+    cand = mine[fresh]
+    if read:
+        free = [s for s in cand.tolist() if s in read]
+        if free:
+            evidence[e].extend(free[: p.max_evidence - len(evidence[e])])
+            return True
+    if evidence[e]:
+        used_w = np.array(evidence[e], np.int64) // inc.n_cells
+        gap = np.abs((cand // inc.n_cells)[:, None] - used_w[None, :]).min(axis=1)
+        pick = int(cand[int(np.argmax(gap))])  # argmax keeps the first (random-order) maximum
+    else:
+        pick = int(cand[0])
+    evidence[e].append(pick)
     return True
 
 
