@@ -26,9 +26,7 @@ def small_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("ev") / "small.mcap"
     simulate_ev(
         str(path),
-        EvScenario(
-            people=150, area_m=500, duration_s=900, eid_miss=0.3, vid_miss=0.05, seed=11
-        ),
+        EvScenario(people=150, area_m=500, duration_s=900, eid_miss=0.3, vid_miss=0.05, seed=11),
     )
     return path
 
@@ -36,15 +34,19 @@ def small_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="session")
 def spark_session() -> Iterator[object]:
     """One local[2] SparkSession for the whole test session (startup takes seconds)."""
-    from pyspark.sql import SparkSession  # the dev extra installs pyspark: no skip
+    import warnings
 
-    session = (
-        SparkSession.builder.master("local[2]")
-        .appName("trackctl-tests")
-        .config("spark.ui.enabled", "false")
-        .config("spark.ui.showConsoleProgress", "false")
-        .getOrCreate()
-    )
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*pandas >= 3.*")
+        from pyspark.sql import SparkSession  # the dev extra installs pyspark: no skip
+
+        session = (
+            SparkSession.builder.master("local[2]")
+            .appName("trackctl-tests")
+            .config("spark.ui.enabled", "false")
+            .config("spark.ui.showConsoleProgress", "false")
+            .getOrCreate()
+        )
     session.sparkContext.setLogLevel("ERROR")
     yield session
     session.stop()
@@ -92,6 +94,8 @@ def write_ev_log(
                 vs = sorted(vids)
                 w.write(
                     topics.ev_v(c),
-                    VScenario(t, win, c, tuple(vs), (0.0,) * len(vs), (0.0,) * len(vs), (12,) * len(vs)),
+                    VScenario(
+                        t, win, c, tuple(vs), (0.0,) * len(vs), (0.0,) * len(vs), (12,) * len(vs)
+                    ),
                 )
     return path

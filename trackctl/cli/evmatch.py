@@ -46,9 +46,7 @@ def ev_match(
         str | None, typer.Option(help="Spark master: local[N] or a cluster URL.")
     ] = None,
     seed: Annotated[int, typer.Option(help="Order of the random windows.")] = 0,
-    margin: Annotated[
-        int, typer.Option(help="Votes the best VID must lead the runner-up by.")
-    ] = 1,
+    margin: Annotated[int, typer.Option(help="Votes the best VID must lead the runner-up by.")] = 1,
     max_evidence: Annotated[
         int, typer.Option(help="Most evidence scenarios per EID before giving up.")
     ] = 12,

@@ -11,8 +11,8 @@ import pandas as pd
 
 from trackctl.errors import InputError, LogError
 from trackctl.logs import topics
-from trackctl.logs.messages import GroundTruth, VScenario
 from trackctl.logs.codecs import Codec
+from trackctl.logs.messages import GroundTruth, VScenario
 from trackctl.logs.reader import IndexedWindowReader, LogReader, RawMessage
 
 __all__ = ["EData", "VStore", "load_e", "load_ground_truth"]
@@ -65,7 +65,6 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
         InputError: windows of different lengths.
     """
     reader.require([topic], "ev-match", "the E-scenarios: EIDs heard per cell and window")
-    w_list: list[np.ndarray] = []
     c_list: list[str] = []
     e_list: list[tuple[str, ...]] = []
     v_list: list[tuple[bool, ...]] = []
@@ -89,9 +88,13 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
     cell_code = {c: i for i, c in enumerate(cells)}
     lengths = np.fromiter((len(e) for e in e_list), dtype=np.int64, count=len(e_list))
     flat_e = np.array([e for es in e_list for e in es], dtype=object)
-    eids, eid_code = np.unique(flat_e.astype(str), return_inverse=True) if flat_e.size else (
-        np.array([], dtype=str),
-        np.array([], dtype=np.int64),
+    eids, eid_code = (
+        np.unique(flat_e.astype(str), return_inverse=True)
+        if flat_e.size
+        else (
+            np.array([], dtype=str),
+            np.array([], dtype=np.int64),
+        )
     )
     w_code = np.searchsorted(windows, np.array(t_list, dtype=np.int64))
     c_codes = np.array([cell_code[c] for c in c_list], dtype=np.int64)
@@ -151,14 +154,13 @@ class VStore:
     reads: int = 0
     bytes_read: int = 0
 
-    def total(self) -> tuple[int, int | None]:
-        """V-scenarios in the log (messages on the cell V topics) and their bytes (None: unknown)."""
-        n = sum(
+    def total(self) -> int:
+        """V-scenarios in the log: messages on the cell V topics."""
+        return sum(
             info.count
             for name, info in self.reader.topics().items()
             if name.startswith(topics.EV_V_PREFIX)
         )
-        return n, None
 
     def _window_reader(self) -> IndexedWindowReader | None:
         if self._indexed is None and not self.reader.truncated:

@@ -51,7 +51,9 @@ class Engine(Protocol):
         sorted by eid, then count descending, then vid."""
         ...
 
-    def edp_select(self, targets: Sequence[int], select: Callable[[int], list[int]]) -> list[list[int]]:
+    def edp_select(
+        self, targets: Sequence[int], select: Callable[[int], list[int]]
+    ) -> list[list[int]]:
         """Run the per-EID baseline selection ``select`` for every target (in order)."""
         ...
 
@@ -99,7 +101,9 @@ class LocalEngine:
         counts = joined.groupby(["eid", "vid"], sort=False).size().rename("count").reset_index()
         return _sorted_vote(counts)
 
-    def edp_select(self, targets: Sequence[int], select: Callable[[int], list[int]]) -> list[list[int]]:
+    def edp_select(
+        self, targets: Sequence[int], select: Callable[[int], list[int]]
+    ) -> list[list[int]]:
         return [select(int(t)) for t in targets]
 
     def close(self) -> None:
@@ -117,28 +121,28 @@ class SparkEngine:
     name = "spark"
 
     def __init__(self, master: str = "local[2]", partitions: int | None = None) -> None:
-        try:
-            with warnings.catch_warnings():
-                # pyspark warns about pandas >= 3 for its pandas API, which trackctl does not use
-                warnings.filterwarnings("ignore", message=".*pandas.*", category=UserWarning)
+        with warnings.catch_warnings():
+            # pyspark warns about pandas >= 3 for its pandas API, which trackctl does not use
+            warnings.filterwarnings("ignore", message=".*pandas >= 3.*")
+            try:
                 from pyspark.sql import SparkSession
-        except ImportError as err:
-            raise InputError(
-                "--engine spark needs pyspark (and Java 17+): pip install 'trackctl[spark]'"
-            ) from err
-        active = SparkSession.getActiveSession()
-        if active is not None and active.sparkContext.master == master:
-            self._session = active
-            self._owned = False
-        else:
-            self._session = (
-                SparkSession.builder.master(master)
-                .appName("trackctl-ev-match")
-                .config("spark.ui.enabled", "false")
-                .config("spark.ui.showConsoleProgress", "false")
-                .getOrCreate()
-            )
-            self._owned = True
+            except ImportError as err:
+                raise InputError(
+                    "--engine spark needs pyspark (and Java 17+): pip install 'trackctl[spark]'"
+                ) from err
+            active = SparkSession.getActiveSession()
+            if active is not None and active.sparkContext.master == master:
+                self._session = active
+                self._owned = False
+            else:
+                self._session = (
+                    SparkSession.builder.master(master)
+                    .appName("trackctl-ev-match")
+                    .config("spark.ui.enabled", "false")
+                    .config("spark.ui.showConsoleProgress", "false")
+                    .getOrCreate()
+                )
+                self._owned = True
         self.sc = self._session.sparkContext
         self.sc.setLogLevel("ERROR")
         self.partitions = partitions or self.sc.defaultParallelism
@@ -152,7 +156,11 @@ class SparkEngine:
         ).map(lambda r: (r[0], ("P", r[1])))
         scen = sc.parallelize(
             list(
-                zip(listing["eid"].astype(int).tolist(), listing["cell"].astype(int).tolist(), strict=True)
+                zip(
+                    listing["eid"].astype(int).tolist(),
+                    listing["cell"].astype(int).tolist(),
+                    strict=True,
+                )
             ),
             p,
         ).map(lambda r: (r[0], ("S", r[1])))
@@ -180,20 +188,24 @@ class SparkEngine:
         self, eid: np.ndarray, scenario: np.ndarray, vids: Mapping[int, Sequence[str]]
     ) -> pd.DataFrame:
         sc, p = self.sc, self.partitions
+        # the V-scenarios read are shipped to every task once (a map-side join): each task
+        # compares the VIDs of its EIDs' scenarios, parallel across EIDs (§3.2.4 C)
+        table = sc.broadcast({int(s): tuple(v) for s, v in vids.items()})
         ev = sc.parallelize(
-            list(zip(np.asarray(scenario).tolist(), np.asarray(eid).tolist(), strict=True)), p
+            list(zip(np.asarray(eid).tolist(), np.asarray(scenario).tolist(), strict=True)), p
         )
-        vs = sc.parallelize([(int(s), tuple(v)) for s, v in vids.items()], p)
         counts = (
-            ev.join(vs, p)
-            .flatMap(lambda kv: [((kv[1][0], v), 1) for v in kv[1][1]])
+            ev.flatMap(lambda es: [((es[0], v), 1) for v in table.value.get(es[1], ())])
             .reduceByKey(operator.add, p)
             .map(lambda kv: (kv[0][0], kv[0][1], kv[1]))
             .collect()
         )
+        table.unpersist()
         return _sorted_vote(pd.DataFrame(counts, columns=VOTE_COLUMNS))
 
-    def edp_select(self, targets: Sequence[int], select: Callable[[int], list[int]]) -> list[list[int]]:
+    def edp_select(
+        self, targets: Sequence[int], select: Callable[[int], list[int]]
+    ) -> list[list[int]]:
         # one task per EID, as the paper adapts EDP to MapReduce; keys keep the input order
         rdd = self.sc.parallelize(list(enumerate(int(t) for t in targets)), self.partitions)
         out = rdd.map(lambda kv: (kv[0], select(kv[1]))).collect()

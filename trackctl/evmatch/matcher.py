@@ -214,9 +214,7 @@ def _judge_all(
     top = counts.groupby("eid", sort=False).head(2)
     e_arr = top["eid"].to_numpy()
     best: dict[int, list[tuple[str, int]]] = {}
-    for e, v, c in zip(
-        e_arr.tolist(), top["vid"].tolist(), top["count"].tolist(), strict=True
-    ):
+    for e, v, c in zip(e_arr.tolist(), top["vid"].tolist(), top["count"].tolist(), strict=True):
         best.setdefault(int(e), []).append((str(v), int(c)))
     out: dict[int, _Verdict] = {}
     for e in pending:
@@ -464,7 +462,9 @@ def match_edp(
             )
         else:
             c2 = r[1][1] if len(r) > 1 else 0
-            result[e] = EvMatch(str(data.eids[e]), r[0][0], _confidence(r[0][1], c2, len(ch)), names)
+            result[e] = EvMatch(
+                str(data.eids[e]), r[0][0], _confidence(r[0][1], c2, len(ch)), names
+            )
     if progress is not None:
         progress(len(targets), len(targets))
     t2 = time.perf_counter()

@@ -90,7 +90,7 @@ def run(
         MATCHES_TOPIC,
         EvMatches(t_ns=end_ns, algorithm=str(config.algorithm), matches=tuple(outcome.matches)),
     )
-    v_total, _ = vstore.total()
+    v_total = vstore.total()
     metrics = {
         "system": "ev-matching",
         "algorithm": str(config.algorithm),

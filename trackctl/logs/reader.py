@@ -412,7 +412,9 @@ class IndexedWindowReader:
     def has_topic(self, topic: str) -> bool:
         return topic in self._by_topic
 
-    def _message_index(self, chunk_offset: int, offset: int, channel_id: int) -> list[tuple[int, int]]:
+    def _message_index(
+        self, chunk_offset: int, offset: int, channel_id: int
+    ) -> list[tuple[int, int]]:
         key = (chunk_offset, channel_id)
         found = self._index.get(key)
         if found is None:
@@ -423,8 +425,8 @@ class IndexedWindowReader:
         return found
 
     def _chunk_data(self, chunk_index: Any) -> bytes:
-        from mcap.records import Chunk
         from mcap.data_stream import ReadDataStream
+        from mcap.records import Chunk
         from mcap.stream_reader import get_chunk_data_stream
 
         key = chunk_index.chunk_start_offset

@@ -3,11 +3,11 @@
 People walk by the random-waypoint model (Camp et al.: uniform destination, uniform speed, uniform
 pause) in a square area cut into square cells. Every ``sample_s`` each person is sampled:
 
-* **E side** - a person who carries a phone (share ``1 - eid_miss``) is located at cell level; within
-  ``drift_m`` of a cell border the E-location drifts into the neighbour cell with a probability
-  that falls linearly from ``drift_p`` at the border to 0 at ``drift_m``. Per window and cell the
-  EIDs' occurrence shares give the zones: ``>= inclusive_frac`` inclusive, ``>= vague_frac``
-  vague, below that exclusive (not listed).
+* **E side** - a person who carries a phone (share ``1 - eid_miss``) is located at cell level;
+  within ``drift_m`` of a cell border the E-location drifts into the neighbour cell with a
+  probability that falls linearly from ``drift_p`` at the border to 0 at ``drift_m``. Per window
+  and cell the EIDs' occurrence shares give the zones: ``>= inclusive_frac`` inclusive,
+  ``>= vague_frac`` vague, below that exclusive (not listed).
 * **V side** - each cell has a camera: its V-scenario of a window lists every person seen in the
   cell in at least one sampled frame, with the mean ground position and the number of frames; a
   person's VID is missing from a V-scenario with probability ``vid_miss`` (occlusion, missed
@@ -68,9 +68,7 @@ class EvScenario:
         if self.people < 1:
             raise InputError(f"--people {self.people}: need at least one person")
         if not (self.cell_m > 0 and self.area_m >= self.cell_m):
-            raise InputError(
-                f"--cell {self.cell_m} / --area {self.area_m}: need 0 < cell <= area"
-            )
+            raise InputError(f"--cell {self.cell_m} / --area {self.area_m}: need 0 < cell <= area")
         for name in ("eid_miss", "vid_miss", "drift_p"):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
@@ -148,9 +146,7 @@ class _Walkers:
             self.pause[idx] = np.maximum(rng.uniform(*cfg.pause_s, idx.size), 1e-9)
 
 
-def _e_cells(
-    cfg: EvScenario, pos: np.ndarray, rng: np.random.Generator, n_side: int
-) -> np.ndarray:
+def _e_cells(cfg: EvScenario, pos: np.ndarray, rng: np.random.Generator, n_side: int) -> np.ndarray:
     """Cell index (i, j) of each E-location sample, with border drift."""
     c = cfg.cell_m
     ij = np.clip(np.floor(pos / c).astype(np.int64), 0, n_side - 1)
