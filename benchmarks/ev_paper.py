@@ -9,9 +9,10 @@ windows. Two sweeps, as in the paper:
 For 200 / 400 / 600 / 800 matched EIDs (a random subset of the EIDs in the log; when fewer EIDs
 exist, e.g. 50 % missing leaves ~500, all of them) it runs SS (set splitting + refining) and EDP
 (the baseline) with the local engine and prints accuracy and V-scenarios read beside the paper.
-The dissertation's text states only two figures: SS ~85 % at 50 % EID missing and > 80 % at 10 %
-VID missing, SS better than EDP; the other cells of the paper column are read off the figures
-as ranges and marked "fig".
+The dissertation's text states only two numbers: SS ~85 % at 50 % EID missing and > 80 % at 10 %
+VID missing, SS better than EDP. The other cells exist only as plotted points (Figures 3.14,
+3.15), which the text extraction does not carry: the paper column says "fig" there. The 10 % EID
+/ 2 % VID setting is in both sweeps, so those two blocks are the same runs.
 
     python benchmarks/ev_paper.py [--seeds 1] [--plot docs/img] [--json out.json]
 """
