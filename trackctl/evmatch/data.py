@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from trackctl.errors import InputError, LogError
+from trackctl.errors import InputError, LogError, MissingTopicError
 from trackctl.logs import topics
 from trackctl.logs.codecs import Codec
 from trackctl.logs.messages import GroundTruth, VScenario
@@ -64,7 +64,11 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
         MissingTopicError: the log has no E-observations.
         InputError: windows of different lengths.
     """
-    reader.require([topic], "ev-match", "the E-scenarios: EIDs heard per cell and window")
+    if topic not in reader.topics():
+        raise MissingTopicError(
+            f"{reader.path}: topic {topic} is missing; ev-match needs the E-scenarios "
+            "(trackctl.EObservations: EIDs heard per cell and window)"
+        )
     c_list: list[str] = []
     e_list: list[tuple[str, ...]] = []
     v_list: list[tuple[bool, ...]] = []
@@ -197,9 +201,13 @@ class VStore:
             w, c = divmod(s, n_cells)
             cell = self.data.cells[c]
             name = topics.ev_v(cell)
-            if name not in present:
-                self.reader.require([name], "ev-match", f"the V-scenarios of cell {cell}")
             start = int(self.data.windows_ns[w])
+            if name not in present:
+                # not reader.require: its list of every topic is 10 000 long in a city-size log
+                raise MissingTopicError(
+                    f"{self.reader.path}: topic {name} is missing; ev-match needs the V-scenario "
+                    f"of cell {cell} in the window starting at {start} ns"
+                )
             raws = self._read(name, start, start + max(self.data.window_ns, 1))
             if not raws:
                 raise InputError(
