@@ -36,6 +36,10 @@ def child(log: str, out: str, engine: str) -> None:
     metrics = jsonable_metrics(report.metrics)
     metrics["wall_seconds_with_copy"] = round(time.perf_counter() - t0, 1)
     metrics["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
+    # the Spark JVM is a child of this process: its peak shows here once it has exited
+    metrics["children_peak_rss_mb"] = round(
+        resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024, 1
+    )
     print(json.dumps(metrics))
 
 
@@ -75,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"{'people':>7} {'engine':>6} | {'EIDs':>6} {'accuracy':>8} {'unres':>5} | "
         f"{'V read':>7} {'V total':>7} {'V MB read':>9} | {'match s':>7} {'with copy s':>11} "
-        f"{'peak MB':>7}"
+        f"{'peak MB':>7} {'JVM MB':>6}"
     )
     for n in sizes:
         log = workdir / f"ev_{n}.mcap"
@@ -100,7 +104,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"{n:>7} {engine:>6} | {m['requested']:>6} {100 * m['accuracy']:>7.2f}% "
                 f"{m['unresolved']:>5} | {m['v_scenarios_read']:>7} {m['v_scenarios_total']:>7} "
                 f"{m['v_bytes_read'] / 1e6:>9.1f} | {m['seconds']:>7.1f} "
-                f"{m['wall_seconds_with_copy']:>11.1f} {m['peak_rss_mb']:>7.0f}"
+                f"{m['wall_seconds_with_copy']:>11.1f} {m['peak_rss_mb']:>7.0f} "
+                f"{m['children_peak_rss_mb'] if engine == 'spark' else '-':>6}"
             )
             print("#   stages:", {k: v for k, v in m.items() if k.startswith("seconds_")})
             out.unlink(missing_ok=True)

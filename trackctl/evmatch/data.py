@@ -69,10 +69,14 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
             f"{reader.path}: topic {topic} is missing; ev-match needs the E-scenarios "
             "(trackctl.EObservations: EIDs heard per cell and window)"
         )
-    c_list: list[str] = []
-    e_list: list[tuple[str, ...]] = []
-    v_list: list[tuple[bool, ...]] = []
+    # EIDs and cells become integer codes while streaming, so memory holds int arrays (about
+    # 9 bytes per listing), not millions of Python strings
+    eid_code: dict[str, int] = {}
+    cell_code: dict[str, int] = {}
     t_list: list[int] = []
+    c_list: list[int] = []
+    e_parts: list[np.ndarray] = []
+    v_parts: list[np.ndarray] = []
     window_ns = None
     for msg in reader.messages([topic]):
         obs = msg.message
@@ -84,34 +88,36 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
                 f"differs from the first message's {window_ns}; EV-Matching needs one window length"
             )
         t_list.append(obs.t_ns)
-        c_list.append(obs.cell)
-        e_list.append(obs.eids)
-        v_list.append(obs.vague)
-    windows = np.unique(np.array(t_list, dtype=np.int64))
-    cells = sorted(set(c_list))
-    cell_code = {c: i for i, c in enumerate(cells)}
-    lengths = np.fromiter((len(e) for e in e_list), dtype=np.int64, count=len(e_list))
-    flat_e = np.array([e for es in e_list for e in es], dtype=object)
-    eids, eid_code = (
-        np.unique(flat_e.astype(str), return_inverse=True)
-        if flat_e.size
-        else (
-            np.array([], dtype=str),
-            np.array([], dtype=np.int64),
+        c_list.append(cell_code.setdefault(obs.cell, len(cell_code)))
+        e_parts.append(
+            np.fromiter(
+                (eid_code.setdefault(e, len(eid_code)) for e in obs.eids),
+                dtype=np.int32,
+                count=len(obs.eids),
+            )
         )
-    )
+        v_parts.append(np.array(obs.vague, dtype=bool))
+    windows = np.unique(np.array(t_list, dtype=np.int64))
+    # codes in sorted-name order: an EID's code is its index in the sorted EID list
+    eids = np.array(sorted(eid_code), dtype=object)
+    e_remap = np.empty(len(eid_code), np.int32)
+    e_remap[[eid_code[e] for e in eids]] = np.arange(len(eids), dtype=np.int32)
+    cells = sorted(cell_code)
+    c_remap = np.empty(len(cell_code), np.int32)
+    c_remap[[cell_code[c] for c in cells]] = np.arange(len(cells), dtype=np.int32)
+    lengths = np.fromiter((len(e) for e in e_parts), dtype=np.int64, count=len(e_parts))
+    flat_e = np.concatenate(e_parts) if e_parts else np.zeros(0, np.int32)
     w_code = np.searchsorted(windows, np.array(t_list, dtype=np.int64))
-    c_codes = np.array([cell_code[c] for c in c_list], dtype=np.int64)
+    c_codes = c_remap[np.array(c_list, dtype=np.int64)] if c_list else np.zeros(0, np.int32)
     rows = pd.DataFrame(
         {
             "w": np.repeat(w_code, lengths).astype(np.int32),
             "cell": np.repeat(c_codes, lengths).astype(np.int32),
-            "eid": np.asarray(eid_code, dtype=np.int32),
-            "vague": np.fromiter(
-                (v for vs in v_list for v in vs), dtype=bool, count=int(lengths.sum())
-            ),
+            "eid": e_remap[flat_e] if len(flat_e) else flat_e,
+            "vague": np.concatenate(v_parts) if v_parts else np.zeros(0, bool),
         }
     )
+    del e_parts, v_parts
     # an EID listed twice in one scenario keeps its strongest (inclusive) flag
     rows = (
         rows.sort_values(["w", "cell", "eid", "vague"], kind="stable")
@@ -119,7 +125,7 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
         .reset_index(drop=True)
     )
     return EData(
-        eids=eids.astype(object),
+        eids=eids,
         cells=cells,
         windows_ns=windows,
         window_ns=int(window_ns or 0),
