@@ -165,3 +165,15 @@ def test_same_seed_same_matches(small_log: Path) -> None:
     a, *_ = match_log(reader, EvMatchConfig(seed=5))
     b, *_ = match_log(reader, EvMatchConfig(seed=5))
     assert a.matches == b.matches
+
+
+def test_split_sends_a_vague_eid_to_every_cell_it_is_listed_in() -> None:
+    import numpy as np
+    import pandas as pd
+
+    node = np.array([0, 0, 0, 1])
+    eid = np.array([0, 1, 2, 3])
+    # EID 1 is heard in cells 5 and 6 (vague in both); EID 2 in no selected scenario
+    listing = pd.DataFrame({"eid": [0, 1, 1, 3], "cell": [5, 5, 6, 6]})
+    out = LocalEngine().split(node, eid, listing)
+    assert out.values.tolist() == [[0, -1, 2], [0, 5, 0], [0, 5, 1], [0, 6, 1], [1, 6, 3]]
