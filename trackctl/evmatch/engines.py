@@ -93,12 +93,22 @@ class LocalEngine:
         self, eid: np.ndarray, scenario: np.ndarray, vids: Mapping[int, Sequence[str]]
     ) -> pd.DataFrame:
         ev = pd.DataFrame({"eid": np.asarray(eid, np.int64), "s": np.asarray(scenario, np.int64)})
-        keys = [s for s, v in vids.items() for _ in v]
-        vdf = pd.DataFrame(
-            {"s": np.asarray(keys, np.int64), "vid": [x for v in vids.values() for x in v]}
+        keys = np.fromiter((s for s, v in vids.items() for _ in v), dtype=np.int64)
+        # VIDs as integer codes: the join has one row per (evidence scenario, VID) - millions in
+        # a city-size run - and strings there would cost ~60 bytes each
+        codes, names = pd.factorize(
+            np.array([x for v in vids.values() for x in v], dtype=object), sort=True
         )
+        vdf = pd.DataFrame({"s": keys, "v": codes.astype(np.int64)})
         joined = ev.merge(vdf, on="s", how="inner")
-        counts = joined.groupby(["eid", "vid"], sort=False).size().rename("count").reset_index()
+        n = max(len(names), 1)
+        key, count = np.unique(
+            joined["eid"].to_numpy() * n + joined["v"].to_numpy(), return_counts=True
+        )
+        del joined
+        counts = pd.DataFrame(
+            {"eid": key // n, "vid": np.asarray(names, dtype=object)[key % n], "count": count}
+        )
         return _sorted_vote(counts)
 
     def edp_select(
