@@ -6,7 +6,8 @@ topics. Each run is the real command, ``trackctl ev-match LOG --out OUT --all --
 a child process that reports its own peak RSS. Engines: the local engine for every size, Spark
 ``local[2]`` for the sizes in ``--spark-sizes``.
 
-    python benchmarks/ev_scale.py [--sizes 10000,100000] [--spark-sizes 10000] [--workdir DIR]
+    python benchmarks/ev_scale.py [--sizes 10000,100000] [--spark-sizes 10000] [--local-sizes ...]
+                                  [--workdir DIR]
 
 Logs are simulated once into ``--workdir`` (default: a temporary folder) and reused when present.
 """
@@ -61,6 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="10000,100000")
     ap.add_argument("--spark-sizes", default="10000")
+    ap.add_argument("--local-sizes", help="sizes run on the local engine (default: --sizes)")
     ap.add_argument("--workdir", type=Path)
     ap.add_argument("--child", nargs=3, metavar=("LOG", "OUT", "ENGINE"), help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -69,6 +71,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     sizes = [int(s) for s in args.sizes.split(",") if s]
     spark_sizes = {int(s) for s in args.spark_sizes.split(",") if s}
+    local_sizes = (
+        set(sizes)
+        if args.local_sizes is None
+        else {int(s) for s in args.local_sizes.split(",") if s}
+    )
     tmp = None
     if args.workdir is None:
         tmp = tempfile.TemporaryDirectory()
@@ -89,7 +96,8 @@ def main(argv: list[str] | None = None) -> int:
                 f"# simulated {n} people: {sim_s:.0f} s, peak {sim_mb:.0f} MB, "
                 f"{log.stat().st_size / 1e6:.0f} MB log"
             )
-        for engine in ["local"] + (["spark"] if n in spark_sizes else []):
+        engines = (["local"] if n in local_sizes else []) + (["spark"] if n in spark_sizes else [])
+        for engine in engines:
             out = workdir / f"ev_{n}_{engine}_out.mcap"
             proc = subprocess.run(
                 [sys.executable, __file__, "--child", str(log), str(out), engine],
