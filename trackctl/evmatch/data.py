@@ -3,6 +3,7 @@ store that reads one (cell topic, window) at a time and counts what it read."""
 
 from __future__ import annotations
 
+from array import array
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -69,14 +70,15 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
             f"{reader.path}: topic {topic} is missing; ev-match needs the E-scenarios "
             "(trackctl.EObservations: EIDs heard per cell and window)"
         )
-    # EIDs and cells become integer codes while streaming, so memory holds int arrays (about
-    # 9 bytes per listing), not millions of Python strings
+    # EIDs and cells become integer codes while streaming, into flat typed buffers (5 bytes per
+    # listing), not millions of Python strings or small arrays
     eid_code: dict[str, int] = {}
     cell_code: dict[str, int] = {}
-    t_list: list[int] = []
-    c_list: list[int] = []
-    e_parts: list[np.ndarray] = []
-    v_parts: list[np.ndarray] = []
+    t_list = array("q")
+    c_list = array("i")
+    lengths = array("q")
+    flat_e = array("i")
+    flat_v = array("b")
     window_ns = None
     for msg in reader.messages([topic]):
         obs = msg.message
@@ -89,15 +91,11 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
             )
         t_list.append(obs.t_ns)
         c_list.append(cell_code.setdefault(obs.cell, len(cell_code)))
-        e_parts.append(
-            np.fromiter(
-                (eid_code.setdefault(e, len(eid_code)) for e in obs.eids),
-                dtype=np.int32,
-                count=len(obs.eids),
-            )
-        )
-        v_parts.append(np.array(obs.vague, dtype=bool))
-    windows = np.unique(np.array(t_list, dtype=np.int64))
+        lengths.append(len(obs.eids))
+        flat_e.extend(eid_code.setdefault(e, len(eid_code)) for e in obs.eids)
+        flat_v.extend(obs.vague)
+    t_arr = np.frombuffer(t_list, dtype=np.int64) if t_list else np.zeros(0, np.int64)
+    windows = np.unique(t_arr)
     # codes in sorted-name order: an EID's code is its index in the sorted EID list
     eids = np.array(sorted(eid_code), dtype=object)
     e_remap = np.empty(len(eid_code), np.int32)
@@ -105,25 +103,23 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
     cells = sorted(cell_code)
     c_remap = np.empty(len(cell_code), np.int32)
     c_remap[[cell_code[c] for c in cells]] = np.arange(len(cells), dtype=np.int32)
-    lengths = np.fromiter((len(e) for e in e_parts), dtype=np.int64, count=len(e_parts))
-    flat_e = np.concatenate(e_parts) if e_parts else np.zeros(0, np.int32)
-    w_code = np.searchsorted(windows, np.array(t_list, dtype=np.int64))
-    c_codes = c_remap[np.array(c_list, dtype=np.int64)] if c_list else np.zeros(0, np.int32)
-    rows = pd.DataFrame(
-        {
-            "w": np.repeat(w_code, lengths).astype(np.int32),
-            "cell": np.repeat(c_codes, lengths).astype(np.int32),
-            "eid": e_remap[flat_e] if len(flat_e) else flat_e,
-            "vague": np.concatenate(v_parts) if v_parts else np.zeros(0, bool),
-        }
-    )
-    del e_parts, v_parts
-    # an EID listed twice in one scenario keeps its strongest (inclusive) flag
-    rows = (
-        rows.sort_values(["w", "cell", "eid", "vague"], kind="stable")
-        .drop_duplicates(["w", "cell", "eid"])
-        .reset_index(drop=True)
-    )
+    n_rows = len(flat_e)
+    lens = np.frombuffer(lengths, dtype=np.int64) if lengths else np.zeros(0, np.int64)
+    w = np.repeat(np.searchsorted(windows, t_arr), lens).astype(np.int32)
+    c = np.repeat(
+        c_remap[np.frombuffer(c_list, dtype=np.int32)] if c_list else np.zeros(0, np.int32), lens
+    ).astype(np.int32)
+    e = e_remap[np.frombuffer(flat_e, dtype=np.int32)] if n_rows else np.zeros(0, np.int32)
+    v = np.frombuffer(flat_v, dtype=np.int8).astype(bool) if n_rows else np.zeros(0, bool)
+    del flat_e, flat_v
+    # sort by (window, cell, EID); an EID listed twice in one scenario keeps its inclusive flag
+    key = (w.astype(np.int64) * max(len(cells), 1) + c) * max(len(eids), 1) + e
+    order = np.lexsort((v, key))
+    key = key[order]
+    first = np.r_[True, key[1:] != key[:-1]] if n_rows else np.zeros(0, bool)
+    sel = order[first]
+    del key, order, first
+    rows = pd.DataFrame({"w": w[sel], "cell": c[sel], "eid": e[sel], "vague": v[sel]})
     return EData(
         eids=eids,
         cells=cells,
