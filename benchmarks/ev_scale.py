@@ -37,7 +37,8 @@ def child(log: str, out: str, engine: str) -> None:
     metrics = jsonable_metrics(report.metrics)
     metrics["wall_seconds_with_copy"] = round(time.perf_counter() - t0, 1)
     metrics["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
-    # the Spark JVM is a child of this process: its peak shows here once it has exited
+    # the Spark JVM is a child of this process: its peak shows here only if it was reaped
+    # (pyspark does not always wait for it; 0 then means "not measured")
     metrics["children_peak_rss_mb"] = round(
         resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024, 1
     )
@@ -113,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"{m['unresolved']:>5} | {m['v_scenarios_read']:>7} {m['v_scenarios_total']:>7} "
                 f"{m['v_bytes_read'] / 1e6:>9.1f} | {m['seconds']:>7.1f} "
                 f"{m['wall_seconds_with_copy']:>11.1f} {m['peak_rss_mb']:>7.0f} "
-                f"{m['children_peak_rss_mb'] if engine == 'spark' else '-':>6}"
+                f"{m['children_peak_rss_mb'] if engine == 'spark' and m['children_peak_rss_mb'] else '-':>6}"
             )
             print("#   stages:", {k: v for k, v in m.items() if k.startswith("seconds_")})
             out.unlink(missing_ok=True)
