@@ -109,12 +109,17 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{n:>7} {engine:>6} | failed: {proc.stderr.strip().splitlines()[-1:]}")
                 continue
             m = json.loads(proc.stdout.strip().splitlines()[-1])
+            jvm = (
+                m["children_peak_rss_mb"]
+                if engine == "spark" and m["children_peak_rss_mb"]
+                else "-"
+            )
             print(
                 f"{n:>7} {engine:>6} | {m['requested']:>6} {100 * m['accuracy']:>7.2f}% "
                 f"{m['unresolved']:>5} | {m['v_scenarios_read']:>7} {m['v_scenarios_total']:>7} "
                 f"{m['v_bytes_read'] / 1e6:>9.1f} | {m['seconds']:>7.1f} "
                 f"{m['wall_seconds_with_copy']:>11.1f} {m['peak_rss_mb']:>7.0f} "
-                f"{m['children_peak_rss_mb'] if engine == 'spark' and m['children_peak_rss_mb'] else '-':>6}"
+                f"{jvm:>6}"
             )
             print("#   stages:", {k: v for k, v in m.items() if k.startswith("seconds_")})
             out.unlink(missing_ok=True)
