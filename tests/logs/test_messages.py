@@ -99,6 +99,48 @@ report = st.builds(
 
 ALL = st.one_of(imu, rssi, odom, detections, tracks, gt, camera, report)
 
+# EV-Matching (§3.2) messages: parallel arrays of equal length.
+ev_e = st.integers(0, 4).flatmap(
+    lambda n: st.builds(
+        m.EObservations,
+        t_ns,
+        st.integers(0, 2**40),
+        text,
+        st.lists(text, min_size=n, max_size=n).map(tuple),
+        st.lists(st.booleans(), min_size=n, max_size=n).map(tuple),
+        st.integers(0, 100),
+    )
+)
+ev_v = st.integers(0, 4).flatmap(
+    lambda n: st.builds(
+        m.VScenario,
+        t_ns,
+        st.integers(0, 2**40),
+        text,
+        st.lists(text, min_size=n, max_size=n).map(tuple),
+        st.lists(finite, min_size=n, max_size=n).map(tuple),
+        st.lists(finite, min_size=n, max_size=n).map(tuple),
+        st.lists(st.integers(0, 1000), min_size=n, max_size=n).map(tuple),
+    )
+)
+ev_matches = st.builds(
+    m.EvMatches,
+    t_ns,
+    st.sampled_from(["ss", "edp"]),
+    st.lists(
+        st.builds(
+            m.EvMatch,
+            text,
+            st.one_of(opt(), text),
+            st.floats(0, 1),
+            st.lists(text, max_size=3).map(tuple),
+            st.text(max_size=12),
+        ),
+        max_size=3,
+    ).map(tuple),
+)
+ALL = st.one_of(ALL, ev_e, ev_v, ev_matches)
+
 
 def _schema(cls: type) -> dict:
     return json.loads((codecs.formats_dir() / f"{cls.SCHEMA}.json").read_text())

@@ -6,6 +6,7 @@ import typer
 
 from trackctl import __version__
 from trackctl.cli.common import TrackctlGroup
+from trackctl.cli.evmatch import ev_match, simulate_ev
 from trackctl.cli.info import info
 from trackctl.cli.process import process, report
 from trackctl.cli.record import record
@@ -45,6 +46,8 @@ app.command()(process)
 app.command()(report)
 app.command("vm-track")(vm_track)
 simulate_app.command("vm")(simulate_vm)
+app.command("ev-match")(ev_match)
+simulate_app.command("ev")(simulate_ev)
 app.add_typer(simulate_app, name="simulate")
 
 

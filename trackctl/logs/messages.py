@@ -638,3 +638,182 @@ MESSAGE_TYPES: tuple[type, ...] = (
     CameraModel,
     MetricReport,
 )
+
+
+# -- EV-Matching (dissertation §3.2) -------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class EObservations:
+    """The E-scenario of one cell in one time window: the EIDs its base station/APs heard.
+
+    Each EID is listed with a vague flag: inclusive (heard in this cell for most of the window's
+    samples) or vague (heard here only part of the time, e.g. near a border where the E-location
+    drifts into the neighbour cell). EIDs heard only occasionally are in the exclusive zone and
+    not listed (§3.2.3 B, vague zones).
+
+    Attributes:
+        t_ns: start of the window (ns); the window is ``[t_ns, t_ns + window_ns)``.
+        window_ns: window length (ns).
+        cell: cell name ``<i>_<j>`` (column i along x, row j along y).
+        eids: the EIDs listed (MAC/IMSI strings), sorted.
+        vague: one flag per EID, True for the vague zone.
+        samples: number of E-location samples per EID in the window (occurrence denominator).
+    """
+
+    SCHEMA: ClassVar[str] = "trackctl.EObservations"
+    t_ns: int
+    window_ns: int
+    cell: str
+    eids: tuple[str, ...] = ()
+    vague: tuple[bool, ...] = ()
+    samples: int = 1
+
+    def __post_init__(self) -> None:
+        if len(self.eids) != len(self.vague):
+            raise ValueError(
+                f"EObservations {self.cell}: eids ({len(self.eids)}) and vague "
+                f"({len(self.vague)}) must have the same length"
+            )
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "timestamp": time_to_json(self.t_ns),
+            "window_ns": self.window_ns,
+            "cell": self.cell,
+            "eids": list(self.eids),
+            "vague": list(self.vague),
+            "samples": self.samples,
+        }
+
+    @classmethod
+    def from_json(cls, obj: Mapping[str, Any]) -> EObservations:
+        return cls(
+            t_ns=time_from_json(obj["timestamp"]),
+            window_ns=int(obj["window_ns"]),
+            cell=str(obj["cell"]),
+            eids=tuple(str(e) for e in obj.get("eids", ())),
+            vague=tuple(bool(v) for v in obj.get("vague", ())),
+            samples=int(obj.get("samples", 1)),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class VScenario:
+    """The V-scenario of one camera cell in one time window: the people (VIDs) its video shows.
+
+    Attributes:
+        t_ns: start of the window (ns); the window is ``[t_ns, t_ns + window_ns)``.
+        window_ns: window length (ns).
+        cell: cell name ``<i>_<j>``.
+        vids: visual IDs detected in the window, sorted.
+        x_m, y_m: each VID's mean ground position (world frame, metres) while in the cell.
+        frames: number of sampled frames in which each VID was detected.
+    """
+
+    SCHEMA: ClassVar[str] = "trackctl.VScenario"
+    t_ns: int
+    window_ns: int
+    cell: str
+    vids: tuple[str, ...] = ()
+    x_m: tuple[float, ...] = ()
+    y_m: tuple[float, ...] = ()
+    frames: tuple[int, ...] = ()
+
+    def __post_init__(self) -> None:
+        n = len(self.vids)
+        if not (len(self.x_m) == len(self.y_m) == len(self.frames) == n):
+            raise ValueError(
+                f"VScenario {self.cell}: vids, x_m, y_m and frames must have the same length"
+            )
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "timestamp": time_to_json(self.t_ns),
+            "window_ns": self.window_ns,
+            "cell": self.cell,
+            "vids": list(self.vids),
+            "x_m": list(self.x_m),
+            "y_m": list(self.y_m),
+            "frames": list(self.frames),
+        }
+
+    @classmethod
+    def from_json(cls, obj: Mapping[str, Any]) -> VScenario:
+        return cls(
+            t_ns=time_from_json(obj["timestamp"]),
+            window_ns=int(obj["window_ns"]),
+            cell=str(obj["cell"]),
+            vids=tuple(str(v) for v in obj.get("vids", ())),
+            x_m=tuple(float(v) for v in obj.get("x_m", ())),
+            y_m=tuple(float(v) for v in obj.get("y_m", ())),
+            frames=tuple(int(v) for v in obj.get("frames", ())),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class EvMatch:
+    """The outcome for one requested EID.
+
+    Attributes:
+        eid: the electronic ID.
+        vid: the matched visual ID, or None when unresolved.
+        confidence: share of the EID's evidence scenarios that show the VID, scaled by the
+            margin over the runner-up (0..1); 0 when unresolved.
+        scenarios: the EV-scenarios used as evidence, as ``<cell>@<window start ns>``.
+        reason: why the EID is unresolved (empty when matched).
+    """
+
+    eid: str
+    vid: str | None
+    confidence: float
+    scenarios: tuple[str, ...] = ()
+    reason: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "eid": self.eid,
+            "vid": self.vid,
+            "confidence": self.confidence,
+            "scenarios": list(self.scenarios),
+            "reason": self.reason,
+        }
+
+    @classmethod
+    def from_json(cls, obj: Mapping[str, Any]) -> EvMatch:
+        return cls(
+            eid=str(obj["eid"]),
+            vid=_opt(obj, "vid", str),
+            confidence=float(obj.get("confidence", 0.0)),
+            scenarios=tuple(str(s) for s in obj.get("scenarios", ())),
+            reason=str(obj.get("reason", "")),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class EvMatches:
+    """EV-Matching results: one entry per requested EID (matched or unresolved)."""
+
+    SCHEMA: ClassVar[str] = "trackctl.EvMatches"
+    t_ns: int
+    algorithm: str
+    matches: tuple[EvMatch, ...] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "timestamp": time_to_json(self.t_ns),
+            "algorithm": self.algorithm,
+            "matches": [m.to_json() for m in self.matches],
+        }
+
+    @classmethod
+    def from_json(cls, obj: Mapping[str, Any]) -> EvMatches:
+        return cls(
+            t_ns=time_from_json(obj["timestamp"]),
+            algorithm=str(obj["algorithm"]),
+            matches=tuple(EvMatch.from_json(m) for m in obj.get("matches", ())),
+        )
+
+
+MESSAGE_TYPES = (*MESSAGE_TYPES, EObservations, VScenario, EvMatches)
+__all__ += ["EObservations", "VScenario", "EvMatch", "EvMatches"]

@@ -51,3 +51,21 @@ def detections(camera: str) -> str:
 def metrics(processor: str) -> str:
     """Metric report of a processor: ``/metrics/NAME`` (trackctl.MetricReport)."""
     return f"/metrics/{processor}"
+
+
+# -- EV-Matching (§3.2) ---------------------------------------------------------------------------
+EV_E = "/ev/e"
+"""E-scenarios: one trackctl.EObservations per cell per time window."""
+EV_GROUND_TRUTH = "/ev/ground_truth"
+"""EID <-> VID ground truth (trackctl.GroundTruth, one message)."""
+EV_MATCHES = "/evmatch/matches"
+"""EV-Matching output (trackctl.EvMatches)."""
+EV_V_PREFIX = "/ev/cell/"
+
+
+def ev_v(cell: str) -> str:
+    """V-scenarios of one camera cell: ``/ev/cell/<i>_<j>/v`` (trackctl.VScenario per window)."""
+    return f"{EV_V_PREFIX}{cell}/v"
+
+
+__all__ += ["EV_E", "EV_GROUND_TRUTH", "EV_MATCHES", "EV_V_PREFIX", "ev_v"]

@@ -1,0 +1,143 @@
+"""``trackctl ev-match`` and ``trackctl simulate ev``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from trackctl.cli.common import apply_fail_if, print_json, progress, stderr
+from trackctl.cli.process import print_reports
+from trackctl.metrics.report import jsonable_metrics
+
+
+def _read_eids(path: Path) -> tuple[str, ...]:
+    from trackctl.errors import InputError
+
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise InputError(f"--eids {path}: cannot read: {err.strerror}") from None
+    eids = []
+    for line in text.splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line:
+            eids.append(line)
+    if not eids:
+        raise InputError(f"--eids {path}: no EID in the file (one per line, # comments)")
+    return tuple(dict.fromkeys(eids))
+
+
+def ev_match(
+    log: Annotated[Path, typer.Argument(help="MCAP log with /ev/e and /ev/cell/<i>_<j>/v.")],
+    out: Annotated[Path, typer.Option(help="Output MCAP: input + /evmatch/matches + report.")],
+    eids: Annotated[
+        Path | None, typer.Option(help="File with the EIDs to match, one per line.")
+    ] = None,
+    all_eids: Annotated[
+        bool, typer.Option("--all", help="Universal matching: every EID in the log (default).")
+    ] = False,
+    algorithm: Annotated[
+        str, typer.Option(help="ss (EID set splitting) or edp (single-EID baseline).")
+    ] = "ss",
+    engine: Annotated[str, typer.Option(help="local (pandas) or spark (pyspark).")] = "local",
+    master: Annotated[
+        str | None, typer.Option(help="Spark master: local[N] or a cluster URL.")
+    ] = None,
+    seed: Annotated[int, typer.Option(help="Order of the random windows.")] = 0,
+    margin: Annotated[int, typer.Option(help="Votes the best VID must lead the runner-up by.")] = 1,
+    max_evidence: Annotated[
+        int, typer.Option(help="Most evidence scenarios per EID before giving up.")
+    ] = 12,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    plot: Annotated[
+        Path | None, typer.Option(help="Folder for figures (needs the plot extra).")
+    ] = None,
+    fail_if: Annotated[
+        str | None,
+        typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "accuracy<0.9".'),
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """EV-Matching: find the VID (person in video) of each EID (phone) reading little video."""
+    from trackctl.errors import InputError
+    from trackctl.evmatch import Algorithm, EvMatchConfig, EvMatchProcessor, MatchParams
+    from trackctl.processing import run_processors
+
+    if eids is not None and all_eids:
+        raise InputError("--eids and --all: give one of them")
+    try:
+        algo = Algorithm(algorithm)
+    except ValueError:
+        raise InputError(f"--algorithm {algorithm!r}: expected ss or edp") from None
+    if engine not in ("local", "spark"):
+        raise InputError(f"--engine {engine!r}: expected local or spark")
+    if master is not None and engine != "spark":
+        raise InputError("--master is for --engine spark")
+    if margin < 1 or max_evidence < 1:
+        raise InputError("--margin and --max-evidence must be >= 1")
+    requested = _read_eids(eids) if eids is not None else None
+    if plot is not None:
+        from trackctl.plots.evmatch import require_matplotlib
+
+        require_matplotlib()
+    config = EvMatchConfig(
+        eids=requested,
+        algorithm=algo,
+        engine=engine,
+        master=master,
+        seed=seed,
+        params=MatchParams(margin=margin, max_evidence=max_evidence),
+    )
+    with progress("ev-match", quiet) as bar:
+        (report,) = run_processors(log, out, [EvMatchProcessor(config)], bar)
+    if plot is not None:
+        from trackctl.plots.evmatch import plot_run
+
+        plot_run(out, plot)
+    if json_out:
+        print_json(jsonable_metrics(report.metrics))
+    else:
+        print_reports([report])
+    apply_fail_if(fail_if, [report])
+
+
+def simulate_ev(
+    out: Annotated[Path, typer.Option(help="MCAP log to write.")],
+    people: Annotated[int, typer.Option(help="People in the area.")] = 1000,
+    area: Annotated[float, typer.Option(help="Side of the square area, m.")] = 1000.0,
+    cell: Annotated[float, typer.Option(help="Side of a square cell (E and camera), m.")] = 100.0,
+    duration: Annotated[float, typer.Option(help="Seconds.")] = 1800.0,
+    window: Annotated[float, typer.Option(help="Scenario window, s.")] = 60.0,
+    eid_miss: Annotated[float, typer.Option(help="Share of people without a phone.")] = 0.1,
+    vid_miss: Annotated[
+        float, typer.Option(help="Chance a VID is missing from a V-scenario.")
+    ] = 0.02,
+    drift_m: Annotated[
+        float, typer.Option(help="E-locations within this distance of a border may drift, m.")
+    ] = 15.0,
+    seed: Annotated[int, typer.Option(help="Random seed (same seed, same log).")] = 0,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """People under cell-level E-location and per-cell cameras (EV-Matching scenarios)."""
+    from trackctl.sim.ev import EvScenario
+    from trackctl.sim.ev import simulate_ev as simulate
+
+    cfg = EvScenario(
+        people=people,
+        area_m=area,
+        cell_m=cell,
+        duration_s=duration,
+        window_s=window,
+        eid_miss=eid_miss,
+        vid_miss=vid_miss,
+        drift_m=drift_m,
+        seed=seed,
+    )
+    counts = simulate(str(out), cfg)
+    if json_out:
+        print_json({"out": str(out), "messages": sum(counts.values()), "topics": len(counts)})
+    elif not quiet:
+        stderr.print(f"wrote {sum(counts.values())} messages on {len(counts)} topics to {out}")

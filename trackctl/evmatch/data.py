@@ -1,0 +1,231 @@
+"""EV data as the matcher sees it: the E-scenario table (read in full, it is light) and a V-scenario
+store that reads one (cell topic, window) at a time and counts what it read."""
+
+from __future__ import annotations
+
+from array import array
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from trackctl.errors import InputError, LogError, MissingTopicError
+from trackctl.logs import topics
+from trackctl.logs.codecs import Codec
+from trackctl.logs.messages import GroundTruth, VScenario
+from trackctl.logs.reader import IndexedWindowReader, LogReader, RawMessage
+
+__all__ = ["EData", "VStore", "load_e", "load_ground_truth"]
+
+
+@dataclass
+class EData:
+    """Every E-scenario of a log, as integer codes.
+
+    Attributes:
+        eids: EID names, sorted; an EID's code is its index.
+        cells: cell names, sorted; a cell's code is its index.
+        windows_ns: window start times, sorted; a window's code is its index.
+        window_ns: window length (ns).
+        rows: one row per (window, cell, EID) listing: columns ``w``, ``cell``, ``eid`` (codes)
+            and ``vague`` (bool). A scenario's id is ``w * len(cells) + cell``.
+    """
+
+    eids: np.ndarray
+    cells: list[str]
+    windows_ns: np.ndarray
+    window_ns: int
+    rows: pd.DataFrame
+
+    @property
+    def n_cells(self) -> int:
+        return len(self.cells)
+
+    def scenario_id(self, w: np.ndarray | int, cell: np.ndarray | int) -> np.ndarray | int:
+        return w * self.n_cells + cell
+
+    def scenario_name(self, s: int) -> str:
+        """``<cell>@<window start ns>`` (how matches name their evidence)."""
+        w, c = divmod(int(s), self.n_cells)
+        return f"{self.cells[c]}@{int(self.windows_ns[w])}"
+
+    def eid_codes(self, names: Iterable[str]) -> tuple[np.ndarray, list[str]]:
+        """Codes of the known names (in the given order) and the names that never appear."""
+        names = list(names)
+        idx = pd.Index(self.eids).get_indexer(names) if names else np.zeros(0, np.int64)
+        missing = [n for n, i in zip(names, idx, strict=True) if i < 0]
+        return idx[idx >= 0].astype(np.int64), missing
+
+
+def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
+    """Read every E-scenario on ``topic`` (streamed; memory grows with the listings only).
+
+    Raises:
+        MissingTopicError: the log has no E-observations.
+        InputError: windows of different lengths.
+    """
+    if topic not in reader.topics():
+        raise MissingTopicError(
+            f"{reader.path}: topic {topic} is missing; ev-match needs the E-scenarios "
+            "(trackctl.EObservations: EIDs heard per cell and window)"
+        )
+    # EIDs and cells become integer codes while streaming, into flat typed buffers (5 bytes per
+    # listing), not millions of Python strings or small arrays
+    eid_code: dict[str, int] = {}
+    cell_code: dict[str, int] = {}
+    t_list = array("q")
+    c_list = array("i")
+    lengths = array("q")
+    flat_e = array("i")
+    flat_v = array("b")
+    window_ns = None
+    for msg in reader.messages([topic]):
+        obs = msg.message
+        if window_ns is None:
+            window_ns = obs.window_ns
+        elif obs.window_ns != window_ns:
+            raise InputError(
+                f"{reader.path}: {topic} at {msg.log_time_ns} ns: window_ns {obs.window_ns} "
+                f"differs from the first message's {window_ns}; EV-Matching needs one window length"
+            )
+        t_list.append(obs.t_ns)
+        c_list.append(cell_code.setdefault(obs.cell, len(cell_code)))
+        lengths.append(len(obs.eids))
+        flat_e.extend(eid_code.setdefault(e, len(eid_code)) for e in obs.eids)
+        flat_v.extend(obs.vague)
+    t_arr = np.frombuffer(t_list, dtype=np.int64) if t_list else np.zeros(0, np.int64)
+    windows = np.unique(t_arr)
+    # codes in sorted-name order: an EID's code is its index in the sorted EID list
+    eids = np.array(sorted(eid_code), dtype=object)
+    e_remap = np.empty(len(eid_code), np.int32)
+    e_remap[[eid_code[e] for e in eids]] = np.arange(len(eids), dtype=np.int32)
+    cells = sorted(cell_code)
+    c_remap = np.empty(len(cell_code), np.int32)
+    c_remap[[cell_code[c] for c in cells]] = np.arange(len(cells), dtype=np.int32)
+    n_rows = len(flat_e)
+    lens = np.frombuffer(lengths, dtype=np.int64) if lengths else np.zeros(0, np.int64)
+    w = np.repeat(np.searchsorted(windows, t_arr), lens).astype(np.int32)
+    c = np.repeat(
+        c_remap[np.frombuffer(c_list, dtype=np.int32)] if c_list else np.zeros(0, np.int32), lens
+    ).astype(np.int32)
+    e = e_remap[np.frombuffer(flat_e, dtype=np.int32)] if n_rows else np.zeros(0, np.int32)
+    v = np.frombuffer(flat_v, dtype=np.int8).astype(bool) if n_rows else np.zeros(0, bool)
+    del flat_e, flat_v
+    # sort by (window, cell, EID); an EID listed twice in one scenario keeps its inclusive flag
+    key = (w.astype(np.int64) * max(len(cells), 1) + c) * max(len(eids), 1) + e
+    order = np.lexsort((v, key))
+    key = key[order]
+    first = np.r_[True, key[1:] != key[:-1]] if n_rows else np.zeros(0, bool)
+    sel = order[first]
+    del key, order, first
+    rows = pd.DataFrame({"w": w[sel], "cell": c[sel], "eid": e[sel], "vague": v[sel]})
+    return EData(
+        eids=eids,
+        cells=cells,
+        windows_ns=windows,
+        window_ns=int(window_ns or 0),
+        rows=rows,
+    )
+
+
+def load_ground_truth(reader: LogReader, topic: str = topics.EV_GROUND_TRUTH) -> dict[str, str]:
+    """EID -> true VID from the ground-truth topic (empty when the log has none)."""
+    if topic not in reader.topics():
+        return {}
+    out: dict[str, str] = {}
+    for msg in reader.messages([topic]):
+        gt: GroundTruth = msg.message
+        for ent in gt.entities:
+            if ent.electronic_id is not None and ent.visual_id is not None:
+                out[ent.electronic_id] = ent.visual_id
+    return out
+
+
+@dataclass
+class VStore:
+    """Reads V-scenarios on demand, one (cell topic, window) each, and keeps what it read.
+
+    Each scenario is fetched through the MCAP index with a topic filter and the window's time
+    range, so the messages decoded are exactly the V-scenarios asked for; ``reads`` and
+    ``bytes_read`` count those messages and their encoded sizes.
+    """
+
+    reader: LogReader
+    data: EData
+    cache: dict[int, tuple[str, ...]] = field(default_factory=dict)
+    sizes: dict[int, int] = field(default_factory=dict)
+    _indexed: IndexedWindowReader | None = None
+    _codecs: dict[tuple[str, str, bytes], Codec] = field(default_factory=dict)
+    reads: int = 0
+    bytes_read: int = 0
+
+    def total(self) -> int:
+        """V-scenarios in the log: messages on the cell V topics."""
+        return sum(
+            info.count
+            for name, info in self.reader.topics().items()
+            if name.startswith(topics.EV_V_PREFIX)
+        )
+
+    def _window_reader(self) -> IndexedWindowReader | None:
+        if self._indexed is None and not self.reader.truncated:
+            try:
+                self._indexed = IndexedWindowReader(self.reader)
+            except LogError:
+                self._indexed = None
+        return self._indexed
+
+    def close(self) -> None:
+        """Close the indexed reader, if one was opened."""
+        if self._indexed is not None:
+            self._indexed.close()
+            self._indexed = None
+
+    def _read(self, topic: str, start: int, end: int) -> list[RawMessage]:
+        indexed = self._window_reader()
+        if indexed is not None:
+            return indexed.read(topic, start, end)
+        return list(self.reader.raw([topic], start, end))
+
+    def fetch(self, scenarios: Iterable[int]) -> dict[int, tuple[str, ...]]:
+        """VIDs of each scenario id (read from the log the first time, cached after).
+
+        Raises:
+            MissingTopicError: a cell's V topic is absent.
+            InputError: the topic has no V-scenario for the window.
+        """
+        scenarios = [int(s) for s in scenarios]
+        wanted = sorted(set(scenarios) - self.cache.keys())
+        n_cells = self.data.n_cells
+        present = self.reader.topics()
+        for s in wanted:
+            w, c = divmod(s, n_cells)
+            cell = self.data.cells[c]
+            name = topics.ev_v(cell)
+            start = int(self.data.windows_ns[w])
+            if name not in present:
+                # not reader.require: its list of every topic is 10 000 long in a city-size log
+                raise MissingTopicError(
+                    f"{self.reader.path}: topic {name} is missing; ev-match needs the V-scenario "
+                    f"of cell {cell} in the window starting at {start} ns"
+                )
+            raws = self._read(name, start, start + max(self.data.window_ns, 1))
+            if not raws:
+                raise InputError(
+                    f"{self.reader.path}: {name} has no V-scenario in the window starting at "
+                    f"{start} ns (cell {cell} listed EIDs then)"
+                )
+            vids: set[str] = set()
+            for raw in raws:
+                key = (raw.schema_name, raw.message_encoding, raw.schema_data)
+                codec = self._codecs.get(key)
+                if codec is None:
+                    codec = self._codecs[key] = self.reader.codec(raw)
+                scen: VScenario = codec.decode(raw.data)
+                vids.update(scen.vids)
+                self.reads += 1
+                self.bytes_read += len(raw.data)
+                self.sizes[s] = self.sizes.get(s, 0) + len(raw.data)
+            self.cache[s] = tuple(sorted(vids))
+        return {s: self.cache[s] for s in scenarios}

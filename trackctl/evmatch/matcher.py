@@ -1,0 +1,481 @@
+"""EV-Matching algorithms (dissertation §3.2.3-3.2.4): EID set splitting with vague zones, VID
+filtering and matching refining (SS), and the single-EID baseline EDP.
+
+SS, step by step:
+
+1. **EID set splitting** (Algorithms 1 and 3). The partition starts as {Ueid}. Each iteration
+   takes a random window (a random time stamp, as the paper's Preprocess does), keeps its
+   E-scenarios that list an EID still to be distinguished, and splits every set by them in one
+   shuffle: an EID's new set is (old set, cell it is listed in). This is the multi-way form of the
+   paper's binary split; an EID in the vague zone is listed in every cell it was heard in for a
+   fair share of the window and goes to each of them (the paper's "vague EIDs go to both
+   children"). A set's path records a scenario only when the split changed the set (Algorithm 1:
+   "if P_eid changes then record C"). A requested EID alone in a set is distinguished; its
+   evidence is the recorded scenarios of that set where it was *inclusive* (vague ones are never
+   used to identify an EID, §3.2.3 B). Sets with no EID left to distinguish are dropped.
+2. **VID filtering**. Every evidence scenario's V-scenario is read once (shared by all EIDs that
+   use it) and each EID's VIDs are counted across its evidence; the VID seen most is the match.
+3. **Matching refining** (Algorithm 2). A result is acceptable when the EID has >= ``min_evidence``
+   scenarios, the best VID leads the runner-up by >= ``margin`` and shows in >= ``support`` of
+   them. Otherwise (missing VIDs, people without a phone sharing the scenarios) the EID gets the
+   next window's inclusive scenario and is filtered again, until acceptable or out of scenarios
+   (``max_evidence``); then it is unresolved, with the reason. VIDs matched with confidence are
+   ruled out for the others (a VID belongs to one person).
+
+EDP (the baseline of [78], adapted to MapReduce with one EID per task as the paper does): for one
+EID, greedily pick the scenarios listing it that shrink its candidate EID set the most, with no
+vague zones, then take the VID seen most in those V-scenarios (one pass, no refining). Each task
+reads its own V-scenarios, so one read serves one EID.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from trackctl.evmatch.data import EData, VStore
+from trackctl.evmatch.engines import Engine
+from trackctl.logs.messages import EvMatch
+
+__all__ = ["MatchParams", "MatchOutcome", "match_ss", "match_edp", "window_order"]
+
+REASON_UNKNOWN = "EID never appears in the E-observations"
+REASON_NO_INCLUSIVE = "never in an inclusive zone: only vague E-observations, no usable evidence"
+
+
+@dataclass(frozen=True)
+class MatchParams:
+    """Acceptance rule of VID filtering and limits of refining."""
+
+    margin: int = 1
+    min_evidence: int = 2
+    support: float = 0.5
+    max_evidence: int = 12
+
+
+@dataclass
+class MatchOutcome:
+    """Matches (one per requested EID, in request order) plus the work it took."""
+
+    matches: list[EvMatch]
+    v_scenarios_read: int = 0
+    v_scenarios_unique: int = 0
+    v_bytes_read: int = 0
+    split_iterations: int = 0
+    refine_rounds: int = 0
+    distinguished: int = 0
+    stage_seconds: dict[str, float] = field(default_factory=dict)
+
+
+def window_order(n_windows: int, seed: int) -> np.ndarray:
+    """The random order in which windows (time stamps) are taken."""
+    return np.random.default_rng(seed).permutation(n_windows)
+
+
+class _Inclusive:
+    """Fast look-ups into the inclusive listings: membership and each EID's scenarios by rank."""
+
+    def __init__(self, data: EData, order: np.ndarray) -> None:
+        rows = data.rows[~data.rows["vague"].to_numpy()]
+        w = rows["w"].to_numpy(np.int64)
+        c = rows["cell"].to_numpy(np.int64)
+        e = rows["eid"].to_numpy(np.int64)
+        s = w * data.n_cells + c
+        n_e = max(len(data.eids), 1)
+        self.keys = np.sort(s * n_e + e)
+        self.n_e = n_e
+        rank = np.empty(len(order), np.int64)
+        rank[order] = np.arange(len(order))
+        r = rank[w] if len(order) else w
+        by = np.lexsort((c, r, e))
+        self.eid_sorted = e[by]
+        self.scen_sorted = s[by]
+        self.bounds = np.searchsorted(self.eid_sorted, np.arange(n_e + 1))
+        self.n_cells = data.n_cells
+
+    def has(self, s: int, e: int) -> bool:
+        k = s * self.n_e + e
+        i = np.searchsorted(self.keys, k)
+        return bool(i < len(self.keys) and self.keys[i] == k)
+
+    def scenarios_of(self, e: int) -> np.ndarray:
+        """Scenarios where ``e`` is inclusive, in window order."""
+        return self.scen_sorted[self.bounds[e] : self.bounds[e + 1]]
+
+
+def _set_split(
+    data: EData,
+    targets: np.ndarray,
+    order: np.ndarray,
+    engine: Engine,
+    inc: _Inclusive,
+    progress: Callable[[int, int | None], None] | None,
+) -> tuple[dict[int, list[int]], set[int], int]:
+    """EID set splitting; returns evidence per target, the distinguished targets, iterations."""
+    n_e = len(data.eids)
+    pending = np.zeros(n_e, bool)
+    pending[targets] = True
+    rows = data.rows
+    w_bounds = np.searchsorted(rows["w"].to_numpy(), np.arange(len(data.windows_ns) + 1))
+    node = np.zeros(n_e, np.int64)
+    eid = np.arange(n_e, dtype=np.int64)
+    paths: dict[int, tuple[int, ...]] = {0: ()}
+    evidence: dict[int, list[int]] = {}
+    distinguished: set[int] = set()
+    best_copy: dict[int, list[int]] = {}
+    iterations = 0
+    for w in order:
+        if not pending.any():
+            break
+        iterations += 1
+        lw = rows.iloc[w_bounds[w] : w_bounds[w + 1]]
+        lw_eid = lw["eid"].to_numpy(np.int64)
+        lw_cell = lw["cell"].to_numpy(np.int64)
+        # Preprocess: only the scenarios that list an EID still to be distinguished
+        useful = np.unique(lw_cell[pending[lw_eid]])
+        keep = np.isin(lw_cell, useful)
+        listing = pd.DataFrame({"eid": lw_eid[keep], "cell": lw_cell[keep]})
+        out = engine.split(node, eid, listing)
+        o_node = out["node"].to_numpy(np.int64)
+        o_cell = out["cell"].to_numpy(np.int64)
+        o_eid = out["eid"].to_numpy(np.int64)
+        if not len(o_eid):
+            break
+        start = np.r_[True, (o_node[1:] != o_node[:-1]) | (o_cell[1:] != o_cell[:-1])]
+        gid = np.cumsum(start) - 1
+        gsize = np.bincount(gid)
+        parent_size = np.bincount(node)
+        g_first = np.flatnonzero(start)
+        g_parent = o_node[g_first]
+        g_cell = o_cell[g_first]
+        changed = gsize != parent_size[g_parent]
+        new_paths: dict[int, tuple[int, ...]] = {}
+        for g in range(len(gsize)):
+            p = paths[int(g_parent[g])]
+            if changed[g] and g_cell[g] >= 0:
+                p = (*p, int(w) * data.n_cells + int(g_cell[g]))
+            new_paths[g] = p
+        node, eid, paths = gid, o_eid, new_paths
+        # distinguished: alone in a set; dropping them may leave others alone, so repeat
+        while True:
+            alone = (np.bincount(node)[node] == 1) & pending[eid] if len(node) else node > 0
+            if alone.any():
+                for g, e in zip(node[alone].tolist(), eid[alone].tolist(), strict=True):
+                    ev = [s for s in paths[g] if inc.has(s, e)]
+                    prev = best_copy.get(e)
+                    if prev is None or len(ev) > len(prev):
+                        best_copy[e] = ev
+                done = np.unique(eid[alone])
+                for e in done.tolist():
+                    evidence[e] = best_copy.pop(e)
+                    distinguished.add(e)
+                pending[done] = False
+                keep_rows = ~np.isin(eid, done)
+                node, eid = node[keep_rows], eid[keep_rows]
+            if len(node):
+                # drop sets with no EID left to distinguish; renumber densely (order kept)
+                has_pending = np.bincount(node, weights=pending[eid].astype(float)) > 0
+                keep_rows = has_pending[node]
+                node, eid = node[keep_rows], eid[keep_rows]
+                uniq, node = np.unique(node, return_inverse=True)
+                paths = {i: paths[int(g)] for i, g in enumerate(uniq)}
+            if not alone.any() or not len(node):
+                break
+        if progress is not None:
+            progress(int((~pending[targets]).sum()), len(targets))
+    # targets never alone: their best copy's evidence (refining may still resolve them)
+    for g, e in zip(node.tolist(), eid.tolist(), strict=True):
+        if pending[e]:
+            ev = [s for s in paths[g] if inc.has(s, e)]
+            prev = evidence.get(e)
+            if prev is None or len(ev) > len(prev):
+                evidence[e] = ev
+    return evidence, distinguished, iterations
+
+
+_Verdict = tuple[str | None, int, int, str]
+
+
+def _judge_all(
+    counts: pd.DataFrame,
+    evidence: dict[int, list[int]],
+    pending: Sequence[int],
+    taken: set[str],
+    params: MatchParams,
+) -> dict[int, _Verdict]:
+    """Per pending EID: best free VID, its count, the runner-up's count and why the result is not
+    acceptable ('' when it is). ``counts`` is sorted by eid, count desc, vid."""
+    if taken and len(counts):
+        counts = counts[~counts["vid"].isin(taken)]
+    top = counts.groupby("eid", sort=False).head(2)
+    e_arr = top["eid"].to_numpy()
+    best: dict[int, list[tuple[str, int]]] = {}
+    for e, v, c in zip(e_arr.tolist(), top["vid"].tolist(), top["count"].tolist(), strict=True):
+        best.setdefault(int(e), []).append((str(v), int(c)))
+    out: dict[int, _Verdict] = {}
+    for e in pending:
+        n = len(evidence[e])
+        free = best.get(e, [])
+        if not free:
+            out[e] = (None, 0, 0, f"no free VID in its {n} V-scenarios")
+            continue
+        (v1, c1), c2 = free[0], (free[1][1] if len(free) > 1 else 0)
+        why = ""
+        if n < params.min_evidence:
+            why = f"only {n} evidence scenario(s) (need {params.min_evidence})"
+        elif c1 - c2 < params.margin:
+            second = free[1][0] if len(free) > 1 else "-"
+            why = f"ambiguous after {n} scenarios: {v1} in {c1}, {second} in {c2}"
+        elif c1 < params.support * n:
+            why = f"weak: best VID {v1} in only {c1} of {n} scenarios"
+        out[e] = (v1, c1, c2, why)
+    return out
+
+
+def _ranked(counts: pd.DataFrame) -> dict[int, list[tuple[str, int]]]:
+    """Top two (VID, count) per EID."""
+    top = counts.groupby("eid", sort=False).head(2)
+    out: dict[int, list[tuple[str, int]]] = {}
+    for e, v, c in zip(
+        top["eid"].tolist(), top["vid"].tolist(), top["count"].tolist(), strict=True
+    ):
+        out.setdefault(int(e), []).append((str(v), int(c)))
+    return out
+
+
+def _confidence(c1: int, c2: int, n: int) -> float:
+    return round(max(0.0, min(1.0, (c1 - c2) / n)), 4) if n else 0.0
+
+
+def match_ss(
+    data: EData,
+    vstore: VStore,
+    requested: Sequence[str],
+    engine: Engine,
+    params: MatchParams,
+    seed: int,
+    progress: Callable[[int, int | None], None] | None = None,
+) -> MatchOutcome:
+    """EID set splitting + VID filtering + matching refining (see the module docstring)."""
+    t0 = time.perf_counter()
+    codes, missing = data.eid_codes(requested)
+    order = window_order(len(data.windows_ns), seed)
+    inc = _Inclusive(data, order)
+    targets = np.unique(codes)
+    evidence, distinguished, iterations = _set_split(data, targets, order, engine, inc, progress)
+    t1 = time.perf_counter()
+    result: dict[int, EvMatch] = {}
+    pending: list[int] = []
+    for e in targets.tolist():
+        ev = evidence.get(e, [])
+        evidence[e] = ev
+        if not ev and not len(inc.scenarios_of(e)):
+            result[e] = EvMatch(str(data.eids[e]), None, 0.0, (), REASON_NO_INCLUSIVE)
+        else:
+            pending.append(e)
+    taken: set[str] = set()
+    rounds = 0
+    while pending:
+        rounds += 1
+        # add one scenario to EIDs short of evidence before filtering (free of a V read if shared)
+        for e in pending:
+            if len(evidence[e]) < params.min_evidence:
+                _extend(e, evidence, inc, params, vstore.cache)
+        ev_e = np.array([e for e in pending for _ in evidence[e]], np.int64)
+        ev_s = np.array([s for e in pending for s in evidence[e]], np.int64)
+        vids = vstore.fetch(ev_s.tolist())
+        verdicts = _judge_all(engine.vote(ev_e, ev_s, vids), evidence, pending, taken, params)
+        ok = sorted(
+            (e for e in pending if not verdicts[e][3]),
+            key=lambda e: (-(verdicts[e][1] - verdicts[e][2]), -verdicts[e][1], e),
+        )
+        still: list[int] = []
+        claimed: set[str] = set()
+        for e in ok:
+            v, c1, c2, _ = verdicts[e]
+            if v in claimed:
+                still.append(e)  # the VID went to a stronger claim this round; re-judge next round
+                continue
+            claimed.add(v)  # type: ignore[arg-type]
+            n = len(evidence[e])
+            result[e] = EvMatch(
+                str(data.eids[e]),
+                v,
+                _confidence(c1, c2, n),
+                tuple(data.scenario_name(s) for s in evidence[e]),
+            )
+        taken |= claimed
+        for e in pending:
+            if e in result or e in still:
+                continue
+            if not _extend(e, evidence, inc, params, vstore.cache):
+                v, c1, c2, why = verdicts[e]
+                result[e] = EvMatch(
+                    str(data.eids[e]),
+                    None,
+                    0.0,
+                    tuple(data.scenario_name(s) for s in evidence[e]),
+                    why,
+                )
+            else:
+                still.append(e)
+        pending = sorted(still)
+        if progress is not None:
+            progress(len(result), len(targets))
+    t2 = time.perf_counter()
+    matches = _in_request_order(data, requested, result)
+    del missing
+    return MatchOutcome(
+        matches=matches,
+        v_scenarios_read=vstore.reads,
+        v_scenarios_unique=vstore.reads,
+        v_bytes_read=vstore.bytes_read,
+        split_iterations=iterations,
+        refine_rounds=rounds,
+        distinguished=len(distinguished),
+        stage_seconds={"seconds_split": t1 - t0, "seconds_filter": t2 - t1},
+    )
+
+
+def _in_request_order(
+    data: EData, requested: Sequence[str], result: dict[int, EvMatch]
+) -> list[EvMatch]:
+    idx = pd.Index(data.eids).get_indexer(list(requested)) if len(requested) else []
+    return [
+        result[int(i)] if i >= 0 else EvMatch(name, None, 0.0, (), REASON_UNKNOWN)
+        for name, i in zip(requested, idx, strict=True)
+    ]
+
+
+def _extend(
+    e: int,
+    evidence: dict[int, list[int]],
+    inc: _Inclusive,
+    p: MatchParams,
+    read: set[int] | dict[int, object] | None = None,
+) -> bool:
+    """Give the EID more evidence: every V-scenario already read where it is inclusive (no extra
+    video to process), else the inclusive scenario farthest in time from its evidence (people
+    who share a cell now likely share it a minute later, so a near window rarely tells them
+    apart); ties go to the earlier window in the random order."""
+    if len(evidence[e]) >= p.max_evidence:
+        return False
+    mine = inc.scenarios_of(e)
+    have = set(evidence[e])
+    fresh = np.array([int(s) not in have for s in mine.tolist()], bool)
+    if not fresh.any():
+        return False
+    cand = mine[fresh]
+    if read:
+        free = [s for s in cand.tolist() if s in read]
+        if free:
+            evidence[e].extend(free[: p.max_evidence - len(evidence[e])])
+            return True
+    if evidence[e]:
+        used_w = np.array(evidence[e], np.int64) // inc.n_cells
+        gap = np.abs((cand // inc.n_cells)[:, None] - used_w[None, :]).min(axis=1)
+        pick = int(cand[int(np.argmax(gap))])  # argmax keeps the first (random-order) maximum
+    else:
+        pick = int(cand[0])
+    evidence[e].append(pick)
+    return True
+
+
+def match_edp(
+    data: EData,
+    vstore: VStore,
+    requested: Sequence[str],
+    engine: Engine,
+    params: MatchParams,
+    seed: int,
+    progress: Callable[[int, int | None], None] | None = None,
+) -> MatchOutcome:
+    """The EDP baseline: per-EID greedy E-filtering then one V-identification vote."""
+    t0 = time.perf_counter()
+    codes, _ = data.eid_codes(requested)
+    targets = np.unique(codes)
+    order = window_order(len(data.windows_ns), seed)
+    rank = np.empty(len(order), np.int64)
+    rank[order] = np.arange(len(order))
+    rows = data.rows
+    w = rows["w"].to_numpy(np.int64)
+    s_all = w * data.n_cells + rows["cell"].to_numpy(np.int64)
+    e_all = rows["eid"].to_numpy(np.int64)
+    want = np.isin(e_all, targets)
+    useful = np.unique(s_all[want])
+    in_useful = np.isin(s_all, useful)
+    members: dict[int, frozenset[int]] = {
+        int(s): frozenset(g.tolist())
+        for s, g in pd.Series(e_all[in_useful]).groupby(s_all[in_useful])
+    }
+    by_eid: dict[int, list[int]] = {}
+    sel = np.flatnonzero(want)
+    sel = sel[np.lexsort((s_all[sel], rank[w[sel]], e_all[sel]))]
+    for e, s in zip(e_all[sel].tolist(), s_all[sel].tolist(), strict=True):
+        by_eid.setdefault(e, []).append(s)
+    max_ev = params.max_evidence
+
+    def select(e: int) -> list[int]:
+        cands = by_eid.get(e, [])
+        chosen: list[int] = []
+        current: frozenset[int] | None = None
+        while len(chosen) < max_ev:
+            best, best_set = None, None
+            for s in cands:
+                if s in chosen:
+                    continue
+                inter = members[s] if current is None else current & members[s]
+                if best_set is None or len(inter) < len(best_set):
+                    best, best_set = s, inter
+            if best is None or (current is not None and len(best_set) >= len(current)):
+                break
+            chosen.append(best)
+            current = best_set
+            if len(current) <= 1:
+                break
+        return chosen
+
+    chosen_all = engine.edp_select(targets.tolist(), select)
+    t1 = time.perf_counter()
+    ev_e = np.array([e for e, ch in zip(targets.tolist(), chosen_all, strict=True) for _ in ch])
+    ev_s = np.array([s for ch in chosen_all for s in ch], np.int64)
+    vids = vstore.fetch(ev_s.tolist())
+    ranked = _ranked(engine.vote(ev_e.astype(np.int64), ev_s, vids))
+    result: dict[int, EvMatch] = {}
+    reads = 0
+    nbytes = 0
+    for e, ch in zip(targets.tolist(), chosen_all, strict=True):
+        # each EID task reads its own V-scenarios (no sharing across EIDs)
+        reads += len(ch)
+        nbytes += sum(vstore.sizes[s] for s in ch)
+        names = tuple(data.scenario_name(s) for s in ch)
+        r = ranked.get(e, [])
+        if not ch:
+            result[e] = EvMatch(str(data.eids[e]), None, 0.0, (), "no E-scenario lists it")
+        elif not r:
+            result[e] = EvMatch(
+                str(data.eids[e]), None, 0.0, names, f"no VID in its {len(ch)} V-scenarios"
+            )
+        else:
+            c2 = r[1][1] if len(r) > 1 else 0
+            result[e] = EvMatch(
+                str(data.eids[e]), r[0][0], _confidence(r[0][1], c2, len(ch)), names
+            )
+    if progress is not None:
+        progress(len(targets), len(targets))
+    t2 = time.perf_counter()
+    matches = _in_request_order(data, requested, result)
+    return MatchOutcome(
+        matches=matches,
+        v_scenarios_read=reads,
+        v_scenarios_unique=vstore.reads,
+        v_bytes_read=nbytes,
+        split_iterations=0,
+        refine_rounds=0,
+        distinguished=0,
+        stage_seconds={"seconds_split": t1 - t0, "seconds_filter": t2 - t1},
+    )
