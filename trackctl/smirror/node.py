@@ -26,10 +26,11 @@ __all__ = [
     "decide_cast",
     "beacon_bytes",
     "REGION_HEADER_BYTES",
+    "pack_regions",
 ]
 
 REGION_HEADER_BYTES = 12
-"""Per region: x, y, w, h (uint16 each) and the JPEG length (uint32)."""
+"""Per region: frame x, y, mosaic x, y, width, height (uint16 each)."""
 MESSAGE_HEADER_BYTES = 24
 """Per image message: node id, frame stamp, region count, new/old flag."""
 
@@ -58,21 +59,64 @@ class NodeConfig:
     """Margin around each changed region, so a blob's edge and its LEDs are not cut."""
     jpeg_quality: int = 80
     motion_px: int = 40
+    model_scale: float = 0.5
+    """Scale of the frame the background model sees."""
     """Fewer changed pixels than this in the whole frame: nothing moved (the old image is sent)."""
 
 
 @dataclass(frozen=True, slots=True)
 class ForegroundPayload:
-    """What a node sends for one frame: the changed regions as JPEG crops."""
+    """What a node sends for one frame: the changed regions packed into one JPEG mosaic.
+
+    One JPEG for all regions, not one per region: a JPEG file carries ~600 bytes of tables, which
+    would dominate small regions.
+    """
 
     t_ns: int
-    regions: tuple[tuple[int, int, bytes], ...]
-    """(x, y, JPEG bytes) per region, x/y the crop's top-left pixel in the full frame."""
+    mosaic: bytes
+    """JPEG of the packed regions (empty when nothing changed)."""
+    regions: tuple[tuple[int, int, int, int, int, int], ...]
+    """(frame x, frame y, mosaic x, mosaic y, width, height) per region, pixels."""
 
     @property
     def size_bytes(self) -> int:
         """Bytes on the wire: message header + per-region header + JPEG data."""
-        return MESSAGE_HEADER_BYTES + sum(REGION_HEADER_BYTES + len(b) for _, _, b in self.regions)
+        return MESSAGE_HEADER_BYTES + REGION_HEADER_BYTES * len(self.regions) + len(self.mosaic)
+
+    def crops(self) -> list[tuple[int, int, np.ndarray]]:
+        """Decode the mosaic into (frame x, frame y, image) crops (what the robot receives)."""
+        if not self.mosaic:
+            return []
+        img = cv2.imdecode(np.frombuffer(self.mosaic, np.uint8), cv2.IMREAD_COLOR)
+        if img is None:
+            return []
+        return [(fx, fy, img[my : my + h, mx : mx + w]) for fx, fy, mx, my, w, h in self.regions]
+
+
+def pack_regions(sizes: list[tuple[int, int]], width: int, align: int = 16) -> tuple[list[tuple[int, int]], tuple[int, int]]:
+    """Shelf packing of (w, h) boxes into rows of at most ``width`` pixels.
+
+    Boxes start on ``align``-pixel boundaries so JPEG blocks never mix two regions. Returns each
+    box's top-left corner and the mosaic size. (A few boxes per frame: a library bin packer
+    would not pay for itself.)
+    """
+    def up(v: int) -> int:
+        return -(-v // align) * align
+
+    order = sorted(range(len(sizes)), key=lambda i: -sizes[i][1])
+    pos: list[tuple[int, int]] = [(0, 0)] * len(sizes)
+    x = y = shelf = 0
+    mosaic_w = 0
+    for i in order:
+        w, h = sizes[i]
+        if x > 0 and x + w > width:
+            y += up(shelf)
+            x = shelf = 0
+        pos[i] = (x, y)
+        x += up(w)
+        shelf = max(shelf, h)
+        mosaic_w = max(mosaic_w, x)
+    return pos, (max(align, mosaic_w), max(align, y + up(shelf)))
 
 
 def beacon_bytes(model: CameraModel, extra: dict[str, object] | None = None) -> int:
@@ -91,6 +135,14 @@ class MirrorNode:
             history=config.history, varThreshold=config.var_threshold, detectShadows=False
         )
         self._kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+        self._small = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
+        # the same encoder settings for foreground mosaics and the full-frame comparison
+        self._params = [
+            int(cv2.IMWRITE_JPEG_QUALITY),
+            config.jpeg_quality,
+            int(cv2.IMWRITE_JPEG_OPTIMIZE),
+            1,
+        ]
         self.last_payload: ForegroundPayload | None = None
         self.last_mask_px = 0
         self.last_sense_ms = 0.0
@@ -98,9 +150,16 @@ class MirrorNode:
     def sense(self, frame: np.ndarray) -> np.ndarray:
         """Update the background model with a frame; returns the cleaned foreground mask."""
         started = time.perf_counter()
-        mask = self._mog.apply(frame)
-        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._kernel)
-        mask = cv2.dilate(mask, self._kernel, iterations=1)
+        # the background model runs on a reduced frame (4x fewer pixels at 0.5): region boxes
+        # need no full-resolution mask, and the node's budget is ~20 ms per request on one core
+        s = self.config.model_scale
+        small = frame if s == 1.0 else cv2.resize(frame, None, fx=s, fy=s, interpolation=cv2.INTER_AREA)
+        mask = self._mog.apply(small)
+        if s != 1.0:
+            mask = cv2.resize(mask, (frame.shape[1], frame.shape[0]), interpolation=cv2.INTER_NEAREST)
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._small)
+        mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._kernel)
+        mask = cv2.dilate(mask, self._small, iterations=1)
         self.last_mask_px = int(cv2.countNonZero(mask))
         self.last_sense_ms = (time.perf_counter() - started) * 1e3
         return mask
@@ -142,17 +201,26 @@ class MirrorNode:
         """
         if self.last_payload is not None and self.last_mask_px < self.config.motion_px:
             return self.last_payload, False
-        params = [int(cv2.IMWRITE_JPEG_QUALITY), self.config.jpeg_quality]
-        crops = []
-        for x, y, bw, bh in self.regions(mask):
-            ok, buf = cv2.imencode(".jpg", frame[y : y + bh, x : x + bw], params)
-            if ok:
-                crops.append((x, y, buf.tobytes()))
-        payload = ForegroundPayload(t_ns, tuple(crops))
+        # foreground-only: inside a region's box the unchanged pixels are blanked to one flat
+        # grey, which JPEG codes in a few bits, so only the changed pixels cost bytes
+        boxes = self.regions(mask)
+        if not boxes:
+            payload = ForegroundPayload(t_ns, b"", ())
+        else:
+            pos, (mw, mh) = pack_regions([(w, h) for _, _, w, h in boxes], frame.shape[1])
+            mosaic = np.full((mh, mw, 3), 128, np.uint8)
+            regions = []
+            for (x, y, w, h), (mx, my) in zip(boxes, pos, strict=True):
+                crop = frame[y : y + h, x : x + w].copy()
+                crop[mask[y : y + h, x : x + w] == 0] = 128
+                mosaic[my : my + h, mx : mx + w] = crop
+                regions.append((x, y, mx, my, w, h))
+            ok, buf = cv2.imencode(".jpg", mosaic, self._params)
+            payload = ForegroundPayload(t_ns, buf.tobytes() if ok else b"", tuple(regions))
         self.last_payload = payload
         return payload, True
 
     def full_frame_bytes(self, frame: np.ndarray) -> int:
         """Bytes of the whole frame at the same JPEG quality (what a plain camera stream sends)."""
-        ok, buf = cv2.imencode(".jpg", frame, [int(cv2.IMWRITE_JPEG_QUALITY), self.config.jpeg_quality])
+        ok, buf = cv2.imencode(".jpg", frame, self._params)
         return MESSAGE_HEADER_BYTES + (len(buf) if ok else 0)

@@ -459,12 +459,7 @@ def localize(
             res.broadcast_lost += 1
             continue
         started = time.perf_counter()
-        crops = []
-        for x0, y0, data in payload.regions:
-            img = _decode(data)
-            if img is not None:
-                crops.append((x0, y0, img))
-        front, back = detect_leds(crops, led)
+        front, back = detect_leds(payload.crops(), led)
         fix = (
             None
             if front is None or back is None
