@@ -12,6 +12,7 @@ from trackctl.cli.record import record
 from trackctl.cli.replay import replay
 from trackctl.cli.simulate import simulate_app
 from trackctl.cli.vmtrack import simulate_vm, vm_track
+from trackctl.cli.smirror import simulate_smirror, smirror
 
 app = typer.Typer(
     cls=TrackctlGroup,
@@ -45,6 +46,8 @@ app.command()(process)
 app.command()(report)
 app.command("vm-track")(vm_track)
 simulate_app.command("vm")(simulate_vm)
+app.command("smirror")(smirror)
+simulate_app.command("smirror")(simulate_smirror)
 app.add_typer(simulate_app, name="simulate")
 
 

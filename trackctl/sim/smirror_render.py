@@ -216,24 +216,62 @@ class NodeRenderer:
         )
         hgt = self.plan.wall_height_m
         for a, b in order:
-            length = math.dist(a, b)
-            n = max(1, int(length / 1.5))
-            for i in range(n):
-                t0, t1 = i / n, (i + 1) / n
-                p0 = np.add(a, np.subtract(b, a) * t0)
-                p1 = np.add(a, np.subtract(b, a) * t1)
-                quad = np.array(
-                    [[*p0, 0.0], [*p1, 0.0], [*p1, hgt], [*p0, hgt]], float
-                )
-                poly = self._poly(quad)
-                if poly is not None:
-                    tone = 190 + int(rng.integers(-12, 12))
-                    cv2.fillPoly(img, [poly], (tone - 20, tone - 5, tone), cv2.LINE_AA, 4)
-                band = np.array([[*p0, 0.0], [*p1, 0.0], [*p1, 0.12], [*p0, 0.12]], float)
-                poly = self._poly(band)
-                if poly is not None:
-                    cv2.fillPoly(img, [poly], (70, 75, 80), cv2.LINE_AA, 4)
+            self._paint_wall(img, a, b, hgt, rng)
         return img
+
+    def _paint_wall(
+        self, img: np.ndarray, a: tuple[float, float], b: tuple[float, float], hgt: float,
+        rng: np.random.Generator,
+    ) -> None:
+        """A wall with posters, a skirting board and plaster grain, warped onto its image area."""
+        length = math.dist(a, b)
+        ppm = 40
+        tw, th = max(8, int(length * ppm)), int(hgt * ppm)
+        tone = 190 + int(rng.integers(-12, 12))
+        tex = np.empty((th, tw, 3), np.uint8)
+        tex[:] = (tone - 20, tone - 5, tone)
+        for _ in range(int(length / 2.5)):
+            pw, ph = int(rng.uniform(0.5, 1.2) * ppm), int(rng.uniform(0.5, 1.0) * ppm)
+            px0 = int(rng.uniform(0, max(1, tw - pw)))
+            py0 = int(rng.uniform(0.6, 1.2) * ppm)
+            # muted colours only: nothing in the scene may look like a saturated LED
+            grey = int(rng.integers(80, 200))
+            color = tuple(int(np.clip(grey + t, 0, 255)) for t in rng.integers(-25, 26, 3))
+            cv2.rectangle(tex, (px0, py0), (px0 + pw, py0 + ph), color, -1)
+            for _ in range(4):  # print on the poster
+                y = int(rng.uniform(py0 + 3, py0 + ph - 3))
+                cv2.line(tex, (px0 + 4, y), (px0 + pw - 4, y), (230, 230, 225), 1)
+        cv2.rectangle(tex, (0, th - int(0.12 * ppm)), (tw, th), (70, 75, 80), -1)
+        grain = cv2.GaussianBlur(rng.normal(0, 7, (th, tw)), (0, 0), 1.2)
+        tex = np.clip(tex + grain[..., None], 0, 255).astype(np.uint8)
+        # texture (u, v) <-> wall point a + (b - a) * u / tw at height hgt * (1 - v / th)
+        u, v = np.meshgrid(np.linspace(0, 1, 6), np.linspace(0, 1, 4))
+        u, v = u.ravel(), v.ravel()
+        pts = np.column_stack(
+            [a[0] + (b[0] - a[0]) * u, a[1] + (b[1] - a[1]) * u, hgt * (1 - v)]
+        )
+        front = self.cam.to_camera(pts)[:, 2] > 0.3
+        if front.sum() < 4:
+            return
+        px, _ = self.cam.project(pts[front])
+        src = np.column_stack([u[front] * tw, v[front] * th]).astype(np.float32)
+        hmat, _ = cv2.findHomography(src, px.astype(np.float32))
+        if hmat is None:
+            return
+        quad = np.array([[*a, 0.0], [*b, 0.0], [*b, hgt], [*a, hgt]], float)
+        poly = self._poly(quad)
+        if poly is None:
+            return
+        mask = np.zeros((self.h, self.w), np.uint8)
+        cv2.fillPoly(mask, [poly], 255, cv2.LINE_8, 4)
+        x, y, w, h = cv2.boundingRect(mask)
+        if w == 0 or h == 0:
+            return
+        # warp only the wall's bounding box of the image
+        shift = np.array([[1, 0, -x], [0, 1, -y], [0, 0, 1.0]])
+        warped = cv2.warpPerspective(tex, shift @ hmat, (w, h), flags=cv2.INTER_LINEAR)
+        sel = mask[y : y + h, x : x + w] > 0
+        img[y : y + h, x : x + w][sel] = warped[sel]
 
     # -- dynamic content ---------------------------------------------------------------------
     def _visible(self, xy: np.ndarray) -> bool:
@@ -280,7 +318,8 @@ class NodeRenderer:
             led = np.array([[x + off * c, y + off * s, shape.led_height_m]])
             (u, v), = self.cam.project(led)[0]
             depth = float(self.cam.to_camera(led)[0, 2])
-            r = max(1.2, self.cam.model.fx_px * shape.led_radius_m / depth)
+            # a bright LED blooms over a couple of pixels however far it is
+            r = max(2.0, self.cam.model.fx_px * shape.led_radius_m / depth)
             center = (int(round(u * 16)), int(round(v * 16)))
             cv2.circle(img, center, int(round(r * 16)), color, -1, cv2.LINE_AA, 4)
 

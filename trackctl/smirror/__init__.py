@@ -12,6 +12,7 @@ from trackctl.smirror.pipeline import (
     pose_topic,
     report_metrics,
     run,
+    run_detailed,
     sent_topic,
 )
 from trackctl.smirror.robot import FilterConfig, LedConfig, PoseFilter, detect_leds, fix_from_leds
@@ -35,6 +36,7 @@ __all__ = [
     "pose_topic",
     "report_metrics",
     "run",
+    "run_detailed",
     "sent_topic",
 ]
 
@@ -46,9 +48,12 @@ class SmirrorProcessor:
 
     def __init__(self, config: SmirrorConfig | None = None) -> None:
         self.config = config or SmirrorConfig()
+        self.last_result: SmirrorResult | None = None
+        """Per-sample figures of the last run (for plots)."""
 
     def run(self, reader, writer, progress=None):  # type: ignore[no-untyped-def]
-        return run(reader, writer, self.config, progress)
+        report, self.last_result = run_detailed(reader, writer, self.config, progress)
+        return report
 
 
 register_processor(

@@ -33,7 +33,18 @@ from trackctl.sim.smirror_render import FloorPlan, line_of_sight
 from trackctl.smirror.node import CastMode, MirrorNode, NodeConfig, beacon_bytes, decide_cast
 from trackctl.smirror.robot import FilterConfig, LedConfig, LedFix, PoseFilter, detect_leds, fix_from_leds
 
-__all__ = ["Mode", "SmirrorConfig", "SmirrorResult", "localize", "run", "pose_topic", "sent_topic"]
+__all__ = [
+    "Mode",
+    "SmirrorConfig",
+    "SmirrorResult",
+    "error_by_range",
+    "localize",
+    "pose_topic",
+    "report_metrics",
+    "run",
+    "run_detailed",
+    "sent_topic",
+]
 
 
 def pose_topic(robot: str) -> str:
@@ -584,9 +595,19 @@ def run(
     progress: Progress | None = None,
 ) -> MetricReport:
     """S-Mirror over ``reader``: writes robot poses and node transmissions, returns the report."""
+    return run_detailed(reader, writer, config, progress)[0]
+
+
+def run_detailed(
+    reader: LogReader,
+    writer: LogWriter | None,
+    config: SmirrorConfig | None = None,
+    progress: Progress | None = None,
+) -> tuple[MetricReport, SmirrorResult]:
+    """:func:`run` that also returns the per-sample figures (plots and benchmarks bin them)."""
     cfg = config or SmirrorConfig()
     res = localize(reader, cfg, writer, progress)
-    return MetricReport(
+    report = MetricReport(
         t_ns=reader.end_ns or 0,
         processor="smirror",
         metrics=report_metrics(res, cfg),
@@ -601,6 +622,4 @@ def run(
             "sensing_ms": cfg.sensing_ms,
         },
     )
-
-
-
+    return report, res
