@@ -213,6 +213,10 @@ class PoseFilter:
             self.rejects += 1
             self.ekf.x, self.ekf.P = saved
             return False
+        if d2 > self.cfg.gate_chi2:
+            # the camera keeps disagreeing: the dead-reckoned pose is what is wrong (wheel slip,
+            # a bad start); widen its covariance by the disagreement so the fix takes over
+            self.ekf.P = self.ekf.P + np.diag((y[:, 0] ** 2))
         self.rejects = 0
         self.ekf.update(
             z,
