@@ -10,8 +10,10 @@ from trackctl.logs import LogReader
 from trackctl.sim.smirror import SmirrorScenario, simulate_smirror
 from trackctl.smirror import Mode, SmirrorConfig, SmirrorResult, run_detailed
 
-SHORT = SmirrorScenario(paths=1, people=4, fps=3.0, duration_s=40.0, seed=3)
-"""40 s of the first patrol: in coverage, then out of it (the first doorway), with people."""
+SHORT = SmirrorScenario(
+    paths=1, people=4, fps=2.5, width_px=480, height_px=360, duration_s=34.0, seed=3
+)
+"""34 s of the first patrol: in coverage, then out of it (the first doorway), with people."""
 
 
 @pytest.fixture(scope="session")

@@ -13,22 +13,15 @@ from trackctl.cli.main import app
 SAMPLE = ROOT / "sample_logs" / "smirror.mcap"
 
 
-def test_cli_json_in_process(smirror_log: Path, tmp_path: Path) -> None:
-    result = CliRunner().invoke(
-        app, ["smirror", str(smirror_log), "--out", str(tmp_path / "o.mcap"), "--json", "-q"]
-    )
-    assert result.exit_code == 0, result.output
-    metrics = json.loads(result.stdout)
-    assert metrics["system"] == "smirror" and metrics["error_m_mean"] < 0.3
-
-
-def test_cli_fail_if_and_bad_mode(smirror_log: Path, tmp_path: Path) -> None:
+def test_cli_json_and_fail_if_in_process(smirror_log: Path, tmp_path: Path) -> None:
     runner = CliRunner()
     out = str(tmp_path / "o.mcap")
     result = runner.invoke(
-        app, ["smirror", str(smirror_log), "--out", out, "-q", "--fail-if", "error_m_mean>0.001"]
+        app, ["smirror", str(smirror_log), "--out", out, "--json", "-q", "--fail-if", "error_m_mean>0.001"]
     )
-    assert result.exit_code == 1
+    assert result.exit_code == 1, result.output
+    metrics = json.loads(result.stdout.splitlines()[0])
+    assert metrics["system"] == "smirror" and metrics["error_m_mean"] < 0.3
     result = runner.invoke(app, ["smirror", str(smirror_log), "--out", out, "--mode", "bogus"])
     assert result.exit_code == 2
     assert "--mode 'bogus': expected mirror+odom or centralized" in result.output
@@ -46,16 +39,16 @@ def test_cli_on_the_sample_log_subprocess(tmp_path: Path) -> None:
 
 
 def test_cli_missing_odometry_is_one_line_exit_2(tmp_path: Path) -> None:
-    from trackctl.logs import LogReader, LogWriter
+    from trackctl.ingest.video import make_compressed_image
+    from trackctl.logs import LogWriter
+    from trackctl.sim.smirror import SmirrorScenario, node_models
 
-    reader = LogReader(SAMPLE)
     src = tmp_path / "no_odom.mcap"
+    model = node_models(SmirrorScenario(width_px=64, height_px=48))[0]
     with LogWriter(src) as w:
-        for name, data in reader.metadata().items():
-            w.add_metadata(name, data)
-        for m in reader.messages():
-            if m.topic != "/robot/r1/odom":
-                w.write(m.topic, m.message, m.log_time_ns)
+        w.add_metadata("robot/r1", {"ticks_per_m": 2000})
+        w.write("/node0/camera_model", model, 0)
+        w.write("/node0/image", make_compressed_image(0, "node0", b"", "jpeg"), 0)
     proc = run_cli("smirror", str(src), "--out", str(tmp_path / "o.mcap"))
     assert proc.returncode == 2
     err = proc.stderr.decode().strip()
@@ -70,5 +63,5 @@ def test_simulate_smirror_subprocess(tmp_path: Path) -> None:
     )
     counts = json.loads(proc.stdout)["topics"]
     assert counts["/robot/r1/odom"] == 75 and counts["/node0/image"] == 6
-    bad = run_cli("simulate", "smirror", "--out", str(out), "--paths", "9")
-    assert bad.returncode == 2 and "paths must be 1..4" in bad.stderr.decode()
+    bad = CliRunner().invoke(app, ["simulate", "smirror", "--out", str(out), "--paths", "9"])
+    assert bad.exit_code == 2 and "paths must be 1..4" in bad.output

@@ -13,7 +13,6 @@ from trackctl.logs import LogReader, LogWriter
 from trackctl.logs.messages import MirrorTransmission
 from trackctl.processing import run_processors
 from trackctl.smirror import (
-    Mode,
     SmirrorConfig,
     SmirrorProcessor,
     error_by_range,
@@ -134,6 +133,3 @@ def test_missing_odometry_names_the_topic(smirror_log: Path, tmp_path: Path) -> 
     _copy_without(smirror_log, no_odom, drop="/robot/r1/odom")
     with pytest.raises(MissingTopicError, match=r"/robot/r1/odom is missing.*'r1'"):
         localize(LogReader(no_odom), SmirrorConfig())
-    # the vision-only baseline needs no odometry
-    res = localize(LogReader(no_odom), SmirrorConfig(mode=Mode.CENTRALIZED))
-    assert res.fixes > 0
