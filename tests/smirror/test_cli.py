@@ -17,7 +17,17 @@ def test_cli_json_and_fail_if_in_process(smirror_log: Path, tmp_path: Path) -> N
     runner = CliRunner()
     out = str(tmp_path / "o.mcap")
     result = runner.invoke(
-        app, ["smirror", str(smirror_log), "--out", out, "--json", "-q", "--fail-if", "error_m_mean>0.001"]
+        app,
+        [
+            "smirror",
+            str(smirror_log),
+            "--out",
+            out,
+            "--json",
+            "-q",
+            "--fail-if",
+            "error_m_mean>0.001",
+        ],
     )
     assert result.exit_code == 1, result.output
     metrics = json.loads(result.stdout.splitlines()[0])
@@ -29,7 +39,13 @@ def test_cli_json_and_fail_if_in_process(smirror_log: Path, tmp_path: Path) -> N
 
 def test_cli_on_the_sample_log_subprocess(tmp_path: Path) -> None:
     proc = run_cli(
-        "smirror", str(SAMPLE), "--out", str(tmp_path / "o.mcap"), "--json", "--plot", str(tmp_path / "fig"),
+        "smirror",
+        str(SAMPLE),
+        "--out",
+        str(tmp_path / "o.mcap"),
+        "--json",
+        "--plot",
+        str(tmp_path / "fig"),
         check=True,
     )
     metrics = json.loads(proc.stdout)
@@ -58,8 +74,22 @@ def test_cli_missing_odometry_is_one_line_exit_2(tmp_path: Path) -> None:
 def test_simulate_smirror_subprocess(tmp_path: Path) -> None:
     out = tmp_path / "s.mcap"
     proc = run_cli(
-        "simulate", "smirror", "--out", str(out), "--paths", "1", "--people", "1", "--size", "160x120",
-        "--fps", "2", "--duration", "3", "--json", check=True,
+        "simulate",
+        "smirror",
+        "--out",
+        str(out),
+        "--paths",
+        "1",
+        "--people",
+        "1",
+        "--size",
+        "160x120",
+        "--fps",
+        "2",
+        "--duration",
+        "3",
+        "--json",
+        check=True,
     )
     counts = json.loads(proc.stdout)["topics"]
     assert counts["/robot/r1/odom"] == 75 and counts["/node0/image"] == 6

@@ -66,7 +66,7 @@ def test_moving_object_is_the_only_region_and_costs_far_less_than_the_frame() ->
     assert 140 <= fx <= 150 and 90 <= fy <= 100 and 30 <= w <= 50 and 40 <= h <= 60
     assert payload.size_bytes == MESSAGE_HEADER_BYTES + REGION_HEADER_BYTES + len(payload.mosaic)
     assert payload.size_bytes * 3 < node.full_frame_bytes(frame)
-    (x0, y0, crop), = payload.crops()
+    ((x0, y0, crop),) = payload.crops()
     assert (x0, y0) == (fx, fy) and crop.shape[:2] == (h, w)
     # the object itself survives encoding (the robot looks for things in it)
     assert np.abs(crop[20:30, 15:25].astype(int).mean(axis=(0, 1)) - (40, 60, 200)).max() < 25

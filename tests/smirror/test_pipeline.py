@@ -95,16 +95,22 @@ def test_outputs_poses_and_transmissions(smirror_log: Path, tmp_path: Path) -> N
     assert present[sent_topic("node1")].schema_name == MirrorTransmission.SCHEMA
     poses = [m.message for m in reader.messages([pose_topic("r1")])]
     assert isinstance(poses[0], PoseInFrame) and len(poses) == present["/robot/r1/odom"].count
-    sent = [m.message for m in reader.messages([sent_topic(n) for n in ("node0", "node1", "node2")])]
+    sent = [
+        m.message for m in reader.messages([sent_topic(n) for n in ("node0", "node1", "node2")])
+    ]
     kinds = {s.kind for s in sent}
     assert kinds == {"image", "beacon"}
     images = [s for s in sent if s.kind == "image"]
     assert all(s.bytes_sent == s.payload_bytes * s.requesters for s in images)
     total = sum(s.bytes_sent for s in sent)
-    assert total / report.metrics["duration_s"] / 1e3 == pytest.approx(report.metrics["kbps_mean"], rel=1e-3)
+    assert total / report.metrics["duration_s"] / 1e3 == pytest.approx(
+        report.metrics["kbps_mean"], rel=1e-3
+    )
 
 
-def _copy_without(src: Path, dst: Path, drop: str | None = None, corrupt: str | None = None) -> None:
+def _copy_without(
+    src: Path, dst: Path, drop: str | None = None, corrupt: str | None = None
+) -> None:
     reader = LogReader(src)
     with LogWriter(dst) as w:
         for name, data in reader.metadata().items():

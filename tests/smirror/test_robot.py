@@ -10,7 +10,14 @@ import pytest
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.sim.smirror import SmirrorScenario, node_models
 from trackctl.sim.smirror_render import NodeRenderer, RobotShape, line_of_sight, three_rooms
-from trackctl.smirror.robot import FilterConfig, LedConfig, LedFix, PoseFilter, detect_leds, fix_from_leds
+from trackctl.smirror.robot import (
+    FilterConfig,
+    LedConfig,
+    LedFix,
+    PoseFilter,
+    detect_leds,
+    fix_from_leds,
+)
 
 
 @pytest.fixture(scope="module")

@@ -11,8 +11,8 @@ from trackctl.cli.process import process, report
 from trackctl.cli.record import record
 from trackctl.cli.replay import replay
 from trackctl.cli.simulate import simulate_app
-from trackctl.cli.vmtrack import simulate_vm, vm_track
 from trackctl.cli.smirror import simulate_smirror, smirror
+from trackctl.cli.vmtrack import simulate_vm, vm_track
 
 app = typer.Typer(
     cls=TrackctlGroup,

@@ -15,10 +15,14 @@ from trackctl.metrics.report import jsonable_metrics
 def smirror(
     log: Annotated[Path, typer.Argument(help="MCAP log with node frames (+ robot odometry).")],
     out: Annotated[
-        Path, typer.Option(help="Output MCAP: input + /smirror/<robot>/pose, /smirror/<node>/sent, report.")
+        Path,
+        typer.Option(
+            help="Output MCAP: input + /smirror/<robot>/pose, /smirror/<node>/sent, report."
+        ),
     ],
     mode: Annotated[
-        str, typer.Option(help="mirror+odom (S-Mirror + motion sensor) or centralized (vision only).")
+        str,
+        typer.Option(help="mirror+odom (S-Mirror + motion sensor) or centralized (vision only)."),
     ] = "mirror+odom",
     broadcast_threshold: Annotated[
         int, typer.Option(help="A node broadcasts an image from this many requests on.")
@@ -30,7 +34,9 @@ def smirror(
     robot: Annotated[
         str | None, typer.Option(help="The robot to localize (default: the log's only robot).")
     ] = None,
-    link_kbps: Annotated[float, typer.Option("--link-kbps", help="Unicast link throughput, kB/s.")] = 1000.0,
+    link_kbps: Annotated[
+        float, typer.Option("--link-kbps", help="Unicast link throughput, kB/s.")
+    ] = 1000.0,
     plot: Annotated[
         Path | None, typer.Option(help="Write the paper's figures (PNG) to this directory.")
     ] = None,
@@ -84,7 +90,9 @@ def simulate_smirror(
     out: Annotated[Path, typer.Option(help="MCAP log to write.")],
     paths: Annotated[int, typer.Option(help="Patrol loops of ~40 m the robot drives (1-4).")] = 4,
     people: Annotated[int, typer.Option(help="People walking in the rooms.")] = 6,
-    requesters: Annotated[int, typer.Option(help="Robots requesting node images (ours + others).")] = 1,
+    requesters: Annotated[
+        int, typer.Option(help="Robots requesting node images (ours + others).")
+    ] = 1,
     seed: Annotated[int, typer.Option(help="Random seed (same seed, same bytes).")] = 0,
     fps: Annotated[float, typer.Option(help="Node frame rate, Hz.")] = 5.0,
     size: Annotated[str, typer.Option(help="Node image size WxH.")] = "640x480",

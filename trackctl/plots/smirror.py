@@ -28,8 +28,13 @@ def require_matplotlib() -> Any:
     return plt
 
 
-def per_metre(res: SmirrorResult, values: list[float], seg_m: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Mean of ``values`` per ``seg_m`` of travelled path (Figs. 4.8-4.10): (segment starts, means)."""
+def per_metre(
+    res: SmirrorResult, values: list[float], seg_m: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of ``values`` per ``seg_m`` of travelled path (Figs. 4.8-4.10).
+
+    Returns the segment starts (m) and the means.
+    """
     path = np.asarray(res.path_m)
     v = np.asarray(values, float)
     if not len(path):
@@ -49,7 +54,9 @@ def plot_result(res: SmirrorResult, out_dir: str | Path) -> list[Path]:
     bins = error_by_range(res)
     fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
     ax[0].bar([b[0] + 0.5 for b in bins], [b[1] or 0 for b in bins], width=0.8)
-    ax[0].set(xlabel="distance to node (m)", ylabel="error (m)", title="Localization error (Fig. 4.6a)")
+    ax[0].set(
+        xlabel="distance to node (m)", ylabel="error (m)", title="Localization error (Fig. 4.6a)"
+    )
     rng = np.asarray(res.range_m)
     delay = np.asarray(res.delay_ms)
     centers, dm = [], []
@@ -59,7 +66,9 @@ def plot_result(res: SmirrorResult, out_dir: str | Path) -> list[Path]:
             centers.append(lo + 0.5)
             dm.append(float(delay[sel].mean()))
     ax[1].bar(centers, dm, width=0.8)
-    ax[1].set(xlabel="distance to node (m)", ylabel="delay (ms)", title="Localization delay (Fig. 4.6b)")
+    ax[1].set(
+        xlabel="distance to node (m)", ylabel="delay (ms)", title="Localization delay (Fig. 4.6b)"
+    )
     fig.tight_layout()
     p = out / "smirror_distance.png"
     fig.savefig(p, dpi=80)
@@ -70,8 +79,14 @@ def plot_result(res: SmirrorResult, out_dir: str | Path) -> list[Path]:
     x, e = per_metre(res, res.error_m)
     _, c = per_metre(res, [float(b) for b in res.in_coverage])
     ax[0].plot(x, e, "-o", ms=2)
-    ax[0].fill_between(x, 0, max(0.05, float(np.nanmax(e)) if len(e) else 1), where=c < 0.5, color="0.85",
-                       label="out of coverage")
+    ax[0].fill_between(
+        x,
+        0,
+        max(0.05, float(np.nanmax(e)) if len(e) else 1),
+        where=c < 0.5,
+        color="0.85",
+        label="out of coverage",
+    )
     ax[0].set(ylabel="error (m)", title="Continuous localization per 1 m (Figs. 4.8-4.10)")
     ax[0].legend(loc="upper right")
     x, d = per_metre(res, res.delay_ms)
@@ -83,7 +98,9 @@ def plot_result(res: SmirrorResult, out_dir: str | Path) -> list[Path]:
         idx = np.clip(np.searchsorted(ts, ev[:, 0], side="right") - 1, 0, len(ts) - 1)
         path = np.asarray(res.path_m)[idx]
         seg = np.floor(path).astype(int)
-        seconds = np.bincount(np.floor(np.asarray(res.path_m)).astype(int)) * float(np.median(np.diff(ts)))
+        seconds = np.bincount(np.floor(np.asarray(res.path_m)).astype(int)) * float(
+            np.median(np.diff(ts))
+        )
         sent = np.bincount(seg, weights=ev[:, 1], minlength=len(seconds))[: len(seconds)]
         ok = seconds > 0
         ax[2].plot(np.arange(len(seconds))[ok], sent[ok] / seconds[ok] / 1e3, "-o", ms=2)

@@ -48,17 +48,54 @@ HOME = (13.5, 4.0)
 
 PATHS: tuple[tuple[tuple[float, float], ...], ...] = (
     # B -> A: along the bottom of B, through the door, a loop in A, back
-    ((16.0, 4.0), (16.0, 1.3), (11.0, 1.3), (11.0, 4.0), (5.0, 4.0), (5.0, 1.5), (1.5, 1.5),
-     (1.5, 4.0), HOME),
+    (
+        (16.0, 4.0),
+        (16.0, 1.3),
+        (11.0, 1.3),
+        (11.0, 4.0),
+        (5.0, 4.0),
+        (5.0, 1.5),
+        (1.5, 1.5),
+        (1.5, 4.0),
+        HOME,
+    ),
     # B -> C: top of B, through both doors, a loop in C, back
-    ((13.5, 6.6), (11.0, 6.6), (11.0, 4.0), (21.5, 4.0), (21.5, 1.5), (24.0, 1.5), (24.0, 6.3),
-     (21.0, 6.3), (21.0, 4.0), HOME),
+    (
+        (13.5, 6.6),
+        (11.0, 6.6),
+        (11.0, 4.0),
+        (21.5, 4.0),
+        (21.5, 1.5),
+        (24.0, 1.5),
+        (24.0, 6.3),
+        (21.0, 6.3),
+        (21.0, 4.0),
+        HOME,
+    ),
     # a figure through A's far side and B's corners
-    ((10.5, 4.0), (10.5, 7.0), (15.5, 7.0), (15.5, 4.0), (7.5, 4.0), (7.5, 6.8), (3.0, 6.8),
-     (3.0, 4.0), HOME),
+    (
+        (10.5, 4.0),
+        (10.5, 7.0),
+        (15.5, 7.0),
+        (15.5, 4.0),
+        (7.5, 4.0),
+        (7.5, 6.8),
+        (3.0, 6.8),
+        (3.0, 4.0),
+        HOME,
+    ),
     # C's near corner and B's bottom
-    ((19.5, 4.0), (19.5, 1.2), (25.0, 1.2), (25.0, 4.0), (16.8, 4.0), (16.8, 1.8), (10.2, 1.8),
-     (10.2, 4.0), HOME),
+    (
+        (19.5, 4.0),
+        (19.5, 1.2),
+        (25.0, 1.2),
+        (25.0, 4.0),
+        (16.8, 4.0),
+        (16.8, 1.8),
+        (10.2, 1.8),
+        (10.2, 4.0),
+        HOME,
+    ),
 )
 """Four ~40 m patrol loops (waypoints after HOME)."""
 
@@ -137,7 +174,7 @@ def _drive(cfg: SmirrorScenario) -> tuple[np.ndarray, np.ndarray, list[float]]:
             target = math.atan2(wy - y, wx - x)
             turn = (target - yaw + math.pi) % (2 * math.pi) - math.pi
             steps = int(math.ceil(abs(turn) / (cfg.turn_rps * dt)))
-            for i in range(steps):
+            for _ in range(steps):
                 d = turn / steps
                 x, y, yaw = poses[-1]
                 poses.append((x, y, yaw + d))
@@ -205,7 +242,14 @@ def _people(cfg: SmirrorScenario, plan: FloorPlan, duration_s: float, rng: np.ra
     return out
 
 
-_CLOTHES = [(60, 70, 140), (120, 90, 60), (70, 110, 80), (100, 100, 110), (40, 60, 90), (130, 120, 100)]
+_CLOTHES = [
+    (60, 70, 140),
+    (120, 90, 60),
+    (70, 110, 80),
+    (100, 100, 110),
+    (40, 60, 90),
+    (130, 120, 100),
+]
 
 
 def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, int]:
@@ -226,9 +270,7 @@ def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, 
     walkers = _people(cfg, plan, duration_s, rng)
     true_models = node_models(cfg)
     calib_models = [_calibrated(m, rng, cfg) for m in true_models]
-    renderers = [
-        NodeRenderer(PinholeCamera(m), plan, rng, cfg.noise_sigma) for m in true_models
-    ]
+    renderers = [NodeRenderer(PinholeCamera(m), plan, rng, cfg.noise_sigma) for m in true_models]
     counts: dict[str, int] = {}
 
     def put(writer: LogWriter, topic: str, msg: object, t_ns: int) -> None:
@@ -314,7 +356,9 @@ def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, 
                 for k in range(len(walkers)):
                     p = person_xy(k, i * dt)
                     ents.append(
-                        GroundTruthEntity(walkers[k][0], Vec3(round(float(p[0]), 4), round(float(p[1]), 4), 0.0))
+                        GroundTruthEntity(
+                            walkers[k][0], Vec3(round(float(p[0]), 4), round(float(p[1]), 4), 0.0)
+                        )
                     )
                 put(w, topics.GROUND_TRUTH, GroundTruth(t_ns, tuple(ents)), t_ns)
     return counts

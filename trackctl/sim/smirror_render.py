@@ -151,7 +151,10 @@ class NodeRenderer:
     def _project_cam(self, pts_c: np.ndarray) -> np.ndarray:
         k = self.cam.K
         return np.column_stack(
-            [k[0, 0] * pts_c[:, 0] / pts_c[:, 2] + k[0, 2], k[1, 1] * pts_c[:, 1] / pts_c[:, 2] + k[1, 2]]
+            [
+                k[0, 0] * pts_c[:, 0] / pts_c[:, 2] + k[0, 2],
+                k[1, 1] * pts_c[:, 1] / pts_c[:, 2] + k[1, 2],
+            ]
         )
 
     def _poly(self, pts_w: np.ndarray) -> np.ndarray | None:
@@ -191,7 +194,9 @@ class NodeRenderer:
         depth = self.cam.to_camera(grid)[:, 2]
         front = depth > 0.5
         px, _ = self.cam.project(grid[front])
-        hmat, _ = cv2.findHomography((grid[front, :2] * ppm).astype(np.float32), px.astype(np.float32))
+        hmat, _ = cv2.findHomography(
+            (grid[front, :2] * ppm).astype(np.float32), px.astype(np.float32)
+        )
         floor = cv2.warpPerspective(
             tex,
             hmat,
@@ -220,7 +225,11 @@ class NodeRenderer:
         return img
 
     def _paint_wall(
-        self, img: np.ndarray, a: tuple[float, float], b: tuple[float, float], hgt: float,
+        self,
+        img: np.ndarray,
+        a: tuple[float, float],
+        b: tuple[float, float],
+        hgt: float,
         rng: np.random.Generator,
     ) -> None:
         """A wall with posters, a skirting board and plaster grain, warped onto its image area."""
@@ -247,9 +256,7 @@ class NodeRenderer:
         # texture (u, v) <-> wall point a + (b - a) * u / tw at height hgt * (1 - v / th)
         u, v = np.meshgrid(np.linspace(0, 1, 6), np.linspace(0, 1, 4))
         u, v = u.ravel(), v.ravel()
-        pts = np.column_stack(
-            [a[0] + (b[0] - a[0]) * u, a[1] + (b[1] - a[1]) * u, hgt * (1 - v)]
-        )
+        pts = np.column_stack([a[0] + (b[0] - a[0]) * u, a[1] + (b[1] - a[1]) * u, hgt * (1 - v)])
         front = self.cam.to_camera(pts)[:, 2] > 0.3
         if front.sum() < 4:
             return
@@ -296,7 +303,9 @@ class NodeRenderer:
             img, (int(cx), int(cy)), (int(half_w), int(abs(fy - hy) / 2)), 0, 0, 360, color, -1
         )
         # a head of skin tone: a second blob so people are not uniform ellipses
-        cv2.circle(img, (int(hx), int(hy + half_w * 0.6)), max(1, int(half_w * 0.6)), (120, 150, 190), -1)
+        cv2.circle(
+            img, (int(hx), int(hy + half_w * 0.6)), max(1, int(half_w * 0.6)), (120, 150, 190), -1
+        )
 
     def _draw_robot(self, img: np.ndarray, pose: np.ndarray, shape: RobotShape) -> None:
         x, y, yaw = pose
@@ -305,7 +314,10 @@ class NodeRenderer:
         hl, hw = shape.length_m / 2, shape.width_m / 2
         base = np.array([[hl, hw], [hl, -hw], [-hl, -hw], [-hl, hw]]) @ rot.T + [x, y]
         box = np.vstack(
-            [np.column_stack([base, np.zeros(4)]), np.column_stack([base, np.full(4, shape.height_m)])]
+            [
+                np.column_stack([base, np.zeros(4)]),
+                np.column_stack([base, np.full(4, shape.height_m)]),
+            ]
         )
         if (self.cam.to_camera(box)[:, 2] < 0.3).any():
             return
@@ -316,7 +328,7 @@ class NodeRenderer:
         cv2.fillConvexPoly(img, np.round(top * 16).astype(np.int32), (80, 75, 70), cv2.LINE_AA, 4)
         for off, color in ((shape.led_front_m, LED_FRONT_BGR), (shape.led_back_m, LED_BACK_BGR)):
             led = np.array([[x + off * c, y + off * s, shape.led_height_m]])
-            (u, v), = self.cam.project(led)[0]
+            ((u, v),) = self.cam.project(led)[0]
             depth = float(self.cam.to_camera(led)[0, 2])
             # a bright LED blooms over a couple of pixels however far it is
             r = max(2.0, self.cam.model.fx_px * shape.led_radius_m / depth)

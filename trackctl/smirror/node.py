@@ -93,13 +93,16 @@ class ForegroundPayload:
         return [(fx, fy, img[my : my + h, mx : mx + w]) for fx, fy, mx, my, w, h in self.regions]
 
 
-def pack_regions(sizes: list[tuple[int, int]], width: int, align: int = 16) -> tuple[list[tuple[int, int]], tuple[int, int]]:
+def pack_regions(
+    sizes: list[tuple[int, int]], width: int, align: int = 16
+) -> tuple[list[tuple[int, int]], tuple[int, int]]:
     """Shelf packing of (w, h) boxes into rows of at most ``width`` pixels.
 
     Boxes start on ``align``-pixel boundaries so JPEG blocks never mix two regions. Returns each
     box's top-left corner and the mosaic size. (A few boxes per frame: a library bin packer
     would not pay for itself.)
     """
+
     def up(v: int) -> int:
         return -(-v // align) * align
 
@@ -153,10 +156,14 @@ class MirrorNode:
         # the background model runs on a reduced frame (4x fewer pixels at 0.5): region boxes
         # need no full-resolution mask, and the node's budget is ~20 ms per request on one core
         s = self.config.model_scale
-        small = frame if s == 1.0 else cv2.resize(frame, None, fx=s, fy=s, interpolation=cv2.INTER_AREA)
+        small = (
+            frame if s == 1.0 else cv2.resize(frame, None, fx=s, fy=s, interpolation=cv2.INTER_AREA)
+        )
         mask = self._mog.apply(small)
         if s != 1.0:
-            mask = cv2.resize(mask, (frame.shape[1], frame.shape[0]), interpolation=cv2.INTER_NEAREST)
+            mask = cv2.resize(
+                mask, (frame.shape[1], frame.shape[0]), interpolation=cv2.INTER_NEAREST
+            )
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._small)
         mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._kernel)
         mask = cv2.dilate(mask, self._small, iterations=1)
@@ -185,7 +192,12 @@ class MirrorNode:
                 for j in range(i + 1, len(boxes)):
                     a, b = boxes[i], boxes[j]
                     if a[0] <= b[2] and b[0] <= a[2] and a[1] <= b[3] and b[1] <= a[3]:
-                        boxes[i] = [min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3])]
+                        boxes[i] = [
+                            min(a[0], b[0]),
+                            min(a[1], b[1]),
+                            max(a[2], b[2]),
+                            max(a[3], b[3]),
+                        ]
                         del boxes[j]
                         merged = True
                         break
@@ -193,7 +205,9 @@ class MirrorNode:
                     break
         return [(x0, y0, x1 - x0, y1 - y0) for x0, y0, x1, y1 in boxes]
 
-    def encode(self, t_ns: int, frame: np.ndarray, mask: np.ndarray) -> tuple[ForegroundPayload, bool]:
+    def encode(
+        self, t_ns: int, frame: np.ndarray, mask: np.ndarray
+    ) -> tuple[ForegroundPayload, bool]:
         """The payload for a request on this frame, and whether it is "new".
 
         When nothing moved (fewer than ``motion_px`` changed pixels) the previous payload is sent

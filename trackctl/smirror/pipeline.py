@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import math
 import time
-
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -31,7 +30,14 @@ from trackctl.processing.base import Progress
 from trackctl.processing.builtin import DeadReckoningProcessor
 from trackctl.sim.smirror_render import FloorPlan, line_of_sight
 from trackctl.smirror.node import CastMode, MirrorNode, NodeConfig, beacon_bytes, decide_cast
-from trackctl.smirror.robot import FilterConfig, LedConfig, LedFix, PoseFilter, detect_leds, fix_from_leds
+from trackctl.smirror.robot import (
+    FilterConfig,
+    LedConfig,
+    LedFix,
+    PoseFilter,
+    detect_leds,
+    fix_from_leds,
+)
 
 __all__ = [
     "Mode",
@@ -161,7 +167,9 @@ class _Coverage:
             mod = cam.model
             if not (front[0] and m <= u < mod.width_px - m and m <= v < mod.height_px - m):
                 continue
-            if self.plan is not None and not line_of_sight(cam.position[:2], np.array([x, y]), self.plan.walls):
+            if self.plan is not None and not line_of_sight(
+                cam.position[:2], np.array([x, y]), self.plan.walls
+            ):
                 continue
             best = (name, rng)
         return best
@@ -206,7 +214,9 @@ def _robot_name(reader: LogReader, cfg: SmirrorConfig) -> str:
             "topic; smirror localizes a robot carrying two LEDs"
         )
     if len(names) > 1:
-        raise InputError(f"{reader.path}: several robots ({', '.join(names)}); choose one with --robot")
+        raise InputError(
+            f"{reader.path}: several robots ({', '.join(names)}); choose one with --robot"
+        )
     return names[0]
 
 
@@ -246,8 +256,8 @@ def localize(
     use_odom = cfg.mode is Mode.MIRROR_ODOM
     if use_odom and odom_topic not in present:
         raise MissingTopicError(
-            f"{reader.path}: {odom_topic} is missing: smirror --mode mirror+odom dead-reckons robot "
-            f"{robot!r} with its wheel odometry (use --mode centralized for vision only)"
+            f"{reader.path}: {odom_topic} is missing: smirror --mode mirror+odom dead-reckons "
+            f"robot {robot!r} with its wheel odometry (use --mode centralized for vision only)"
         )
     metadata = reader.metadata()
     rmd = metadata.get(f"robot/{robot}", {})
@@ -347,7 +357,7 @@ def localize(
         count += 1
         if progress is not None and count % 2000 == 0:
             progress(count, None)
-        if not (cfg.mode is Mode.CENTRALIZED):
+        if cfg.mode is not Mode.CENTRALIZED:
             flush_beacons(t_ns)
         if msg.topic == topics.GROUND_TRUTH:
             for ent in msg.message.entities:
@@ -402,7 +412,11 @@ def localize(
         if cfg.mode is Mode.CENTRALIZED:
             started = time.perf_counter()
             front, back = detect_leds([(0, 0, frame)], led)
-            fix = None if front is None or back is None else fix_from_leds(front, back, cams[name], led, t_ns)
+            fix = (
+                None
+                if front is None or back is None
+                else fix_from_leds(front, back, cams[name], led, t_ns)
+            )
             central_ms = (time.perf_counter() - started) * 1e3
             res.robot_ms.append(central_ms)
             res.fix_attempts += 1
@@ -498,7 +512,9 @@ def _mean(values: Iterable[float]) -> float | None:
     return None if not v else round(float(np.mean(v)), 4)
 
 
-def report_metrics(res: SmirrorResult, cfg: SmirrorConfig) -> dict[str, float | int | str | bool | None]:
+def report_metrics(
+    res: SmirrorResult, cfg: SmirrorConfig
+) -> dict[str, float | int | str | bool | None]:
     """The report figures of a run (keys of issue 5 first, then the details)."""
     err = np.asarray(res.error_m)
     cov = np.asarray(res.in_coverage, bool)
@@ -577,7 +593,9 @@ def _max_bin(err: np.ndarray, rng: np.ndarray) -> float | None:
     return None if not out else round(max(out), 4)
 
 
-def error_by_range(res: SmirrorResult, edges: Iterable[float] = range(2, 13)) -> list[tuple[float, float | None, int]]:
+def error_by_range(
+    res: SmirrorResult, edges: Iterable[float] = range(2, 13)
+) -> list[tuple[float, float | None, int]]:
     """(bin start m, mean error m, samples) of in-coverage samples by distance to the node."""
     err, rng = np.asarray(res.error_m), np.asarray(res.range_m)
     e = list(edges)

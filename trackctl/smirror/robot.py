@@ -58,9 +58,7 @@ class LedFix:
 
 
 def _blob(hsv: np.ndarray, hue: tuple[int, int], cfg: LedConfig) -> tuple[float, float, int] | None:
-    mask = cv2.inRange(
-        hsv, (hue[0], cfg.min_saturation, cfg.min_value), (hue[1], 255, 255)
-    )
+    mask = cv2.inRange(hsv, (hue[0], cfg.min_saturation, cfg.min_value), (hue[1], 255, 255))
     n, _, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if n <= 1:
         return None
@@ -111,7 +109,9 @@ def fix_from_leds(
     d = (f - b) / base
     centre = f - cfg.led_front_m * d
     rng = float(np.linalg.norm(centre - cam.position[:2]))
-    return LedFix(t_ns, float(centre[0]), float(centre[1]), math.atan2(d[1], d[0]), rng, cam.model.camera)
+    return LedFix(
+        t_ns, float(centre[0]), float(centre[1]), math.atan2(d[1], d[0]), rng, cam.model.camera
+    )
 
 
 class _DiffDriveEKF(ExtendedKalmanFilter):
@@ -156,7 +156,9 @@ class PoseFilter:
         self.ekf.R = np.eye(3)
         self.t_ns = t_ns
         # (t_ns, x, P, increment that led here)
-        self._hist: deque[tuple[int, np.ndarray, np.ndarray, tuple[float, float]]] = deque(maxlen=150)
+        self._hist: deque[tuple[int, np.ndarray, np.ndarray, tuple[float, float]]] = deque(
+            maxlen=150
+        )
         self._hist.append((t_ns, self.ekf.x.copy(), self.ekf.P.copy(), (0.0, 0.0)))
         self.rejects = 0
 
@@ -171,7 +173,9 @@ class PoseFilter:
         # noise enters through the increments: Q = G diag(var_ds, var_dyaw) G^T
         g = np.array([[c, -0.5 * ds * s], [s, 0.5 * ds * c], [0, 1.0]])
         var_ds = (self.cfg.odom_rel_sigma * ds) ** 2 + 1e-8
-        var_dyaw = (self.cfg.yaw_rel_sigma * dyaw) ** 2 + self.cfg.yaw_per_m_sigma**2 * abs(ds) + 1e-8
+        var_dyaw = (
+            (self.cfg.yaw_rel_sigma * dyaw) ** 2 + self.cfg.yaw_per_m_sigma**2 * abs(ds) + 1e-8
+        )
         self.ekf.Q = g @ np.diag([var_ds, var_dyaw]) @ g.T
         self.ekf.predict(u=np.array([ds, dyaw]))
 
@@ -181,12 +185,16 @@ class PoseFilter:
         self.t_ns = t_ns
         self._hist.append((t_ns, self.ekf.x.copy(), self.ekf.P.copy(), (ds, dyaw)))
 
-    def fix_sigma(self, fix: LedFix, cam: PinholeCamera, led_height_m: float) -> tuple[float, float]:
+    def fix_sigma(
+        self, fix: LedFix, cam: PinholeCamera, led_height_m: float
+    ) -> tuple[float, float]:
         """(position sigma m, heading sigma rad) of a fix at its range (ground error ~ d^2)."""
         drop = max(0.3, float(cam.position[2]) - led_height_m)
         d = math.hypot(fix.range_m, drop)
         per_px = d * d / (cam.model.fx_px * drop)
-        sp = math.hypot(self.cfg.fix_floor_m, self.cfg.fix_px_sigma * per_px, self.cfg.calib_rad * d * d / drop)
+        sp = math.hypot(
+            self.cfg.fix_floor_m, self.cfg.fix_px_sigma * per_px, self.cfg.calib_rad * d * d / drop
+        )
         sy = min(1.5, math.sqrt(2) * math.hypot(self.cfg.fix_px_sigma * per_px, 0.01) / 0.3)
         return sp, sy
 
@@ -216,14 +224,16 @@ class PoseFilter:
         if d2 > self.cfg.gate_chi2:
             # the camera keeps disagreeing: the dead-reckoned pose is what is wrong (wheel slip,
             # a bad start); widen its covariance by the disagreement so the fix takes over
-            self.ekf.P = self.ekf.P + np.diag((y[:, 0] ** 2))
+            self.ekf.P = self.ekf.P + np.diag(y[:, 0] ** 2)
         self.rejects = 0
         self.ekf.update(
             z,
             HJacobian=lambda _x: np.eye(3),
             Hx=lambda x: x,
             R=r,
-            residual=lambda a, b: np.array([[a[0, 0] - b[0, 0]], [a[1, 0] - b[1, 0]], [wrap(a[2, 0] - b[2, 0])]]),
+            residual=lambda a, b: np.array(
+                [[a[0, 0] - b[0, 0]], [a[1, 0] - b[1, 0]], [wrap(a[2, 0] - b[2, 0])]]
+            ),
         )
         self.ekf.x[2, 0] = wrap(float(self.ekf.x[2, 0]))
         # replay the odometry since the image was taken
