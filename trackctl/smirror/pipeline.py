@@ -561,6 +561,7 @@ def report_metrics(
         "error_m_p95": None if not len(err) else round(float(np.percentile(err, 95)), 4),
         "error_m_max": None if not len(err) else round(float(err.max()), 4),
         "error_m_in_coverage_le_11m_max_bin": _max_bin(err[cov], rng[cov]),
+        "error_m_per_m_range": _slope(err[cov], rng[cov]),
         "coverage_fraction": None if not len(cov) else round(float(cov.mean()), 4),
         "samples": len(err),
         "foreground_bytes": res.foreground_bytes,
@@ -591,6 +592,14 @@ def _max_bin(err: np.ndarray, rng: np.ndarray) -> float | None:
         if sel.sum() >= 3:
             out.append(float(err[sel].mean()))
     return None if not out else round(max(out), 4)
+
+
+def _slope(err: np.ndarray, rng: np.ndarray) -> float | None:
+    """Least-squares growth of the in-coverage error with range (m of error per m of range)."""
+    ok = np.isfinite(rng)
+    if ok.sum() < 10 or np.ptp(rng[ok]) < 1.0:
+        return None
+    return round(float(np.polyfit(rng[ok], err[ok], 1)[0]), 5)
 
 
 def error_by_range(
