@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -111,26 +112,33 @@ def test_outputs_poses_and_transmissions(smirror_log: Path, tmp_path: Path) -> N
 def _copy_without(
     src: Path, dst: Path, drop: str | None = None, corrupt: str | None = None
 ) -> None:
+    """Copy a log, dropping a topic, or damaging two frames of a topic: one's JPEG bytes and
+    one's whole protobuf message."""
     reader = LogReader(src)
     with LogWriter(dst) as w:
         for name, data in reader.metadata().items():
             w.add_metadata(name, data)
-        done = False
-        for m in reader.messages():
-            if m.topic == drop:
+        damaged = 0
+        for raw in reader.raw():
+            if raw.topic == drop:
                 continue
-            msg = m.message
-            if m.topic == corrupt and not done and m.log_time_ns > 5e9:
-                msg.data = b"\xff\xd8 not a jpeg"
-                done = True
-            w.write(m.topic, msg, m.log_time_ns)
+            if raw.topic == corrupt and raw.log_time_ns > 5e9 and damaged < 2:
+                if damaged == 0:
+                    msg = reader.codec(raw).decode(raw.data)
+                    msg.data = b"\xff\xd8 not a jpeg"
+                    w.write(raw.topic, msg, raw.log_time_ns)
+                else:
+                    w.write_raw(replace(raw, data=b"\x0a\xff\xff not protobuf"))
+                damaged += 1
+                continue
+            w.write_raw(raw)
 
 
-def test_undecodable_frame_is_skipped_and_counted(smirror_log: Path, tmp_path: Path) -> None:
+def test_undecodable_frames_are_skipped_and_counted(smirror_log: Path, tmp_path: Path) -> None:
     bad = tmp_path / "bad.mcap"
     _copy_without(smirror_log, bad, corrupt="/node1/image")
     res = localize(LogReader(bad), SmirrorConfig())
-    assert res.decode_failures == 1
+    assert res.decode_failures == 2
     assert np.mean(res.error_m) < 0.3
 
 

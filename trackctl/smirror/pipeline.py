@@ -11,20 +11,21 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from enum import StrEnum
 
 import cv2
 import numpy as np
 
-from trackctl.errors import InputError, MissingTopicError
+from trackctl.errors import InputError, LogError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.geometry.odometry import DiffDrive
 from trackctl.logs import topics
 from trackctl.logs.foxglove import pose_in_frame
 from trackctl.logs.messages import CameraModel, MetricReport, MirrorTransmission, WheelOdometry
-from trackctl.logs.reader import LogReader
+from trackctl.logs.codecs import Codec
+from trackctl.logs.reader import LogMessage, LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import Progress
 from trackctl.processing.builtin import DeadReckoningProcessor
@@ -238,6 +239,30 @@ def _decode(data: bytes, flags: int = cv2.IMREAD_COLOR) -> np.ndarray | None:
     return img
 
 
+def _stream(
+    reader: LogReader, wanted: list[str], images: set[str], res: SmirrorResult
+) -> Iterator[LogMessage]:
+    """Decoded messages in log order; a node frame whose message does not decode is skipped and
+    counted (a camera glitch must not end a localization run), anything else raises."""
+    codecs: dict[tuple[str, str, bytes], Codec] = {}
+    for raw in reader.raw(wanted):
+        key = (raw.schema_name, raw.message_encoding, raw.schema_data)
+        codec = codecs.get(key)
+        if codec is None:
+            codec = codecs[key] = reader.codec(raw)
+        try:
+            decoded = codec.decode(raw.data)
+        except Exception as err:  # noqa: BLE001 - any decoder failure of a frame is a bad frame
+            if raw.topic in images:
+                res.decode_failures += 1
+                continue
+            raise LogError(
+                f"{reader.path}: {raw.topic} at {raw.log_time_ns} ns: cannot decode "
+                f"{raw.schema_name}: {err}"
+            ) from err
+        yield LogMessage(raw.topic, raw.log_time_ns, raw.schema_name, decoded)
+
+
 def localize(
     reader: LogReader,
     cfg: SmirrorConfig,
@@ -350,7 +375,7 @@ def localize(
         wanted.append(topics.GROUND_TRUTH)
     count = 0
     t_first = t_last = None
-    for msg in reader.messages(wanted):
+    for msg in _stream(reader, wanted, set(topics.image(n) for n in models), res):
         t_ns = msg.log_time_ns
         t_first = t_ns if t_first is None else t_first
         t_last = t_ns
