@@ -22,9 +22,9 @@ from trackctl.errors import InputError, LogError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.geometry.odometry import DiffDrive
 from trackctl.logs import topics
+from trackctl.logs.codecs import Codec
 from trackctl.logs.foxglove import pose_in_frame
 from trackctl.logs.messages import CameraModel, MetricReport, MirrorTransmission, WheelOdometry
-from trackctl.logs.codecs import Codec
 from trackctl.logs.reader import LogMessage, LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import Progress
