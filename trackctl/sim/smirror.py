@@ -267,9 +267,11 @@ def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, 
         starts = [s for s in starts if s < keep * dt]
     n = len(poses)
     duration_s = n * dt
-    walkers = _people(cfg, plan, duration_s, rng)
+    # calibration errors are drawn before the people, so logs with and without people differ in
+    # nothing else (the occlusion experiment of Figs. 4.8-4.10)
     true_models = node_models(cfg)
     calib_models = [_calibrated(m, rng, cfg) for m in true_models]
+    walkers = _people(cfg, plan, duration_s, rng)
     renderers = [NodeRenderer(PinholeCamera(m), plan, rng, cfg.noise_sigma) for m in true_models]
     counts: dict[str, int] = {}
 
