@@ -97,7 +97,22 @@ report = st.builds(
     st.dictionaries(text, metric_value, max_size=3),
 )
 
-ALL = st.one_of(imu, rssi, odom, detections, tracks, gt, camera, report)
+mirror_tx = st.builds(
+    m.MirrorTransmission,
+    t_ns,
+    text,
+    st.sampled_from(["image", "beacon"]),
+    st.sampled_from(["unicast", "broadcast"]),
+    st.integers(0, 1000),
+    st.integers(0, 2**31),
+    st.integers(0, 2**40),
+    st.sampled_from([None, "new", "old"]),
+    st.integers(0, 100),
+    st.one_of(opt(), st.integers(0, 2**31)),
+    st.one_of(opt(), st.floats(0, 1e4)),
+)
+
+ALL = st.one_of(imu, rssi, odom, detections, tracks, gt, camera, report, mirror_tx)
 
 # EV-Matching (§3.2) messages: parallel arrays of equal length.
 ev_e = st.integers(0, 4).flatmap(

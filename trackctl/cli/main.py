@@ -12,6 +12,7 @@ from trackctl.cli.process import process, report
 from trackctl.cli.record import record
 from trackctl.cli.replay import replay
 from trackctl.cli.simulate import simulate_app
+from trackctl.cli.smirror import simulate_smirror, smirror
 from trackctl.cli.vmtrack import simulate_vm, vm_track
 
 app = typer.Typer(
@@ -48,6 +49,8 @@ app.command("vm-track")(vm_track)
 simulate_app.command("vm")(simulate_vm)
 app.command("ev-match")(ev_match)
 simulate_app.command("ev")(simulate_ev)
+app.command("smirror")(smirror)
+simulate_app.command("smirror")(simulate_smirror)
 app.add_typer(simulate_app, name="simulate")
 
 

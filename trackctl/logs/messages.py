@@ -40,6 +40,7 @@ __all__ = [
     "MetricValue",
     "MetricReport",
     "MESSAGE_TYPES",
+    "MirrorTransmission",
     "time_to_json",
     "time_from_json",
 ]
@@ -817,3 +818,78 @@ class EvMatches:
 
 MESSAGE_TYPES = (*MESSAGE_TYPES, EObservations, VScenario, EvMatches)
 __all__ += ["EObservations", "VScenario", "EvMatch", "EvMatches"]
+
+
+@dataclass(frozen=True, slots=True)
+class MirrorTransmission:
+    """What one S-Mirror node sent at one instant (an image answer or an E-beacon).
+
+    Attributes:
+        t_ns: send time (the frame's time for images).
+        node: the node's name (its camera).
+        kind: ``image`` (foreground-only answer to requests) or ``beacon`` (periodic E-beacon).
+        cast_mode: ``unicast`` (one copy per requester) or ``broadcast`` (one copy for all).
+        requesters: robots that requested this image (0 for beacons).
+        image: ``new`` (changed regions encoded now) or ``old`` (nothing moved, the previous
+            image re-sent); None for beacons.
+        regions: changed regions in the image payload.
+        payload_bytes: bytes of one copy (headers + JPEG data, or the beacon's JSON).
+        bytes_sent: bytes on the link (payload x requesters in unicast, payload once otherwise).
+        full_frame_bytes: bytes of the whole frame at the same JPEG quality, for comparison.
+        node_ms: measured node processing time of this answer (ms).
+    """
+
+    SCHEMA: ClassVar[str] = "trackctl.MirrorTransmission"
+    t_ns: int
+    node: str
+    kind: str
+    cast_mode: str
+    requesters: int
+    payload_bytes: int
+    bytes_sent: int
+    image: str | None = None
+    regions: int = 0
+    full_frame_bytes: int | None = None
+    node_ms: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("image", "beacon"):
+            raise ValueError(f"MirrorTransmission.kind must be image or beacon, got {self.kind!r}")
+        if self.cast_mode not in ("unicast", "broadcast"):
+            raise ValueError(
+                f"MirrorTransmission.cast_mode must be unicast or broadcast, got {self.cast_mode!r}"
+            )
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "timestamp": time_to_json(self.t_ns),
+            "node": self.node,
+            "kind": self.kind,
+            "cast_mode": self.cast_mode,
+            "requesters": self.requesters,
+            "payload_bytes": self.payload_bytes,
+            "bytes_sent": self.bytes_sent,
+            "image": self.image,
+            "regions": self.regions,
+            "full_frame_bytes": self.full_frame_bytes,
+            "node_ms": self.node_ms,
+        }
+
+    @classmethod
+    def from_json(cls, obj: Mapping[str, Any]) -> MirrorTransmission:
+        return cls(
+            t_ns=time_from_json(obj["timestamp"]),
+            node=str(obj["node"]),
+            kind=str(obj["kind"]),
+            cast_mode=str(obj["cast_mode"]),
+            requesters=int(obj["requesters"]),
+            payload_bytes=int(obj["payload_bytes"]),
+            bytes_sent=int(obj["bytes_sent"]),
+            image=_opt(obj, "image", str),
+            regions=int(obj.get("regions", 0)),
+            full_frame_bytes=_opt(obj, "full_frame_bytes", int),
+            node_ms=_opt(obj, "node_ms", float),
+        )
+
+
+MESSAGE_TYPES = (*MESSAGE_TYPES, MirrorTransmission)

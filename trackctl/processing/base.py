@@ -86,3 +86,4 @@ def _load_builtin() -> None:
     import trackctl.processing.builtin  # noqa: F401
     import trackctl.vmtrack  # noqa: F401
     import trackctl.evmatch  # noqa: F401
+    import trackctl.smirror  # noqa: F401

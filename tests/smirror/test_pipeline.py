@@ -1,0 +1,149 @@
+"""S-Mirror over a rendered log: accuracy, the centralized baseline, data rates and cast modes."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+
+from trackctl.errors import MissingTopicError
+from trackctl.logs import LogReader, LogWriter
+from trackctl.logs.messages import MirrorTransmission
+from trackctl.processing import run_processors
+from trackctl.smirror import (
+    SmirrorConfig,
+    SmirrorProcessor,
+    error_by_range,
+    localize,
+    pose_topic,
+    sent_topic,
+)
+
+KEYS = {
+    "system",
+    "mode",
+    "error_m_mean",
+    "error_m_mean_in_coverage",
+    "error_m_mean_out_coverage",
+    "delay_ms_mean",
+    "kbps_mean",
+    "kbps_unicast_equivalent",
+    "requesters",
+    "cast_mode",
+}
+
+
+def test_report_has_the_issue_keys(mirror_run) -> None:  # type: ignore[no-untyped-def]
+    metrics, _ = mirror_run
+    assert KEYS <= set(metrics)
+    assert metrics["system"] == "smirror" and metrics["mode"] == "mirror+odom"
+    assert metrics["requesters"] == 1 and metrics["cast_mode"] == "unicast"
+
+
+def test_mirror_odom_is_accurate_in_and_out_of_coverage(mirror_run) -> None:  # type: ignore[no-untyped-def]
+    metrics, res = mirror_run
+    assert 0.1 < metrics["coverage_fraction"] < 0.95  # the log has both kinds of segment
+    assert metrics["error_m_mean_in_coverage"] < 0.2
+    assert metrics["error_m_mean_out_coverage"] < 0.33
+    assert metrics["fixes"] > 0.5 * metrics["fix_attempts"]
+    bins = [b for b in error_by_range(res) if b[2] >= 5]
+    assert bins and max(b[1] for b in bins) <= 0.5  # type: ignore[type-var]
+
+
+def test_centralized_fails_out_of_coverage(mirror_run, centralized_run) -> None:  # type: ignore[no-untyped-def]
+    mirror, _ = mirror_run
+    central, _ = centralized_run
+    assert central["mode"] == "centralized" and central["kbps_mean"] is None
+    assert central["error_m_mean_out_coverage"] > 2 * mirror["error_m_mean_out_coverage"]
+    assert central["error_m_mean"] > mirror["error_m_mean"]
+
+
+def test_delay_is_higher_with_images_than_with_odometry(mirror_run) -> None:  # type: ignore[no-untyped-def]
+    metrics, _ = mirror_run
+    assert metrics["delay_ms_mean_in_coverage"] > metrics["delay_ms_mean_out_coverage"]
+    assert metrics["delay_ms_mean_out_coverage"] >= 40.0  # the sensing delay
+
+
+def test_foreground_only_is_cheaper_than_full_frames(mirror_run) -> None:  # type: ignore[no-untyped-def]
+    metrics, _ = mirror_run
+    assert metrics["kbps_in_coverage"] <= 174
+    assert metrics["kbps_out_coverage"] < metrics["kbps_in_coverage"]
+    assert metrics["full_to_foreground_ratio"] >= 4
+
+
+def test_twenty_requesters_switch_to_broadcast(smirror_log: Path) -> None:
+    cfg = SmirrorConfig(requesters=20)
+    res = localize(LogReader(smirror_log), cfg)
+    from trackctl.smirror import report_metrics
+
+    m = report_metrics(res, cfg)
+    assert m["cast_mode"] == "broadcast" and m["requesters"] == 20
+    assert m["kbps_mean"] <= 0.1 * m["kbps_unicast_equivalent"]
+    below = report_metrics(localize(LogReader(smirror_log), SmirrorConfig(requesters=10)), cfg)
+    assert below["cast_mode"] == "unicast"
+    assert below["kbps_mean"] > m["kbps_mean"]
+
+
+def test_outputs_poses_and_transmissions(smirror_log: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out.mcap"
+    (report,) = run_processors(smirror_log, out, [SmirrorProcessor()])
+    reader = LogReader(out)
+    present = reader.topics()
+    assert present[pose_topic("r1")].schema_name == "foxglove.PoseInFrame"
+    assert present[sent_topic("node1")].schema_name == MirrorTransmission.SCHEMA
+    poses = [m.message for m in reader.messages([pose_topic("r1")])]
+    assert isinstance(poses[0], PoseInFrame) and len(poses) == present["/robot/r1/odom"].count
+    sent = [
+        m.message for m in reader.messages([sent_topic(n) for n in ("node0", "node1", "node2")])
+    ]
+    kinds = {s.kind for s in sent}
+    assert kinds == {"image", "beacon"}
+    images = [s for s in sent if s.kind == "image"]
+    assert all(s.bytes_sent == s.payload_bytes * s.requesters for s in images)
+    total = sum(s.bytes_sent for s in sent)
+    assert total / report.metrics["duration_s"] / 1e3 == pytest.approx(
+        report.metrics["kbps_mean"], rel=1e-3
+    )
+
+
+def _copy_without(
+    src: Path, dst: Path, drop: str | None = None, corrupt: str | None = None
+) -> None:
+    """Copy a log, dropping a topic, or damaging two frames of a topic: one's JPEG bytes and
+    one's whole protobuf message."""
+    reader = LogReader(src)
+    with LogWriter(dst) as w:
+        for name, data in reader.metadata().items():
+            w.add_metadata(name, data)
+        damaged = 0
+        for raw in reader.raw():
+            if raw.topic == drop:
+                continue
+            if raw.topic == corrupt and raw.log_time_ns > 5e9 and damaged < 2:
+                if damaged == 0:
+                    msg = reader.codec(raw).decode(raw.data)
+                    msg.data = b"\xff\xd8 not a jpeg"
+                    w.write(raw.topic, msg, raw.log_time_ns)
+                else:
+                    w.write_raw(replace(raw, data=b"\x0a\xff\xff not protobuf"))
+                damaged += 1
+                continue
+            w.write_raw(raw)
+
+
+def test_undecodable_frames_are_skipped_and_counted(smirror_log: Path, tmp_path: Path) -> None:
+    bad = tmp_path / "bad.mcap"
+    _copy_without(smirror_log, bad, corrupt="/node1/image")
+    res = localize(LogReader(bad), SmirrorConfig())
+    assert res.decode_failures == 2
+    assert np.mean(res.error_m) < 0.3
+
+
+def test_missing_odometry_names_the_topic(smirror_log: Path, tmp_path: Path) -> None:
+    no_odom = tmp_path / "no_odom.mcap"
+    _copy_without(smirror_log, no_odom, drop="/robot/r1/odom")
+    with pytest.raises(MissingTopicError, match=r"/robot/r1/odom is missing.*'r1'"):
+        localize(LogReader(no_odom), SmirrorConfig())

@@ -1,0 +1,366 @@
+"""S-Mirror scenarios (dissertation §4.1.3): three rooms, three node cameras, a patrolling robot.
+
+A differential-drive robot with wheel encoders (per-wheel scale error and slip) and two LEDs
+(front green, back magenta) patrols predefined ~40 m loops from a home point in the middle room,
+with segments inside and outside the nodes' views; people walk in the rooms (random waypoint) and
+may occlude it. Each node camera's frames are rendered (real pixels, JPEG) at the node rate; the
+nodes publish their *calibrated* camera model, which differs from the true pose by a small
+calibration error, as a real calibration would. Same seed, same bytes.
+
+Topics: ``/<node>/image`` (foxglove.CompressedImage), ``/<node>/camera_model``,
+``/<node>/calibration``, ``/robot/r1/odom`` (trackctl.WheelOdometry, 25 Hz),
+``/ground_truth`` (12.5 Hz). Metadata: ``scenario``, ``robot/r1`` (wheels and LEDs),
+``smirror/floorplan`` (walls), ``smirror/requesters`` (how many robots request node images).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from trackctl.geometry.camera import PinholeCamera, look_at
+from trackctl.ingest.calibration import to_foxglove_calibration
+from trackctl.ingest.video import make_compressed_image
+from trackctl.logs import topics
+from trackctl.logs.messages import (
+    CameraModel,
+    GroundTruth,
+    GroundTruthEntity,
+    Quat,
+    Transform,
+    Vec3,
+    WheelOdometry,
+)
+from trackctl.logs.writer import LogWriter
+from trackctl.sim.smirror_render import FloorPlan, NodeRenderer, RobotShape, three_rooms
+from trackctl.sim.walkers import random_waypoint
+
+__all__ = ["SmirrorScenario", "simulate_smirror", "PATHS", "HOME", "NODES", "path_length_m"]
+
+S = 1_000_000_000
+HOME = (13.5, 4.0)
+"""The robot's dock in the middle room; every patrol path starts and ends here."""
+
+PATHS: tuple[tuple[tuple[float, float], ...], ...] = (
+    # B -> A: along the bottom of B, through the door, a loop in A, back
+    (
+        (16.0, 4.0),
+        (16.0, 1.3),
+        (11.0, 1.3),
+        (11.0, 4.0),
+        (5.0, 4.0),
+        (5.0, 1.5),
+        (1.5, 1.5),
+        (1.5, 4.0),
+        HOME,
+    ),
+    # B -> C: top of B, through both doors, a loop in C, back
+    (
+        (13.5, 6.6),
+        (11.0, 6.6),
+        (11.0, 4.0),
+        (21.5, 4.0),
+        (21.5, 1.5),
+        (24.0, 1.5),
+        (24.0, 6.3),
+        (21.0, 6.3),
+        (21.0, 4.0),
+        HOME,
+    ),
+    # a figure through A's far side and B's corners
+    (
+        (10.5, 4.0),
+        (10.5, 7.0),
+        (15.5, 7.0),
+        (15.5, 4.0),
+        (7.5, 4.0),
+        (7.5, 6.8),
+        (3.0, 6.8),
+        (3.0, 4.0),
+        HOME,
+    ),
+    # C's near corner and B's bottom
+    (
+        (19.5, 4.0),
+        (19.5, 1.2),
+        (25.0, 1.2),
+        (25.0, 4.0),
+        (16.8, 4.0),
+        (16.8, 1.8),
+        (10.2, 1.8),
+        (10.2, 4.0),
+        HOME,
+    ),
+)
+"""Four ~40 m patrol loops (waypoints after HOME)."""
+
+NODES: tuple[tuple[str, tuple[float, float, float], tuple[float, float, float]], ...] = (
+    ("node0", (0.15, 0.15, 3.0), (6.2, 5.0, 0.0)),
+    ("node1", (9.15, 7.85, 3.0), (15.2, 2.6, 0.0)),
+    ("node2", (26.85, 0.15, 3.0), (20.8, 5.0, 0.0)),
+)
+"""Node cameras: name, eye (m), look-at target (m). Corner mounts at 3 m, one per room."""
+
+
+def path_length_m(k: int) -> float:
+    """Length of patrol loop ``k`` (metres)."""
+    pts = [HOME, *PATHS[k]]
+    return float(sum(math.dist(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True)))
+
+
+@dataclass(frozen=True, slots=True)
+class SmirrorScenario:
+    """Parameters of an S-Mirror scenario."""
+
+    paths: int = 4
+    people: int = 6
+    requesters: int = 1
+    seed: int = 0
+    fps: float = 5.0
+    width_px: int = 640
+    height_px: int = 480
+    hfov_deg: float = 50.0
+    jpeg_quality: int = 80
+    noise_sigma: float = 2.0
+    odom_hz: float = 25.0
+    speed_mps: float = 0.5
+    turn_rps: float = 0.8
+    ticks_per_m: float = 2000.0
+    wheel_base_m: float = 0.30
+    wheel_scale: tuple[float, float] = (1.004, 0.997)
+    """Systematic scale of the left/right encoder (wheel radius error)."""
+    slip_sigma: float = 0.03
+    """Relative random slip of each wheel increment."""
+    turn_slip: float = 0.03
+    """Wheels slip on turns in place: the true rotation falls short of the encoders by this."""
+    calib_rot_deg: float = 0.15
+    calib_pos_m: float = 0.02
+    dock_s: float = 3.0
+    duration_s: float | None = None
+    """Cut the patrol after this many seconds (short logs for tests); None: all of it."""
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.paths <= len(PATHS):
+            raise ValueError(f"paths must be 1..{len(PATHS)}, got {self.paths}")
+        if self.people < 0 or self.requesters < 1:
+            raise ValueError("people must be >= 0 and requesters >= 1")
+        if self.fps <= 0 or self.fps > self.odom_hz:
+            raise ValueError(f"fps must be in (0, {self.odom_hz}], got {self.fps}")
+
+
+def _drive(cfg: SmirrorScenario) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """True poses (n, 3) and true wheel increments (n, 2) on the odometry grid, path start times."""
+    dt = 1.0 / cfg.odom_hz
+    half_b = cfg.wheel_base_m / 2
+    poses = [(HOME[0], HOME[1], 0.0)]
+    incs = [(0.0, 0.0)]
+    starts: list[float] = []
+
+    def stay(seconds: float) -> None:
+        for _ in range(int(round(seconds / dt))):
+            poses.append(poses[-1])
+            incs.append((0.0, 0.0))
+
+    stay(cfg.dock_s)
+    for k in range(cfg.paths):
+        starts.append(len(poses) * dt)
+        for wx, wy in PATHS[k]:
+            x, y, yaw = poses[-1]
+            target = math.atan2(wy - y, wx - x)
+            turn = (target - yaw + math.pi) % (2 * math.pi) - math.pi
+            steps = int(math.ceil(abs(turn) / (cfg.turn_rps * dt)))
+            for _ in range(steps):
+                d = turn / steps
+                x, y, yaw = poses[-1]
+                poses.append((x, y, yaw + d))
+                incs.append((-d * half_b, d * half_b))
+            x, y, yaw = poses[-1]
+            dist = math.hypot(wx - x, wy - y)
+            steps = int(math.ceil(dist / (cfg.speed_mps * dt)))
+            for i in range(1, steps + 1):
+                poses.append((x + (wx - x) * i / steps, y + (wy - y) * i / steps, yaw))
+                incs.append((dist / steps, dist / steps))
+        stay(1.0)
+    return np.array(poses), np.array(incs), starts
+
+
+def _odometry(cfg: SmirrorScenario, incs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Cumulative encoder ticks (n, 2) as the wheels would count them."""
+    meas = incs * np.array(cfg.wheel_scale)
+    meas = meas * (1.0 + rng.normal(0.0, cfg.slip_sigma, meas.shape))
+    turning = np.sign(incs[:, 0]) != np.sign(incs[:, 1])
+    # on a turn in place the wheels scrub: encoders count more rotation than the body makes
+    meas[turning] *= 1.0 + cfg.turn_slip
+    return np.floor(np.cumsum(meas * cfg.ticks_per_m, axis=0)).astype(np.int64)
+
+
+def _calibrated(true: CameraModel, rng: np.random.Generator, cfg: SmirrorScenario) -> CameraModel:
+    """The model a real calibration would give: the true pose plus a small error."""
+    pose = true.world_from_camera
+    assert pose is not None
+    err = Rotation.from_rotvec(rng.normal(0, math.radians(cfg.calib_rot_deg), 3))
+    rot = err * Rotation.from_quat(list(pose.rotation))
+    t = np.array(pose.translation) + rng.normal(0, cfg.calib_pos_m, 3)
+    return replace(
+        true,
+        world_from_camera=Transform(Vec3(*map(float, t)), Quat(*map(float, rot.as_quat()))),
+    )
+
+
+def node_models(cfg: SmirrorScenario) -> list[CameraModel]:
+    """True camera models of the three nodes."""
+    f = cfg.width_px / (2 * math.tan(math.radians(cfg.hfov_deg) / 2))
+    return [
+        CameraModel(
+            t_ns=0,
+            camera=name,
+            width_px=cfg.width_px,
+            height_px=cfg.height_px,
+            fx_px=f,
+            fy_px=f,
+            cx_px=cfg.width_px / 2,
+            cy_px=cfg.height_px / 2,
+            distortion_model="plumb_bob",
+            distortion=(0.0,) * 5,
+            world_from_camera=look_at(np.array(eye), np.array(target)),
+        )
+        for name, eye, target in NODES
+    ]
+
+
+def _people(cfg: SmirrorScenario, plan: FloorPlan, duration_s: float, rng: np.random.Generator):  # type: ignore[no-untyped-def]
+    out = []
+    for i in range(cfg.people):
+        x0, y0, x1, y1 = plan.rooms[i % len(plan.rooms)]
+        trj = random_waypoint(f"p{i}", rng, (x1 - x0, y1 - y0), duration_s + 1.0, dt_s=0.04)
+        out.append((f"p{i}", trj, x0, y0))
+    return out
+
+
+_CLOTHES = [
+    (60, 70, 140),
+    (120, 90, 60),
+    (70, 110, 80),
+    (100, 100, 110),
+    (40, 60, 90),
+    (130, 120, 100),
+]
+
+
+def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, int]:
+    """Write an S-Mirror scenario log to ``out``; returns message counts per topic."""
+    cfg = cfg or SmirrorScenario()
+    rng = np.random.default_rng(cfg.seed)
+    plan = three_rooms()
+    shape = RobotShape()
+    poses, incs, starts = _drive(cfg)
+    ticks = _odometry(cfg, incs, rng)
+    dt = 1.0 / cfg.odom_hz
+    if cfg.duration_s is not None:
+        keep = max(2, int(cfg.duration_s * cfg.odom_hz))
+        poses, incs, ticks = poses[:keep], incs[:keep], ticks[:keep]
+        starts = [s for s in starts if s < keep * dt]
+    n = len(poses)
+    duration_s = n * dt
+    # calibration errors are drawn before the people, so logs with and without people differ in
+    # nothing else (the occlusion experiment of Figs. 4.8-4.10)
+    true_models = node_models(cfg)
+    calib_models = [_calibrated(m, rng, cfg) for m in true_models]
+    walkers = _people(cfg, plan, duration_s, rng)
+    renderers = [NodeRenderer(PinholeCamera(m), plan, rng, cfg.noise_sigma) for m in true_models]
+    counts: dict[str, int] = {}
+
+    def put(writer: LogWriter, topic: str, msg: object, t_ns: int) -> None:
+        writer.write(topic, msg, t_ns)
+        counts[topic] = counts.get(topic, 0) + 1
+
+    def person_xy(k: int, t: float) -> np.ndarray:
+        _, trj, x0, y0 = walkers[k]
+        return trj.at(t)[0] + (x0, y0)
+
+    def robot_pose(t: float) -> np.ndarray:
+        f = min(t / dt, n - 1.0)
+        i = min(int(f), n - 2)
+        a = f - i
+        p = poses[i] * (1 - a) + poses[i + 1] * a
+        return p
+
+    with LogWriter(out) as w:
+        w.add_metadata(
+            "scenario",
+            {
+                "generator": "trackctl simulate smirror",
+                "seed": cfg.seed,
+                "paths": cfg.paths,
+                "people": cfg.people,
+                "requesters": cfg.requesters,
+                "fps": cfg.fps,
+                "path_start_s": json.dumps([round(s, 3) for s in starts]),
+                "path_length_m": json.dumps([round(path_length_m(k), 2) for k in range(cfg.paths)]),
+            },
+        )
+        w.add_metadata(
+            "robot/r1",
+            {
+                "ticks_per_m": cfg.ticks_per_m,
+                "wheel_base_m": cfg.wheel_base_m,
+                "led_height_m": shape.led_height_m,
+                "led_front_m": shape.led_front_m,
+                "led_back_m": shape.led_back_m,
+            },
+        )
+        w.add_metadata("smirror/floorplan", {"plan": json.dumps(plan.to_json())})
+        w.add_metadata("smirror/requesters", {"count": cfg.requesters})
+        for model in calib_models:
+            put(w, topics.calibration(model.camera), to_foxglove_calibration(model), 0)
+            put(w, topics.camera_model(model.camera), model, 0)
+        frame_dt = 1.0 / cfg.fps
+        n_frames = int(duration_s / frame_dt)
+        # One pass over time: odometry every step, truth every 2nd, frames at the node rate.
+        step_ns = int(round(dt * S))
+        next_frame = 0
+        for i in range(n):
+            t_ns = i * step_ns
+            while next_frame < n_frames and int(round(next_frame * frame_dt * S)) <= t_ns:
+                tf = next_frame * frame_dt
+                tf_ns = int(round(tf * S))
+                people = [
+                    (person_xy(k, tf), _CLOTHES[k % len(_CLOTHES)]) for k in range(len(walkers))
+                ]
+                robot = robot_pose(tf)
+                for model, ren in zip(true_models, renderers, strict=True):
+                    img = ren.render(people, [robot], shape, rng)
+                    ok, buf = cv2.imencode(
+                        ".jpg", img, [int(cv2.IMWRITE_JPEG_QUALITY), cfg.jpeg_quality]
+                    )
+                    assert ok
+                    put(
+                        w,
+                        topics.image(model.camera),
+                        make_compressed_image(tf_ns, model.camera, buf.tobytes(), "jpeg"),
+                        tf_ns,
+                    )
+                next_frame += 1
+            put(
+                w,
+                topics.odom("r1"),
+                WheelOdometry(t_ns, "robot/r1", int(ticks[i, 0]), int(ticks[i, 1])),
+                t_ns,
+            )
+            if i % 2 == 0:
+                x, y, yaw = poses[i]
+                ents = [GroundTruthEntity("r1", Vec3(float(x), float(y), 0.0), float(yaw))]
+                for k in range(len(walkers)):
+                    p = person_xy(k, i * dt)
+                    ents.append(
+                        GroundTruthEntity(
+                            walkers[k][0], Vec3(round(float(p[0]), 4), round(float(p[1]), 4), 0.0)
+                        )
+                    )
+                put(w, topics.GROUND_TRUTH, GroundTruth(t_ns, tuple(ents)), t_ns)
+    return counts

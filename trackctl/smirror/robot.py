@@ -1,0 +1,245 @@
+"""The robot side of S-Mirror (§4.1.2 C, Fig. 4.5): LED detection in a node's image, a pose fix
+through the node's calibrated camera, and dead reckoning calibrated at every fix.
+
+The fusion is an extended Kalman filter (filterpy) over (x, y, yaw): wheel odometry drives the
+prediction, LED fixes the update. With a fix far more certain than the dead-reckoned pose the
+update is exactly Fig. 4.5's offset calibration (the odometry offset is deducted from then on);
+the filter also weighs a far, noisy fix against a short, good dead-reckoning run. Fixes arrive
+late (communication and processing delay): the filter rewinds to the frame's time, updates and
+replays the odometry since, so the offset is computed at the instant the image was taken.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+
+from trackctl.geometry.camera import PinholeCamera
+
+__all__ = ["LedConfig", "LedFix", "detect_leds", "fix_from_leds", "PoseFilter", "wrap"]
+
+
+def wrap(a: float) -> float:
+    """Angle in [-pi, pi)."""
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+@dataclass(frozen=True, slots=True)
+class LedConfig:
+    """The robot's LED markers and how they are told apart from the scene."""
+
+    led_height_m: float = 0.32
+    led_front_m: float = 0.15
+    led_back_m: float = -0.15
+    front_hue: tuple[int, int] = (45, 80)
+    """OpenCV hue range (0..180) of the front LED (green)."""
+    back_hue: tuple[int, int] = (135, 170)
+    """Hue range of the back LED (magenta)."""
+    min_saturation: int = 110
+    min_value: int = 150
+
+
+@dataclass(frozen=True, slots=True)
+class LedFix:
+    """A pose fix from one node image."""
+
+    t_ns: int
+    x_m: float
+    y_m: float
+    yaw_rad: float
+    range_m: float
+    """Ground distance from the node camera (its error grows with it)."""
+    node: str
+
+
+def _blob(hsv: np.ndarray, hue: tuple[int, int], cfg: LedConfig) -> tuple[float, float, int] | None:
+    mask = cv2.inRange(hsv, (hue[0], cfg.min_saturation, cfg.min_value), (hue[1], 255, 255))
+    n, _, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if n <= 1:
+        return None
+    k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    return float(cents[k, 0]), float(cents[k, 1]), int(stats[k, cv2.CC_STAT_AREA])
+
+
+def detect_leds(
+    crops: list[tuple[int, int, np.ndarray]], cfg: LedConfig
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Pixel centroids (full-frame coordinates) of the front and back LED, or None when unseen.
+
+    ``crops`` are ``(x, y, image)`` with x/y the crop's top-left pixel in the full frame (a
+    whole frame is one crop at 0, 0). The largest blob of each LED colour over all crops wins.
+    """
+    best: list[tuple[int, np.ndarray] | None] = [None, None]
+    for x0, y0, image in crops:
+        hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
+        for k, hue in enumerate((cfg.front_hue, cfg.back_hue)):
+            b = _blob(hsv, hue, cfg)
+            if b is not None and (best[k] is None or b[2] > best[k][0]):  # type: ignore[index]
+                best[k] = (b[2], np.array([b[0] + x0, b[1] + y0]))
+    return (
+        None if best[0] is None else best[0][1],
+        None if best[1] is None else best[1][1],
+    )
+
+
+def fix_from_leds(
+    front_px: np.ndarray,
+    back_px: np.ndarray,
+    cam: PinholeCamera,
+    cfg: LedConfig,
+    t_ns: int,
+    gate_m: tuple[float, float] = (0.08, 0.8),
+) -> LedFix | None:
+    """Robot pose from its two LEDs: both rays meet the LED plane; centre and heading follow.
+
+    Returns None when the two ground points are implausibly close or far apart (a false blob).
+    """
+    pts = cam.ground_point(np.vstack([front_px, back_px]), ground_z=cfg.led_height_m)
+    if not np.isfinite(pts).all():
+        return None
+    f, b = pts[0, :2], pts[1, :2]
+    base = float(np.linalg.norm(f - b))
+    if not gate_m[0] <= base <= gate_m[1]:
+        return None
+    d = (f - b) / base
+    centre = f - cfg.led_front_m * d
+    rng = float(np.linalg.norm(centre - cam.position[:2]))
+    return LedFix(
+        t_ns, float(centre[0]), float(centre[1]), math.atan2(d[1], d[0]), rng, cam.model.camera
+    )
+
+
+class _DiffDriveEKF(ExtendedKalmanFilter):
+    """filterpy's EKF with the unicycle motion model as its (non-linear) state prediction."""
+
+    def predict_x(self, u: np.ndarray = 0) -> None:  # type: ignore[override, assignment]
+        ds, dyaw = float(u[0]), float(u[1])
+        mid = float(self.x[2, 0]) + dyaw / 2
+        self.x = self.x + np.array([[ds * math.cos(mid)], [ds * math.sin(mid)], [dyaw]])
+        self.x[2, 0] = wrap(float(self.x[2, 0]))
+
+
+@dataclass(frozen=True, slots=True)
+class FilterConfig:
+    """Noise model of the fusion."""
+
+    odom_rel_sigma: float = 0.03
+    """Relative error of a wheel-odometry distance increment."""
+    yaw_per_m_sigma: float = 0.03
+    """Heading random walk per metre travelled (rad/m): differential wheel scale, slip."""
+    yaw_rel_sigma: float = 0.05
+    """Relative error of a heading increment (turns in place scrub the wheels)."""
+    fix_px_sigma: float = 0.8
+    """LED centroid error in pixels (JPEG, noise, partial blobs)."""
+    fix_floor_m: float = 0.03
+    calib_rad: float = 0.003
+    """Residual calibration error of a node camera (rad): a ground error growing with range."""
+    gate_chi2: float = 16.27
+    """Mahalanobis gate of a fix (chi-square, 3 dof, 99.9 %)."""
+    max_rejects: int = 3
+    """After this many consecutive rejected fixes the filter trusts the camera again."""
+
+
+class PoseFilter:
+    """Dead reckoning + LED fixes, with rewind for late fixes (keeps a few seconds of history)."""
+
+    def __init__(self, x: float, y: float, yaw: float, t_ns: int, cfg: FilterConfig) -> None:
+        self.cfg = cfg
+        self.ekf = _DiffDriveEKF(dim_x=3, dim_z=3)
+        self.ekf.x = np.array([[x], [y], [yaw]])
+        self.ekf.P = np.diag([0.05**2, 0.05**2, 0.05**2])
+        self.ekf.R = np.eye(3)
+        self.t_ns = t_ns
+        # (t_ns, x, P, increment that led here)
+        self._hist: deque[tuple[int, np.ndarray, np.ndarray, tuple[float, float]]] = deque(
+            maxlen=150
+        )
+        self._hist.append((t_ns, self.ekf.x.copy(), self.ekf.P.copy(), (0.0, 0.0)))
+        self.rejects = 0
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        return float(self.ekf.x[0, 0]), float(self.ekf.x[1, 0]), float(self.ekf.x[2, 0])
+
+    def _predict(self, ds: float, dyaw: float) -> None:
+        yaw = float(self.ekf.x[2, 0]) + dyaw / 2
+        c, s = math.cos(yaw), math.sin(yaw)
+        self.ekf.F = np.array([[1, 0, -ds * s], [0, 1, ds * c], [0, 0, 1.0]])
+        # noise enters through the increments: Q = G diag(var_ds, var_dyaw) G^T
+        g = np.array([[c, -0.5 * ds * s], [s, 0.5 * ds * c], [0, 1.0]])
+        var_ds = (self.cfg.odom_rel_sigma * ds) ** 2 + 1e-8
+        var_dyaw = (
+            (self.cfg.yaw_rel_sigma * dyaw) ** 2 + self.cfg.yaw_per_m_sigma**2 * abs(ds) + 1e-8
+        )
+        self.ekf.Q = g @ np.diag([var_ds, var_dyaw]) @ g.T
+        self.ekf.predict(u=np.array([ds, dyaw]))
+
+    def step(self, t_ns: int, ds: float, dyaw: float) -> None:
+        """Dead-reckon one odometry increment."""
+        self._predict(ds, dyaw)
+        self.t_ns = t_ns
+        self._hist.append((t_ns, self.ekf.x.copy(), self.ekf.P.copy(), (ds, dyaw)))
+
+    def fix_sigma(
+        self, fix: LedFix, cam: PinholeCamera, led_height_m: float
+    ) -> tuple[float, float]:
+        """(position sigma m, heading sigma rad) of a fix at its range (ground error ~ d^2)."""
+        drop = max(0.3, float(cam.position[2]) - led_height_m)
+        d = math.hypot(fix.range_m, drop)
+        per_px = d * d / (cam.model.fx_px * drop)
+        sp = math.hypot(
+            self.cfg.fix_floor_m, self.cfg.fix_px_sigma * per_px, self.cfg.calib_rad * d * d / drop
+        )
+        sy = min(1.5, math.sqrt(2) * math.hypot(self.cfg.fix_px_sigma * per_px, 0.01) / 0.3)
+        return sp, sy
+
+    def apply_fix(self, fix: LedFix, sigma_pos: float, sigma_yaw: float) -> bool:
+        """Fuse a (possibly late) fix taken at ``fix.t_ns``; False when gated out or too old."""
+        idx = None
+        for i in range(len(self._hist) - 1, -1, -1):
+            if self._hist[i][0] <= fix.t_ns:
+                idx = i
+                break
+        if idx is None:
+            return False
+        later = list(self._hist)[idx + 1 :]
+        t0, x0, p0, _ = self._hist[idx]
+        saved = (self.ekf.x.copy(), self.ekf.P.copy())
+        self.ekf.x, self.ekf.P = x0.copy(), p0.copy()
+        z = np.array([[fix.x_m], [fix.y_m], [fix.yaw_rad]])
+        r = np.diag([sigma_pos**2, sigma_pos**2, sigma_yaw**2])
+        y = z - self.ekf.x
+        y[2, 0] = wrap(float(y[2, 0]))
+        s = self.ekf.P + r
+        d2 = float((y.T @ np.linalg.solve(s, y))[0, 0])
+        if d2 > self.cfg.gate_chi2 and self.rejects < self.cfg.max_rejects:
+            self.rejects += 1
+            self.ekf.x, self.ekf.P = saved
+            return False
+        if d2 > self.cfg.gate_chi2:
+            # the camera keeps disagreeing: the dead-reckoned pose is what is wrong (wheel slip,
+            # a bad start); widen its covariance by the disagreement so the fix takes over
+            self.ekf.P = self.ekf.P + np.diag(y[:, 0] ** 2)
+        self.rejects = 0
+        self.ekf.update(
+            z,
+            HJacobian=lambda _x: np.eye(3),
+            Hx=lambda x: x,
+            R=r,
+            residual=lambda a, b: np.array(
+                [[a[0, 0] - b[0, 0]], [a[1, 0] - b[1, 0]], [wrap(a[2, 0] - b[2, 0])]]
+            ),
+        )
+        self.ekf.x[2, 0] = wrap(float(self.ekf.x[2, 0]))
+        # replay the odometry since the image was taken
+        while len(self._hist) > idx + 1:
+            self._hist.pop()
+        self._hist[idx] = (t0, self.ekf.x.copy(), self.ekf.P.copy(), self._hist[idx][3])
+        for t, _, _, (ds, dyaw) in later:
+            self.step(t, ds, dyaw)
+        return True
