@@ -12,6 +12,7 @@ from trackctl.cli.record import record
 from trackctl.cli.replay import replay
 from trackctl.cli.simulate import simulate_app
 from trackctl.cli.vmtrack import simulate_vm, vm_track
+from trackctl.cli.bridgeloc import bridgeloc_app
 
 app = typer.Typer(
     cls=TrackctlGroup,
@@ -46,6 +47,7 @@ app.command()(report)
 app.command("vm-track")(vm_track)
 simulate_app.command("vm")(simulate_vm)
 app.add_typer(simulate_app, name="simulate")
+app.add_typer(bridgeloc_app, name="bridgeloc")
 
 
 def main() -> None:
