@@ -12,7 +12,7 @@ from trackctl.cli.record import record
 from trackctl.cli.replay import replay
 from trackctl.cli.simulate import simulate_app
 from trackctl.cli.vmtrack import simulate_vm, vm_track
-from trackctl.cli.bridgeloc import bridgeloc_app
+from trackctl.cli.bridgeloc import bridgeloc_app, simulate_bridgeloc
 
 app = typer.Typer(
     cls=TrackctlGroup,
@@ -46,6 +46,7 @@ app.command()(process)
 app.command()(report)
 app.command("vm-track")(vm_track)
 simulate_app.command("vm")(simulate_vm)
+simulate_app.command("bridgeloc")(simulate_bridgeloc)
 app.add_typer(simulate_app, name="simulate")
 app.add_typer(bridgeloc_app, name="bridgeloc")
 

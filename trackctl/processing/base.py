@@ -85,3 +85,4 @@ def _load_builtin() -> None:
     # Imported lazily: system packages import this module to register themselves.
     import trackctl.processing.builtin  # noqa: F401
     import trackctl.vmtrack  # noqa: F401
+    import trackctl.bridgeloc  # noqa: F401
