@@ -468,7 +468,9 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
             wps = _csv_waypoints(cfg.path)
         start_yaw = 0.0
     dt = 1.0 / cfg.odom_hz
-    poses = _segments(wps, start_yaw, cfg.speed_mps, cfg.turn_rps, dt)
+    # office: the robot is driven quickly between test spots (only the spots are evaluated)
+    fast = 2.5 if cfg.field == "office" else 1.0
+    poses = _segments(wps, start_yaw, cfg.speed_mps * fast, cfg.turn_rps * fast, dt)
     if cfg.field == "lobby":
         poses = poses[: int(cfg.duration_s * cfg.odom_hz)]
     duration = len(poses) * dt
