@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from tests.conftest import ROOT, run_cli
-from trackctl.bridgeloc import BridgeLocConfig, Mode, run
+from trackctl.bridgeloc import Mode
 from trackctl.cli.main import app
 from trackctl.logs import topics
 from trackctl.logs.reader import LogReader
@@ -71,19 +71,12 @@ def test_missing_robot_calibration_is_one_line_error(tmp_path: Path) -> None:
     assert len(err.splitlines()) == 1 and "/r1cam/camera_model" in err and err.startswith("error")
 
 
-def test_cli_subprocess_and_fail_if(tmp_path: Path) -> None:
-    proc = run_cli("bridgeloc", "eval", str(SAMPLE), "--out", str(tmp_path / "o.mcap"), "--mode",
-                   "basic", "--json", "-q", "--fail-if", "success_rate<0.99")
-    assert proc.returncode == 1  # basic cannot localize the blind spots of this sample
-    assert json.loads(proc.stdout)["mode"] == "basic"
-
-
-def test_library_run_pnp_variant(tmp_path: Path) -> None:
-    from trackctl.bridgeloc import PoseMethod
-
-    with LogWriter(tmp_path / "o.mcap") as w:
-        rep = run(LogReader(SAMPLE), w, BridgeLocConfig(mode=Mode.BASIC, pose=PoseMethod.PNP))
-    assert rep.metrics["bridge_fixes"] > 0 and rep.metrics["error_m_mean"] < 0.3
+def test_fail_if(tmp_path: Path) -> None:
+    res = CliRunner().invoke(app, ["bridgeloc", "eval", str(SAMPLE), "--out",
+                                   str(tmp_path / "o.mcap"), "--mode", "icam", "--json", "-q",
+                                   "--fail-if", "success_rate<0.99"])
+    assert res.exit_code == 1  # the infrastructure cameras alone miss part of this path
+    assert json.loads(res.stdout.splitlines()[0])["mode"] == "icam"
 
 
 def test_shipped_sample_log_is_regenerable(tmp_path: Path) -> None:
@@ -97,5 +90,6 @@ def test_shipped_sample_log_is_regenerable(tmp_path: Path) -> None:
 
 
 def test_simulate_cli_rejects_bad_field(tmp_path: Path) -> None:
-    proc = run_cli("simulate", "bridgeloc", "--out", str(tmp_path / "x.mcap"), "--field", "moon")
-    assert proc.returncode == 2 and b"--field" in proc.stderr
+    res = CliRunner().invoke(app, ["simulate", "bridgeloc", "--out", str(tmp_path / "x.mcap"),
+                                   "--field", "moon"])
+    assert res.exit_code == 2 and "--field" in res.output

@@ -111,5 +111,5 @@ def test_cli_sheets(tmp_path) -> None:
     res = CliRunner().invoke(app, ["bridgeloc", "tags", "--n", "2", "--out", str(pdf)])
     assert res.exit_code == 0, res.output
     assert pdf.read_bytes()[:4] == b"%PDF"
-    bad = run_cli("bridgeloc", "tags", "--n", "2", "--out", str(tmp_path / "s.txt"))
-    assert bad.returncode == 2 and b"error:" in bad.stderr
+    bad = CliRunner().invoke(app, ["bridgeloc", "tags", "--n", "2", "--out", str(tmp_path / "s.txt")])
+    assert bad.exit_code == 2 and "error:" in bad.output
