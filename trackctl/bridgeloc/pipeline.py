@@ -228,6 +228,7 @@ def run(
     ekf = RobotEkf(cfg.ekf)
     truth: dict[int, tuple[float, float]] = {}
     est: list[tuple[int, tuple[float, float, float] | None]] = []
+    other: dict[Mode, list[tuple[int, tuple[float, float, float] | None]]] = {m: [] for m in Mode}
     stats = {"bridge_fixes": 0, "icam_fixes": 0, "tag_observations": 0, "robot_frames": 0,
              "ambiguous_matches": 0}
     prev_ticks: tuple[int, int] | None = None
@@ -254,7 +255,7 @@ def run(
             od: WheelOdometry = msg.message
             if od.left_ticks is None or od.right_ticks is None:
                 continue
-            if prev_ticks is not None and cfg.mode is Mode.FULL:
+            if prev_ticks is not None and needs_robot:
                 ds, dyaw = drive.motion_from_ticks(od.left_ticks - prev_ticks[0],
                                                    od.right_ticks - prev_ticks[1])
                 ekf.predict(ds, dyaw)
@@ -291,37 +292,42 @@ def run(
             stats["bridge_fixes"] += 1
         if fix is not None:
             stats["icam_fixes"] += 1
-        pose: tuple[float, float, float] | None = None
-        if cfg.mode is Mode.BASIC:
-            if fix is not None:
-                pose = (float(fix[0]), float(fix[1]), bridge[2] if bridge else 0.0)
-            elif bridge is not None:
-                pose = bridge
-        else:
-            c = cfg.ekf
-            if fix is not None:
-                ekf.update_pose(float(fix[0]), float(fix[1]), None, c.fix_sigma_m, 0.0)
-            if not ekf.initialized and bridge is not None:
-                ekf.update_pose(*bridge, c.bridge_sigma_m, c.bridge_yaw_sigma_rad)
-            elif ekf.initialized:
-                for _, sig, pb in obs:
-                    ctr = pb.mean(axis=0)
-                    rng_m = math.hypot(ctr[0], ctr[1])
-                    bearing = math.atan2(ctr[1], ctr[0])
-                    cands = tag_map.candidates(sig)
-                    if not cands:
-                        continue
-                    seen_at = ekf.observed_position(rng_m, bearing)  # Eq. 4.11
-                    dists = [float(np.linalg.norm(t.center[:2] - seen_at)) for t in cands]
-                    k = int(np.argmin(dists))
-                    if len(cands) > 1:
-                        stats["ambiguous_matches"] += 1
-                    if dists[k] > c.gate_m + 2 * ekf.sigma_m:
-                        continue
-                    ekf.update_range_bearing(rng_m, bearing, cands[k].center[:2])  # Eq. 4.12
-                    stats["tag_observations"] += 1
-            if ekf.initialized and ekf.sigma_m <= cfg.max_sigma_m:
-                pose = ekf.pose
+        # every mode's estimate comes out of the same pass (I-Cam and Basic are by-products)
+        icam_pose = None if fix is None else (float(fix[0]), float(fix[1]), 0.0)
+        basic_pose: tuple[float, float, float] | None = None
+        if fix is not None:
+            basic_pose = (float(fix[0]), float(fix[1]), bridge[2] if bridge else 0.0)
+        elif bridge is not None:
+            basic_pose = bridge
+        full_pose: tuple[float, float, float] | None = None
+        c = cfg.ekf
+        if fix is not None:
+            ekf.update_pose(float(fix[0]), float(fix[1]), None, c.fix_sigma_m, 0.0)
+        if not ekf.initialized and bridge is not None:
+            ekf.update_pose(*bridge, c.bridge_sigma_m, c.bridge_yaw_sigma_rad)
+        elif ekf.initialized:
+            for _, sig, pb in obs:
+                ctr = pb.mean(axis=0)
+                rng_m = math.hypot(ctr[0], ctr[1])
+                bearing = math.atan2(ctr[1], ctr[0])
+                cands = tag_map.candidates(sig)
+                if not cands:
+                    continue
+                seen_at = ekf.observed_position(rng_m, bearing)  # Eq. 4.11
+                dists = [float(np.linalg.norm(t.center[:2] - seen_at)) for t in cands]
+                k = int(np.argmin(dists))
+                if len(cands) > 1:
+                    stats["ambiguous_matches"] += 1
+                if dists[k] > c.gate_m + 2 * ekf.sigma_m:
+                    continue
+                ekf.update_range_bearing(rng_m, bearing, cands[k].center[:2])  # Eq. 4.12
+                stats["tag_observations"] += 1
+        if ekf.initialized and ekf.sigma_m <= cfg.max_sigma_m:
+            full_pose = ekf.pose
+        other[Mode.ICAM].append((t_ns, icam_pose))
+        other[Mode.BASIC].append((t_ns, basic_pose))
+        other[Mode.FULL].append((t_ns, full_pose))
+        pose = {Mode.ICAM: icam_pose, Mode.BASIC: basic_pose, Mode.FULL: full_pose}[cfg.mode]
         est.append((t_ns, pose))
         if pose is not None:
             writer.write(POSE_TOPIC, pose_in_frame(t_ns, pose[0], pose[1], pose[2]), t_ns)
@@ -330,6 +336,11 @@ def run(
             if pose is not None:
                 writer.write(POSE_TOPIC, pose_in_frame(t_ns, pose[0], pose[1], 0.0), t_ns)
     metrics = _score(est, truth, cfg, len(tag_map.tags), meta)
+    for m, rows in other.items():
+        if rows:  # the same run scored as the other modes would be (same frames, same fixes)
+            sm = _score(rows, truth, cfg, len(tag_map.tags), {})
+            metrics[f"success_rate_{m.value}"] = sm["success_rate"]
+            metrics[f"error_m_mean_{m.value}"] = sm["error_m_mean"]
     metrics.update({k: v for k, v in stats.items()})
     metrics["tags_mapped"] = len(tag_map.tags)
     metrics["tag_map_error_m_mean"] = _map_error(tag_map, meta)

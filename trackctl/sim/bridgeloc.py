@@ -73,7 +73,7 @@ class BridgeLocScenario:
     n: int = 2
     camera_height_m: float = 0.50
     ir_height_m: float = 0.65
-    ir_range_m: float = 7.0
+    ir_range_m: float = 6.0
     """Distance beyond which the IR light is too dim for the infrastructure cameras."""
     speed_mps: float = 0.4
     turn_rps: float = 1.0
@@ -180,11 +180,12 @@ def office_layout(cfg: BridgeLocScenario) -> Layout:
 def lobby_layout(cfg: BridgeLocScenario) -> Layout:
     """The 14 x 8 m lobby: three cameras, an occluded corner for the top camera, wall tags."""
     cams = [
-        _infra("cam0", (0.2, 0.2, 3.0), (5.0, 4.5, 0.4)),
-        _infra("cam1", (13.8, 0.2, 3.0), (9.0, 4.5, 0.4)),
-        _infra("cam2", (7.0, 7.8, 3.0), (7.0, 3.0, 0.0)),
+        _infra("cam0", (3.0, 0.2, 2.6), (3.0, 8.0, 0.0)),
+        _infra("cam1", (11.0, 0.2, 2.6), (11.0, 8.0, 0.0)),
+        _infra("cam2", (7.0, 7.8, 2.6), (7.0, 0.0, 0.0)),
     ]
-    occluded = {"cam2": np.array([[7.0, 4.5], [10.5, 1.0], [10.5, 4.5]], np.float32)}
+    # a corner of the building hides this triangle from the top camera (the paper's grey area)
+    occluded = {"cam2": np.array([[7.0, 3.5], [9.5, 1.0], [9.5, 3.5]], np.float32)}
     rng = np.random.default_rng(cfg.seed + 7)
     w, h = 14.0, 8.0
     cand: list[tuple[float, float, float, float]] = []  # x, y, nx, ny
@@ -202,7 +203,7 @@ def lobby_layout(cfg: BridgeLocScenario) -> Layout:
             cos_inc = (d[0] * nx + d[1] * ny) / max(1e-9, math.hypot(d[0], d[1]))
             px, front = pc.project(ctr[None])
             inside = front[0] and 40 < px[0, 0] < 600 and 40 < px[0, 1] < 440
-            if inside and dist < 9.0 and cos_inc > 0.35:
+            if inside and dist < 9.5 and cos_inc > 0.35:
                 ok.append((x, y, nx, ny))
                 break
     if len(ok) < cfg.tags:
