@@ -177,19 +177,24 @@ def detection_range(quick: bool) -> None:
 
 
 def speed(log: Path) -> None:
+    """Wall and CPU time per frame; CPU time (this thread) is what one core spends, unaffected by
+    other processes sharing the machine."""
     reader = LogReader(log)
-    times = []
-    frames = 0
+    wall, cpu = [], []
     for msg in reader.messages(["/r1cam/image", "/cam0/image", "/cam1/image", "/cam2/image"]):
         img = cv2.imdecode(np.frombuffer(msg.message.data, np.uint8), cv2.IMREAD_GRAYSCALE)
-        t0 = time.perf_counter()
-        detect_tags(img)
-        times.append(time.perf_counter() - t0)
-        frames += 1
-    med = 1000 * statistics.median(times)
-    print(f"== tag detection + decoding, 640x480, one core: median {med:.2f} ms, "
-          f"p90 {1000 * float(np.quantile(times, 0.9)):.2f} ms over {frames} frames "
-          f"(target <= 10 ms: {'PASS' if med <= 10 else 'FAIL'})")
+        for _ in range(3):
+            t0, c0 = time.perf_counter(), time.thread_time()
+            detect_tags(img)
+            wall.append(time.perf_counter() - t0)
+            cpu.append(time.thread_time() - c0)
+    med_cpu = 1000 * statistics.median(cpu)
+    print(f"== tag detection + decoding, 640x480, one thread, {len(cpu)} runs "
+          f"({len(cpu) // 3} frames x 3)")
+    print(f"   CPU time: median {med_cpu:.2f} ms, p90 {1000 * float(np.quantile(cpu, 0.9)):.2f} ms"
+          f"  (target <= 10 ms median: {'PASS' if med_cpu <= 10 else 'FAIL'})")
+    print(f"   wall time: median {1000 * statistics.median(wall):.2f} ms (includes waiting for "
+          f"the CPU when the machine is shared)")
 
 
 # ---------------------------------------------------------------- scenarios
@@ -203,7 +208,7 @@ def _eval(log: Path, tmp: Path, mode: Mode, pose: PoseMethod = PoseMethod.LSTSQ)
 def office(tmp: Path) -> None:
     log = tmp / "office.mcap"
     simulate_bridgeloc(log, BridgeLocScenario(field="office", tags=1, seed=0))
-    print("== Fig. 4.20: median error (m) per distance x view angle, office, Basic bridging")
+    print("== Fig. 4.20: median error (m) per distance x view angle, office, view bridging alone (robot camera + tag map)")
     print("   paper: < 0.25 m for d < 3 m and |angle| <= 45°, growing quickly beyond 3 m")
     for pose in PoseMethod:
         m = _eval(log, tmp, Mode.BASIC, pose)
