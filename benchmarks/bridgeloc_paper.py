@@ -14,7 +14,6 @@ Run from the repository root: ``python benchmarks/bridgeloc_paper.py [--quick] [
 from __future__ import annotations
 
 import argparse
-import math
 import statistics
 import sys
 import tempfile
@@ -208,7 +207,7 @@ def _eval(log: Path, tmp: Path, mode: Mode, pose: PoseMethod = PoseMethod.LSTSQ)
 def office(tmp: Path) -> None:
     log = tmp / "office.mcap"
     simulate_bridgeloc(log, BridgeLocScenario(field="office", tags=1, seed=0))
-    print("== Fig. 4.20: median error (m) per distance x view angle, office, view bridging alone (robot camera + tag map)")
+    print("== Fig. 4.20: median error (m) per distance x view angle, office, view bridging alone")
     print("   paper: < 0.25 m for d < 3 m and |angle| <= 45°, growing quickly beyond 3 m")
     for pose in PoseMethod:
         m = _eval(log, tmp, Mode.BASIC, pose)

@@ -93,3 +93,18 @@ def test_simulate_cli_rejects_bad_field(tmp_path: Path) -> None:
     res = CliRunner().invoke(app, ["simulate", "bridgeloc", "--out", str(tmp_path / "x.mcap"),
                                    "--field", "moon"])
     assert res.exit_code == 2 and "--field" in res.output
+
+
+def test_csv_path_and_office_field(tmp_path: Path) -> None:
+    path = tmp_path / "path.csv"
+    path.write_text("x_m,y_m\n2.0,2.0\n2.6,2.0\n")
+    log = tmp_path / "csv.mcap"
+    counts = simulate_bridgeloc(log, BridgeLocScenario(field="lobby", tags=2, path=str(path),
+                                                       duration_s=1.0, robot_fps=2, infra_fps=1))
+    assert counts["/r1cam/image"] >= 2 and counts["/cam0/image"] >= 1
+    truth = [m.message.entities[0].position_m for m in LogReader(log).messages(["/ground_truth"])]
+    assert truth[0].x == pytest.approx(2.0) and truth[0].y == pytest.approx(2.0)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("x_m,y_m\n1.0,oops\n")
+    with pytest.raises(Exception, match="bad.csv:2"):
+        simulate_bridgeloc(tmp_path / "b.mcap", BridgeLocScenario(path=str(bad)))

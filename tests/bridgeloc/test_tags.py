@@ -104,12 +104,16 @@ def test_cli_count_json_in_process_and_subprocess() -> None:
 
 def test_cli_sheets(tmp_path) -> None:
     png = tmp_path / "s.png"
-    res = CliRunner().invoke(app, ["bridgeloc", "tags", "--n", "2", "--practical", "--out", str(png)])
+    res = CliRunner().invoke(
+        app, ["bridgeloc", "tags", "--n", "2", "--practical", "--out", str(png)]
+    )
     assert res.exit_code == 0, res.output
     assert png.stat().st_size > 1000
     pdf = tmp_path / "s.pdf"
     res = CliRunner().invoke(app, ["bridgeloc", "tags", "--n", "2", "--out", str(pdf)])
     assert res.exit_code == 0, res.output
     assert pdf.read_bytes()[:4] == b"%PDF"
-    bad = CliRunner().invoke(app, ["bridgeloc", "tags", "--n", "2", "--out", str(tmp_path / "s.txt")])
+    bad = CliRunner().invoke(
+        app, ["bridgeloc", "tags", "--n", "2", "--out", str(tmp_path / "s.txt")]
+    )
     assert bad.exit_code == 2 and "error:" in bad.output

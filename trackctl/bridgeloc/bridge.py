@@ -134,8 +134,10 @@ class TagMap:
         """Tags sharing a signature (pattern + mount)."""
         return [t for t in self.tags if t.signature == signature]
 
-    def fix_mounts(self) -> None:
-        """Re-derive above/below from the final (averaged) centres."""
+    def finalize(self, min_samples: int = 3) -> None:
+        """Drop tags seen fewer than ``min_samples`` times (misreads), re-derive above/below from
+        the final (averaged) centres."""
+        self.tags = [t for t in self.tags if len(t.samples) >= min_samples]
         for t in self.tags:
             t.mount = "above" if t.center[2] > self.camera_height_m else "below"
 

@@ -193,6 +193,5 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
         if dec is None:
             continue
         code, contrast = dec
-        ctr = corners.mean(axis=0)
         out.append(TagDetection(code, placement, corners, contrast))
     return out

@@ -20,8 +20,13 @@ from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
 from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation
 
-from trackctl.bridgeloc.bridge import CameraGeometry, TagMap, bridge_lstsq, bridge_pnp, \
-    tag_corners_in_camera
+from trackctl.bridgeloc.bridge import (
+    CameraGeometry,
+    TagMap,
+    bridge_lstsq,
+    bridge_pnp,
+    tag_corners_in_camera,
+)
 from trackctl.bridgeloc.detect import DetectorConfig, TagDetection, detect_tags
 from trackctl.bridgeloc.ekf import EkfConfig, RobotEkf
 from trackctl.errors import InputError, MissingTopicError
@@ -206,7 +211,7 @@ def run(
         if cam in last_t:
             infra_period.setdefault(cam, msg.log_time_ns - last_t[cam])
         last_t[cam] = msg.log_time_ns
-    tag_map.fix_mounts()
+    tag_map.finalize()
     half_period = max(infra_period.values(), default=200_000_000) // 2
     fix_times = np.array(sorted(fixes), dtype=np.int64)
 

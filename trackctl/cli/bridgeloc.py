@@ -79,7 +79,9 @@ def eval_(
         float, typer.Option(help="Full mode: localized while the EKF position std is below (m).")
     ] = 0.5,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
-    plot: Annotated[Path | None, typer.Option(help="Write figures (PNG) to this directory.")] = None,
+    plot: Annotated[
+        Path | None, typer.Option(help="Write figures (PNG) to this directory.")
+    ] = None,
     fail_if: Annotated[
         str | None,
         typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "error_m_mean>0.32".'),

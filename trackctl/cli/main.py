@@ -5,6 +5,7 @@ from __future__ import annotations
 import typer
 
 from trackctl import __version__
+from trackctl.cli.bridgeloc import bridgeloc_app, simulate_bridgeloc
 from trackctl.cli.common import TrackctlGroup
 from trackctl.cli.info import info
 from trackctl.cli.process import process, report
@@ -12,7 +13,6 @@ from trackctl.cli.record import record
 from trackctl.cli.replay import replay
 from trackctl.cli.simulate import simulate_app
 from trackctl.cli.vmtrack import simulate_vm, vm_track
-from trackctl.cli.bridgeloc import bridgeloc_app, simulate_bridgeloc
 
 app = typer.Typer(
     cls=TrackctlGroup,

@@ -487,7 +487,8 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
     events: list[tuple[int, int, str, object]] = []
     # odometry: wheel travel from true pose increments, scale errors of +-1.5%, tick noise
     dyaw = np.diff(np.unwrap(poses[:, 2]), prepend=poses[0, 2])
-    ds = np.hypot(np.diff(poses[:, 0], prepend=poses[0, 0]), np.diff(poses[:, 1], prepend=poses[0, 1]))
+    ds = np.hypot(np.diff(poses[:, 0], prepend=poses[0, 0]),
+                  np.diff(poses[:, 1], prepend=poses[0, 1]))
     left = np.cumsum((ds - dyaw * wheel_base / 2) * ticks_per_m * 1.015
                      + rng.normal(0, 1.0, len(ds)))
     right = np.cumsum((ds + dyaw * wheel_base / 2) * ticks_per_m * 0.985
