@@ -223,7 +223,7 @@ def lobby_layout(cfg: BridgeLocScenario) -> Layout:
         # (the EKF picks the nearest candidate, Eq. 4.11); mounts alternate above/below
         code, placement = symbols[int(order[k % max(2, cfg.tags // 2 + 1)])]
         mount = Mount.ABOVE if k % 2 == 0 else Mount.BELOW
-        z = cfg.camera_height_m + (0.40 if mount is Mount.ABOVE else -0.28)
+        z = round(cfg.camera_height_m + (0.40 if mount is Mount.ABOVE else -0.28), 3)
         tags.append(WallTag(f"t{k}", code, placement, mount, (x, y, z), (nx, ny), cfg.tag_size_m))
     return Layout((w, h), cams, occluded, tags)
 
