@@ -5,6 +5,7 @@ from __future__ import annotations
 import typer
 
 from trackctl import __version__
+from trackctl.cli.bridgeloc import bridgeloc_app, simulate_bridgeloc
 from trackctl.cli.common import TrackctlGroup
 from trackctl.cli.evmatch import ev_match, simulate_ev
 from trackctl.cli.info import info
@@ -51,7 +52,9 @@ app.command("ev-match")(ev_match)
 simulate_app.command("ev")(simulate_ev)
 app.command("smirror")(smirror)
 simulate_app.command("smirror")(simulate_smirror)
+simulate_app.command("bridgeloc")(simulate_bridgeloc)
 app.add_typer(simulate_app, name="simulate")
+app.add_typer(bridgeloc_app, name="bridgeloc")
 
 
 def main() -> None:

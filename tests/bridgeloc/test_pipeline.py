@@ -1,0 +1,110 @@
+"""BridgeLoc end to end on the shipped sample log; errors; the sample log is regenerable."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from tests.conftest import ROOT, run_cli
+from trackctl.bridgeloc import Mode
+from trackctl.cli.main import app
+from trackctl.logs import topics
+from trackctl.logs.reader import LogReader
+from trackctl.logs.writer import LogWriter
+from trackctl.sim.bridgeloc import BridgeLocScenario, simulate_bridgeloc
+
+SAMPLE = ROOT / "sample_logs" / "bridgeloc.mcap"
+KEYS = {"system", "mode", "tags", "positions", "localized", "success_rate", "error_m_mean",
+        "error_m_median"}
+
+
+@pytest.fixture(scope="module")
+def reports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
+    out = {}
+    for mode in Mode:
+        target = tmp_path_factory.mktemp("bl") / f"{mode.value}.mcap"
+        res = CliRunner().invoke(app, ["bridgeloc", "eval", str(SAMPLE), "--out", str(target),
+                                       "--mode", mode.value, "--json", "-q"])
+        assert res.exit_code == 0, res.output
+        out[mode.value] = json.loads(res.stdout) | {"_out": str(target)}
+    return out
+
+
+def test_report_keys_and_values(reports: dict[str, dict]) -> None:
+    for mode, rep in reports.items():
+        assert KEYS <= rep.keys()
+        assert rep["system"] == "bridgeloc" and rep["mode"] == mode and rep["tags"] == 6
+        assert rep["positions"] == 80
+        assert rep["localized"] == round(rep["success_rate"] * rep["positions"])
+
+
+def test_full_mode_on_sample(reports: dict[str, dict]) -> None:
+    full, basic, icam = reports["full"], reports["basic"], reports["icam"]
+    assert full["success_rate"] >= basic["success_rate"] >= icam["success_rate"]
+    assert full["error_m_mean"] < 0.3
+    assert full["tag_observations"] > 0 and full["tags_mapped"] == 6
+
+
+def test_outputs_poses_and_annotations(reports: dict[str, dict]) -> None:
+    tops = LogReader(reports["full"]["_out"]).topics()
+    assert tops["/bridgeloc/pose"].schema_name == "foxglove.PoseInFrame"
+    assert tops["/bridgeloc/pose"].count == reports["full"]["localized"]
+    assert tops["/r1cam/tag_annotations"].schema_name == "foxglove.ImageAnnotations"
+    assert "/metrics/bridgeloc" in tops
+
+
+def test_missing_robot_calibration_is_one_line_error(tmp_path: Path) -> None:
+    broken = tmp_path / "nocal.mcap"
+    reader = LogReader(SAMPLE)
+    with LogWriter(broken) as w:
+        for raw in reader.raw():
+            if raw.topic != topics.camera_model("r1cam"):
+                w.write_raw(raw)
+        for name, data in reader.metadata().items():
+            w.add_metadata(name, data)
+    proc = run_cli("bridgeloc", "eval", str(broken), "--out", str(tmp_path / "o.mcap"))
+    assert proc.returncode == 2
+    err = proc.stderr.decode().strip()
+    assert len(err.splitlines()) == 1 and "/r1cam/camera_model" in err and err.startswith("error")
+
+
+def test_fail_if(tmp_path: Path) -> None:
+    res = CliRunner().invoke(app, ["bridgeloc", "eval", str(SAMPLE), "--out",
+                                   str(tmp_path / "o.mcap"), "--mode", "icam", "--json", "-q",
+                                   "--fail-if", "success_rate<0.99"])
+    assert res.exit_code == 1  # the infrastructure cameras alone miss part of this path
+    assert json.loads(res.stdout.splitlines()[0])["mode"] == "icam"
+
+
+def test_shipped_sample_log_is_regenerable(tmp_path: Path) -> None:
+    fresh = tmp_path / "bridgeloc.mcap"
+    simulate_bridgeloc(fresh, BridgeLocScenario(field="lobby", tags=6, duration_s=16,
+                                                infra_fps=2, seed=0))
+    assert fresh.read_bytes() == SAMPLE.read_bytes(), (
+        "sample_logs/bridgeloc.mcap is stale: regenerate with `make sample-logs`"
+    )
+    assert SAMPLE.stat().st_size < 5_000_000
+
+
+def test_simulate_cli_rejects_bad_field(tmp_path: Path) -> None:
+    res = CliRunner().invoke(app, ["simulate", "bridgeloc", "--out", str(tmp_path / "x.mcap"),
+                                   "--field", "moon"])
+    assert res.exit_code == 2 and "--field" in res.output
+
+
+def test_csv_path_and_office_field(tmp_path: Path) -> None:
+    path = tmp_path / "path.csv"
+    path.write_text("x_m,y_m\n2.0,2.0\n2.6,2.0\n")
+    log = tmp_path / "csv.mcap"
+    counts = simulate_bridgeloc(log, BridgeLocScenario(field="lobby", tags=2, path=str(path),
+                                                       duration_s=1.0, robot_fps=2, infra_fps=1))
+    assert counts["/r1cam/image"] >= 2 and counts["/cam0/image"] >= 1
+    truth = [m.message.entities[0].position_m for m in LogReader(log).messages(["/ground_truth"])]
+    assert truth[0].x == pytest.approx(2.0) and truth[0].y == pytest.approx(2.0)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("x_m,y_m\n1.0,oops\n")
+    with pytest.raises(Exception, match="bad.csv:2"):
+        simulate_bridgeloc(tmp_path / "b.mcap", BridgeLocScenario(path=str(bad)))

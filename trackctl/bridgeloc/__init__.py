@@ -1,0 +1,60 @@
+"""BridgeLoc (dissertation §4.2): robot localization by bridging infrastructure and robot camera
+views through simple rotation-symmetric tags, with an EKF over odometry for blind spots."""
+
+from trackctl.bridgeloc.tags import (
+    BORDER_RATIO,
+    Mount,
+    Placement,
+    PracticalTag,
+    count_practical,
+    count_universal,
+    enumerate_practical,
+    enumerate_universal,
+    theorem5,
+    theorem6,
+)
+
+__all__ = [
+    "BORDER_RATIO",
+    "Mount",
+    "Placement",
+    "PracticalTag",
+    "count_practical",
+    "count_universal",
+    "enumerate_practical",
+    "enumerate_universal",
+    "theorem5",
+    "theorem6",
+]
+
+from trackctl.bridgeloc.pipeline import (  # noqa: E402
+    POSE_TOPIC,
+    BridgeLocConfig,
+    Mode,
+    PoseMethod,
+    run,
+)
+from trackctl.processing.base import ProcessorInfo, register_processor  # noqa: E402
+
+__all__ += ["POSE_TOPIC", "BridgeLocConfig", "BridgeLocProcessor", "Mode", "PoseMethod", "run"]
+
+
+class BridgeLocProcessor:
+    """The ``bridgeloc`` processor (registry entry of :func:`run`)."""
+
+    name = "bridgeloc"
+
+    def __init__(self, config: BridgeLocConfig | None = None) -> None:
+        self.config = config or BridgeLocConfig()
+
+    def run(self, reader, writer, progress=None):  # type: ignore[no-untyped-def]
+        return run(reader, writer, self.config, progress)
+
+
+register_processor(
+    ProcessorInfo(
+        name="bridgeloc",
+        description="BridgeLoc: robot poses from tag bridging + EKF over odometry (§4.2)",
+        factory=BridgeLocProcessor,
+    )
+)

@@ -1,0 +1,197 @@
+"""Detect and decode BridgeLoc tags in a grayscale image (OpenCV quads + our own N x N decoder).
+
+OpenCV finds the candidates (adaptive threshold, contours, ``approxPolyDP`` quads, sub-pixel
+corners); the cells are read by our decoder because cv2.aruco can only hold codes with four
+distinct rotations, not the practical 2x2 family (see ``shared/ECOSYSTEM.md``).
+
+Orientation rules (§4.2.3 B, practical uniqueness): the cameras never roll, so "up" in the image
+is up on the wall. A quad with a near-vertical edge is a square-mounted tag, read with its top
+edge up; a quad without one is a diamond (mounted 45° turned), read with its top corner as the
+printed top-left corner.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from trackctl.bridgeloc.tags import BORDER_RATIO, Code, Placement, tag_geometry
+
+__all__ = ["DetectorConfig", "TagDetection", "detect_tags", "order_corners"]
+
+
+@dataclass(frozen=True, slots=True)
+class DetectorConfig:
+    """Thresholds of the tag detector."""
+
+    n: int = 2
+    border_ratio: float = BORDER_RATIO
+    min_side_px: float = 6.0
+    """Quads with a shorter side are ignored (too few pixels per cell)."""
+    min_contrast: float = 25.0
+    """Grey-level difference required between the white quiet zone and the black border."""
+    cell_margin: float = 0.25
+    """A cell must differ from the black/white midpoint by this fraction of the contrast."""
+    edge_margin_px: float = 2.0
+    """Quads with a corner this close to the image edge are cut by it: rejected."""
+    vertical_tol_deg: float = 20.0
+    """An edge within this angle of vertical marks a square-mounted tag."""
+    block_size: int = 9
+    threshold_c: float = 7.0
+    large_block_size: int = 25
+
+
+@dataclass(frozen=True, slots=True)
+class TagDetection:
+    """One decoded tag: its code read upright, how it is mounted, corners TL, TR, BR, BL (px)."""
+
+    code: Code
+    placement: Placement
+    corners: np.ndarray
+    contrast: float
+
+    @property
+    def pattern_id(self) -> str:
+        """Code + placement, as :attr:`PracticalTag.pattern_id`."""
+        n = int(round(math.sqrt(len(self.code))))
+        return f"{n}:{''.join(map(str, self.code))}/{self.placement.value}"
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.corners.mean(axis=0)
+
+
+def order_corners(quad: np.ndarray, vertical_tol_deg: float = 20.0
+                  ) -> tuple[np.ndarray, Placement]:
+    """Corners in printed order TL, TR, BR, BL and the placement, for an upright camera."""
+    q = np.asarray(quad, np.float64).reshape(4, 2)
+    c = q.mean(axis=0)
+    ang = np.arctan2(q[:, 1] - c[1], q[:, 0] - c[0])  # y down: increasing = clockwise on screen
+    q = q[np.argsort(ang)]
+    edges = np.roll(q, -1, axis=0) - q
+    from_vertical = np.degrees(np.arctan2(np.abs(edges[:, 0]), np.abs(edges[:, 1])))
+    if from_vertical.min() <= vertical_tol_deg:
+        # square: the top edge joins the two highest corners
+        k = max(range(4), key=lambda i: q[(i + 2) % 4, 1] + q[(i + 3) % 4, 1] - q[i, 1]
+                - q[(i + 1) % 4, 1])
+        placement = Placement.SQUARE
+    else:
+        k = int(np.argmin(q[:, 1]))  # diamond: the top corner is the printed top-left
+        placement = Placement.DIAMOND
+    return np.roll(q, -k, axis=0), placement
+
+
+@functools.lru_cache(maxsize=16)
+def _rings(n: int, border_ratio: float) -> tuple[int, int, float, np.ndarray, np.ndarray]:
+    """Canonical warp size and the masks of the black border's middle and the white quiet zone."""
+    geo = tag_geometry(n, border_ratio)
+    side = 28 * n
+    m = int(round(side * 0.14))
+    size = side + 2 * m
+    b = geo.border * side
+    ring_in = np.zeros((size, size), bool)
+    lo, hi = int(m + 0.3 * b), int(round(m + side - 0.3 * b))
+    ring_in[lo:hi, lo:hi] = True
+    lo2, hi2 = int(round(m + 0.7 * b)), int(m + side - 0.7 * b)
+    ring_in[lo2:hi2, lo2:hi2] = False
+    ring_out = np.zeros((size, size), bool)
+    o1, o2 = int(m * 0.25), size - int(m * 0.25)
+    ring_out[o1:o2, o1:o2] = True
+    i1, i2 = int(round(m * 0.75)), size - int(round(m * 0.75))
+    ring_out[i1:i2, i1:i2] = False
+    return side, m, b, ring_in, ring_out
+
+
+def _decode(gray: np.ndarray, corners: np.ndarray, cfg: DetectorConfig
+            ) -> tuple[Code, float] | None:
+    geo = tag_geometry(cfg.n, cfg.border_ratio)
+    side, m, b, ring_in, ring_out = _rings(cfg.n, cfg.border_ratio)
+    dst = np.array([[m, m], [m + side, m], [m + side, m + side], [m, m + side]], np.float32)
+    hmat = cv2.getPerspectiveTransform(corners.astype(np.float32), dst)
+    size = side + 2 * m
+    canon = cv2.warpPerspective(gray, hmat, (size, size), flags=cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REPLICATE)
+    # black reference: the middle line of the border; white: a ring in the quiet zone
+    inner = canon[ring_in]
+    outer = canon[ring_out]
+    black = float(np.median(inner))
+    white = float(np.median(outer))
+    contrast = white - black
+    if contrast < cfg.min_contrast:
+        return None
+    mid = (white + black) / 2
+    if np.mean(inner < mid) < 0.6 or np.mean(outer < mid) > 0.25:
+        return None  # not a black border inside a white margin
+    cell = geo.cell * side
+    bits = []
+    for r in range(cfg.n):
+        for q in range(cfg.n):
+            y0 = m + b + (r + 0.25) * cell
+            x0 = m + b + (q + 0.25) * cell
+            patch = canon[int(y0) : int(y0 + cell / 2), int(x0) : int(x0 + cell / 2)]
+            v = float(patch.mean())
+            if abs(v - mid) < cfg.cell_margin * contrast:
+                return None  # a grey cell: too small or blurred to read safely
+            bits.append(1 if v < mid else 0)
+    if all(bits) or not any(bits):
+        return None  # uniform codes are not tags (practical rule: too many false positives)
+    return tuple(bits), contrast
+
+
+def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[TagDetection]:
+    """All decodable tags of a grayscale image (corners in the image's own, distorted pixels)."""
+    cfg = cfg or DetectorConfig()
+    if gray.ndim != 2:
+        gray = cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
+    h, w = gray.shape
+    min_area = cfg.min_side_px**2
+    quads = []
+    # two window sizes, as ArUco does: a small one separates tiny far tags from the background,
+    # a large one keeps the thick border of near tags in one piece
+    for block, c in ((cfg.block_size, cfg.threshold_c), (cfg.large_block_size, 7.0)):
+        binary = cv2.adaptiveThreshold(gray, 255, cv2.ADAPTIVE_THRESH_MEAN_C,
+                                       cv2.THRESH_BINARY_INV, block, c)
+        contours, _ = cv2.findContours(binary, cv2.RETR_LIST, cv2.CHAIN_APPROX_SIMPLE)
+        for cnt in contours:
+            if len(cnt) < 4:
+                continue
+            _, _, bw, bh = cv2.boundingRect(cnt)
+            if bw < cfg.min_side_px or bh < cfg.min_side_px:
+                continue
+            area = cv2.contourArea(cnt)
+            if area < min_area:
+                continue
+            peri = cv2.arcLength(cnt, True)
+            quad = cv2.approxPolyDP(cnt, 0.06 * peri, True)
+            if len(quad) == 4 and cv2.isContourConvex(quad):
+                quads.append((area, quad))
+    quads.sort(key=lambda aq: -aq[0])  # outer borders first: a tag's inner outline is a dup
+    out: list[TagDetection] = []
+    for _, quad in quads:
+        q = quad.reshape(4, 2).astype(np.float32)
+        sides = np.linalg.norm(q - np.roll(q, 1, axis=0), axis=1)
+        if sides.min() < cfg.min_side_px:
+            continue
+        if (q[:, 0] < cfg.edge_margin_px).any() or (q[:, 1] < cfg.edge_margin_px).any() or (
+            q[:, 0] > w - 1 - cfg.edge_margin_px).any() or (q[:, 1] > h - 1 - cfg.edge_margin_px
+                                                             ).any():
+            continue  # cut by the image border: corners would be wrong
+        # keep the window inside the black border: the code cells' edges would pull the corner
+        border_px = sides.min() / (cfg.border_ratio + 2)
+        win = int(np.clip(border_px * 0.6, 2, 5))
+        ctr0 = q.mean(axis=0)
+        if any(np.linalg.norm(d.center - ctr0) < max(3.0, sides.min() / 2) for d in out):
+            continue  # the same tag found again (inner outline, or the other threshold)
+        refined = cv2.cornerSubPix(gray, q.reshape(-1, 1, 2).copy(), (win, win), (-1, -1),
+                                   (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.01))
+        corners, placement = order_corners(refined.reshape(4, 2), cfg.vertical_tol_deg)
+        dec = _decode(gray, corners, cfg)
+        if dec is None:
+            continue
+        code, contrast = dec
+        out.append(TagDetection(code, placement, corners, contrast))
+    return out

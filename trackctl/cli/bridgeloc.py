@@ -1,0 +1,148 @@
+"""``trackctl bridgeloc tags|eval`` and ``trackctl simulate bridgeloc``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from trackctl.cli.common import apply_fail_if, print_json, progress, stderr
+from trackctl.cli.process import print_reports
+from trackctl.metrics.report import jsonable_metrics
+
+bridgeloc_app = typer.Typer(
+    help="BridgeLoc (§4.2): rotation-symmetric tags, view bridging, EKF robot localization.",
+    no_args_is_help=True,
+)
+
+
+@bridgeloc_app.command("tags")
+def tags(
+    n: Annotated[int, typer.Option("--n", help="Code cells per side (N).")] = 2,
+    practical: Annotated[
+        bool, typer.Option("--practical", help="Practically unique set (no roll, 45°, height).")
+    ] = False,
+    size_cm: Annotated[float, typer.Option(help="Printed side of the black square, cm.")] = 30.0,
+    border_ratio: Annotated[float, typer.Option("--b", help="Code width / border width.")] = 5.0,
+    count: Annotated[bool, typer.Option("--count", help="Print the set sizes only.")] = False,
+    out: Annotated[Path | None, typer.Option(help="Sheet to write: *.png or *.pdf.")] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Enumerate unique tag sets (checked against Theorems 5 and 6) and print tag sheets."""
+    from trackctl.bridgeloc.sheets import write_sheet
+    from trackctl.bridgeloc.tags import (
+        MAX_ENUMERATION_N,
+        count_practical,
+        count_universal,
+        iter_sheet_tags,
+        theorem5,
+        theorem6,
+    )
+    from trackctl.errors import InputError
+
+    if not 1 <= n <= MAX_ENUMERATION_N:
+        raise InputError(f"--n {n}: enumeration supports 1..{MAX_ENUMERATION_N}")
+    if not count and out is None:
+        raise InputError("give --count and/or --out SHEET.png|pdf")
+    result: dict[str, object] = {"n": n}
+    if count:
+        result["universal"] = count_universal(n)
+        result["practical"] = count_practical(n)
+    if out is not None:
+        sheet = list(iter_sheet_tags(n, practical))
+        if len(sheet) > 512:
+            raise InputError(f"--n {n}: {len(sheet)} tags are too many for one sheet (N <= 3)")
+        write_sheet(sheet, n, out, size_cm, border_ratio)
+        result_out = {"out": str(out), "printed": len(sheet)}
+    if json_out:
+        print_json(result)  # the documented object: {"n", "universal", "practical"}
+        return
+    if count:
+        typer.echo(
+            f"N={n}: universal {result['universal']} (Theorem 5: {theorem5(n)}), "
+            f"practical {result['practical']} (Theorem 6: {theorem6(n)})"
+        )
+    if out is not None:
+        stderr.print(f"wrote {result_out['printed']} tags to {out}")
+
+
+@bridgeloc_app.command("eval")
+def eval_(
+    log: Annotated[Path, typer.Argument(help="MCAP log: camera images + models, wheel odometry.")],
+    out: Annotated[Path, typer.Option(help="Output MCAP: input + /bridgeloc/pose + annotations.")],
+    mode: Annotated[str, typer.Option(help="full (EKF), basic (bridging) or icam.")] = "full",
+    pose: Annotated[
+        str, typer.Option(help="Robot pose from bridged corners: lstsq (Eq. 4.9) or pnp.")
+    ] = "lstsq",
+    max_sigma: Annotated[
+        float, typer.Option(help="Full mode: localized while the EKF position std is below (m).")
+    ] = 0.5,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    plot: Annotated[
+        Path | None, typer.Option(help="Write figures (PNG) to this directory.")
+    ] = None,
+    fail_if: Annotated[
+        str | None,
+        typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "error_m_mean>0.32".'),
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """BridgeLoc: localize the robot by bridging infrastructure and robot camera views."""
+    from trackctl.bridgeloc import BridgeLocConfig, BridgeLocProcessor, Mode, PoseMethod
+    from trackctl.errors import InputError
+    from trackctl.processing import run_processors
+
+    try:
+        mode_value = Mode(mode)
+    except ValueError:
+        raise InputError(f"--mode {mode!r}: expected full, basic or icam") from None
+    try:
+        pose_value = PoseMethod(pose)
+    except ValueError:
+        raise InputError(f"--pose {pose!r}: expected lstsq or pnp") from None
+    proc = BridgeLocProcessor(BridgeLocConfig(mode=mode_value, pose=pose_value,
+                                              max_sigma_m=max_sigma))
+    with progress("bridgeloc", quiet) as bar:
+        (report,) = run_processors(log, out, [proc], bar)
+    if plot is not None:
+        from trackctl.plots.bridgeloc import plot_run
+
+        plot_run(out, plot)
+    if json_out:
+        print_json(jsonable_metrics(report.metrics))
+    else:
+        print_reports([report])
+    apply_fail_if(fail_if, [report])
+
+
+def simulate_bridgeloc(
+    out: Annotated[Path, typer.Option(help="MCAP log to write.")],
+    field: Annotated[str, typer.Option(help="office (1 camera, 1 tag) or lobby (3, 2-10).")] = (
+        "lobby"
+    ),
+    tags: Annotated[int, typer.Option(help="Tags on the lobby walls.")] = 10,
+    path: Annotated[str, typer.Option(help="random, or a CSV of x_m,y_m waypoints.")] = "random",
+    duration: Annotated[float, typer.Option(help="Seconds (lobby).")] = 60.0,
+    robot_fps: Annotated[float, typer.Option(help="Robot camera frames per second in the log.")] = (
+        5.0
+    ),
+    infra_fps: Annotated[float, typer.Option(help="Infrastructure camera frames per second.")] = (
+        5.0
+    ),
+    seed: Annotated[int, typer.Option(help="Random seed (same seed, same bytes).")] = 0,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """A robot among infrastructure cameras and wall tags, with rendered images (BridgeLoc)."""
+    from trackctl.sim.bridgeloc import BridgeLocScenario
+    from trackctl.sim.bridgeloc import simulate_bridgeloc as simulate
+
+    cfg = BridgeLocScenario(field=field, tags=tags if field == "lobby" else 1, path=path,
+                            seed=seed, duration_s=duration, robot_fps=robot_fps,
+                            infra_fps=infra_fps)
+    counts = simulate(str(out), cfg)
+    if json_out:
+        print_json({"out": str(out), "topics": counts})
+    elif not quiet:
+        stderr.print(f"wrote {sum(counts.values())} messages on {len(counts)} topics to {out}")

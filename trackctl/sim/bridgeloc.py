@@ -1,0 +1,553 @@
+"""BridgeLoc scenarios (dissertation §4.2.4, Fig. 4.19): a robot with encoders, an IR light and a
+wide-angle camera among infrastructure cameras and N x N wall tags.
+
+* ``office`` — one infrastructure camera (50° AoV), one tag about 1.5 m from it; the robot visits
+  test spots at 1-4 m and -60..60° from the tag (Fig. 4.20), facing the tag's wall.
+* ``lobby`` — 14 x 8 m, three infrastructure cameras (one with an occluded corner), 2-10 tags on
+  the walls above/below the robot camera, some rotated by 45°, tags of a pattern reused far apart;
+  the robot drives random waypoints (or a CSV path).
+
+Images of every camera are rendered: tags are warped onto the projected quads
+(``cv2.warpPerspective``) over a simple background, the robot and its IR light are drawn in the
+infrastructure views, then lens distortion (``cv2.remap``), blur, noise and JPEG. Same seed, same
+bytes.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from trackctl.bridgeloc.tags import Code, Mount, Placement, enumerate_practical, tag_texture
+from trackctl.errors import InputError
+from trackctl.geometry.camera import PinholeCamera, look_at
+from trackctl.ingest.video import make_compressed_image
+from trackctl.logs import topics
+from trackctl.logs.messages import (
+    CameraModel,
+    GroundTruth,
+    GroundTruthEntity,
+    Quat,
+    Transform,
+    Vec3,
+    WheelOdometry,
+)
+from trackctl.logs.writer import LogWriter
+
+__all__ = [
+    "BridgeLocScenario",
+    "WallTag",
+    "lobby_layout",
+    "render_view",
+    "robot_camera_model",
+    "simulate_bridgeloc",
+    "tag_corners",
+]
+
+S = 1_000_000_000
+ROBOT = "r1"
+ROBOT_CAMERA = "r1cam"
+MARGIN = 0.25  # white quiet zone around the black square, fraction of its side
+
+
+@dataclass(frozen=True, slots=True)
+class BridgeLocScenario:
+    """Parameters of a BridgeLoc scenario log."""
+
+    field: str = "lobby"
+    tags: int = 10
+    path: str = "random"
+    seed: int = 0
+    duration_s: float = 60.0
+    robot_fps: float = 5.0
+    """Robot camera rate in the log (the JD-510 runs at 30 fps; 5 Hz keeps logs small)."""
+    infra_fps: float = 5.0
+    odom_hz: float = 25.0
+    tag_size_m: float = 0.30
+    n: int = 2
+    camera_height_m: float = 0.50
+    ir_height_m: float = 0.65
+    ir_range_m: float = 6.0
+    """Distance beyond which the IR light is too dim for the infrastructure cameras."""
+    speed_mps: float = 0.4
+    turn_rps: float = 1.0
+    jpeg_quality: int = 75
+    noise_sigma: float = 2.5
+
+    def __post_init__(self) -> None:
+        if self.field not in ("office", "lobby"):
+            raise InputError(f"--field {self.field!r}: expected office or lobby")
+        if not 1 <= self.tags <= 56:
+            raise InputError(f"--tags {self.tags}: expected 1..56")
+        if self.duration_s <= 0 or self.robot_fps <= 0 or self.infra_fps <= 0:
+            raise InputError("duration and frame rates must be positive")
+
+
+@dataclass(frozen=True, slots=True)
+class WallTag:
+    """A tag hung on a wall: centre, inward normal (horizontal), symbol."""
+
+    tag_id: str
+    code: Code
+    placement: Placement
+    mount: Mount
+    center: tuple[float, float, float]
+    normal: tuple[float, float]
+    size_m: float
+
+    def to_json(self) -> dict[str, object]:
+        return {
+            "tag_id": self.tag_id,
+            "code": "".join(map(str, self.code)),
+            "placement": self.placement.value,
+            "mount": self.mount.value,
+            "center_m": list(self.center),
+            "normal": list(self.normal),
+            "size_m": self.size_m,
+        }
+
+
+def tag_corners(tag: WallTag, scale: float = 1.0) -> np.ndarray:
+    """World corners (4, 3) TL, TR, BR, BL of the printed square (``scale`` x its side).
+
+    TL..BL are the printed tag's corners as a viewer facing the wall sees them; a diamond is the
+    square turned 45° clockwise, so its top corner is the printed TL.
+    """
+    nrm = np.array([tag.normal[0], tag.normal[1], 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    right = np.cross(-nrm, up)
+    if tag.placement is Placement.DIAMOND:
+        c, s = math.cos(math.pi / 4), math.sin(math.pi / 4)
+        right, up = c * right - s * up, s * right + c * up
+    h = tag.size_m * scale / 2
+    ctr = np.asarray(tag.center, float)
+    return np.stack(
+        [ctr - right * h + up * h, ctr + right * h + up * h, ctr + right * h - up * h,
+         ctr - right * h - up * h]
+    )
+
+
+def _model(name: str, pose: Transform, aov_deg: float, dist: tuple[float, ...]) -> CameraModel:
+    w, h = 640, 480
+    f = w / (2 * math.tan(math.radians(aov_deg) / 2))
+    return CameraModel(0, name, w, h, f, f, w / 2, h / 2, "plumb_bob", dist, pose)
+
+
+def robot_camera_model(height_m: float = 0.5) -> CameraModel:
+    """The robot's 120° camera; its pose is base_link <- camera optical frame (not world)."""
+    pose = look_at(np.array([0.10, 0.0, height_m]), np.array([1.10, 0.0, height_m]))
+    return _model(ROBOT_CAMERA, pose, 120.0, (-0.03, 0.004, 0.0, 0.0, 0.0))
+
+
+@dataclass
+class Layout:
+    """Static scene: room size, infrastructure cameras, occluded regions, tag candidates."""
+
+    size: tuple[float, float]
+    cameras: list[CameraModel]
+    occluded: dict[str, np.ndarray] = field(default_factory=dict)
+    tags: list[WallTag] = field(default_factory=list)
+
+
+def _infra(name: str, eye: tuple[float, float, float], target: tuple[float, float, float]
+           ) -> CameraModel:
+    return _model(name, look_at(np.array(eye), np.array(target)), 50.0, (-0.02, 0.0, 0, 0, 0))
+
+
+def _symbols(n: int) -> list[tuple[Code, Placement]]:
+    seen: list[tuple[Code, Placement]] = []
+    for t in enumerate_practical(n):
+        key = (t.code, t.placement)
+        if key not in seen:
+            seen.append(key)
+    return seen
+
+
+def office_layout(cfg: BridgeLocScenario) -> Layout:
+    """A 6 x 7 m office: one camera ~1.5 m from one tag on the wall x = 6 m."""
+    cam = _infra("cam0", (5.0, 2.5, 1.9), (6.0, 3.5, 0.6))
+    tag = WallTag("t0", (0, 1, 1, 0), Placement.SQUARE, Mount.ABOVE, (6.0, 3.5, 0.85),
+                  (-1.0, 0.0), cfg.tag_size_m)
+    return Layout((6.0, 7.0), [cam], {}, [tag])
+
+
+def lobby_layout(cfg: BridgeLocScenario) -> Layout:
+    """The 14 x 8 m lobby: three cameras, an occluded corner for the top camera, wall tags."""
+    cams = [
+        _infra("cam0", (3.0, 0.2, 2.6), (3.0, 8.0, 0.0)),
+        _infra("cam1", (11.0, 0.2, 2.6), (11.0, 8.0, 0.0)),
+        _infra("cam2", (7.0, 7.8, 2.6), (7.0, 0.0, 0.0)),
+    ]
+    # a corner of the building hides this triangle from the top camera (the paper's grey area)
+    occluded = {"cam2": np.array([[7.0, 3.5], [9.5, 1.0], [9.5, 3.5]], np.float32)}
+    rng = np.random.default_rng(cfg.seed + 7)
+    w, h = 14.0, 8.0
+    cand: list[tuple[float, float, float, float]] = []  # x, y, nx, ny
+    for x in np.arange(1.0, w - 0.99, 0.5):
+        cand += [(x, 0.0, 0.0, 1.0), (x, h, 0.0, -1.0)]
+    for y in np.arange(1.0, h - 0.99, 0.5):
+        cand += [(0.0, y, 1.0, 0.0), (w, y, -1.0, 0.0)]
+    pcams = [PinholeCamera(c) for c in cams]
+    ok = []
+    for x, y, nx, ny in cand:
+        ctr = np.array([x, y, 0.6])
+        for pc in pcams:
+            d = pc.position - ctr
+            dist = float(np.linalg.norm(d))
+            cos_inc = (d[0] * nx + d[1] * ny) / max(1e-9, math.hypot(d[0], d[1]))
+            px, front = pc.project(ctr[None])
+            inside = front[0] and 40 < px[0, 0] < 600 and 40 < px[0, 1] < 440
+            if inside and dist < 9.5 and cos_inc > 0.35:
+                ok.append((x, y, nx, ny))
+                break
+    if len(ok) < cfg.tags:
+        raise InputError(f"--tags {cfg.tags}: the lobby has only {len(ok)} usable wall spots")
+    # farthest-point sampling: spread tags over the walls
+    pts = np.array([[c[0], c[1]] for c in ok])
+    chosen = [int(rng.integers(len(ok)))]
+    while len(chosen) < cfg.tags:
+        d = np.min(np.linalg.norm(pts[:, None] - pts[chosen][None], axis=2), axis=1)
+        chosen.append(int(np.argmax(d)))
+    symbols = _symbols(cfg.n)
+    order = rng.permutation(len(symbols))
+    tags = []
+    for k, idx in enumerate(chosen):
+        x, y, nx, ny = ok[idx]
+        # tags are drawn from a small pool of patterns, so some share a pattern far apart
+        # (the EKF picks the nearest candidate, Eq. 4.11); mounts alternate above/below
+        code, placement = symbols[int(order[k % max(2, cfg.tags // 2 + 1)])]
+        mount = Mount.ABOVE if k % 2 == 0 else Mount.BELOW
+        z = round(cfg.camera_height_m + (0.40 if mount is Mount.ABOVE else -0.28), 3)
+        tags.append(WallTag(f"t{k}", code, placement, mount, (x, y, z), (nx, ny), cfg.tag_size_m))
+    return Layout((w, h), cams, occluded, tags)
+
+
+# ---------------------------------------------------------------- robot motion
+
+
+def _segments(waypoints: list[tuple[float, float, float | None, float]], start_yaw: float,
+              v: float, om: float, dt: float) -> np.ndarray:
+    """Poses (K, 3) of a diff-drive robot visiting waypoints: turn, drive, (turn), hold."""
+    x, y = waypoints[0][0], waypoints[0][1]
+    yaw = start_yaw
+    out = [(x, y, yaw)]
+
+    def turn_to(target: float) -> None:
+        nonlocal yaw
+        err = math.atan2(math.sin(target - yaw), math.cos(target - yaw))
+        steps = max(1, int(math.ceil(abs(err) / (om * dt))))
+        for _ in range(steps):
+            yaw += err / steps
+            out.append((x, y, yaw))
+
+    for wx, wy, heading, hold in waypoints[1:]:
+        d = math.hypot(wx - x, wy - y)
+        if d > 1e-6:
+            turn_to(math.atan2(wy - y, wx - x))
+            steps = max(1, int(math.ceil(d / (v * dt))))
+            x0, y0 = x, y
+            for k in range(1, steps + 1):
+                x, y = x0 + (wx - x0) * k / steps, y0 + (wy - y0) * k / steps
+                out.append((x, y, yaw))
+        if heading is not None:
+            turn_to(heading)
+        for _ in range(int(round(hold / dt))):
+            out.append((x, y, yaw))
+    return np.array(out)
+
+
+def _office_spots(layout: Layout) -> tuple[list[tuple[float, float, float | None, float]],
+                                           list[tuple[float, float]]]:
+    tag = layout.tags[0]
+    nrm = np.array(tag.normal)
+    tang = np.array([-nrm[1], nrm[0]])
+    facing = math.atan2(-nrm[1], -nrm[0])
+    wps: list[tuple[float, float, float | None, float]] = []
+    spots = []
+    for dist in (1.0, 2.0, 3.0, 4.0):
+        for ang in (-60, -45, -30, 0, 30, 45, 60):
+            a = math.radians(ang)
+            p = np.array(tag.center[:2]) + dist * (math.cos(a) * nrm + math.sin(a) * tang)
+            wps.append((float(p[0]), float(p[1]), facing, 1.2))
+            spots.append((dist, float(ang)))
+    return wps, spots
+
+
+def _random_waypoints(rng: np.random.Generator, size: tuple[float, float], n: int
+                      ) -> list[tuple[float, float, float | None, float]]:
+    m = 0.8
+    return [(float(rng.uniform(m, size[0] - m)), float(rng.uniform(m, size[1] - m)), None, 0.0)
+            for _ in range(n)]
+
+
+def _csv_waypoints(path: str) -> list[tuple[float, float, float | None, float]]:
+    try:
+        with open(path, newline="") as f:
+            rows = [r for r in csv.reader(f) if r and not r[0].startswith("#")]
+    except OSError as err:
+        raise InputError(f"--path {path}: {err.strerror}") from err
+    out = []
+    for i, r in enumerate(rows):
+        try:
+            out.append((float(r[0]), float(r[1]), None, 0.0))
+        except (ValueError, IndexError):
+            if i == 0:
+                continue  # header
+            raise InputError(f"--path {path}:{i + 1}: expected x_m,y_m") from None
+    if len(out) < 2:
+        raise InputError(f"--path {path}: needs at least two x_m,y_m rows")
+    return out
+
+
+# ---------------------------------------------------------------- rendering
+
+
+class _Renderer:
+    """Draws one camera's views; keeps its distortion map and tag textures."""
+
+    def __init__(self, model: CameraModel, rng: np.random.Generator, cfg: BridgeLocScenario
+                 ) -> None:
+        self.model = model
+        self.cfg = cfg
+        self.rng = rng
+        self.K = np.array([[model.fx_px, 0, model.cx_px], [0, model.fy_px, model.cy_px], [0, 0, 1]])
+        w, h = model.width_px, model.height_px
+        grid = np.stack(np.meshgrid(np.arange(w, dtype=np.float32),
+                                    np.arange(h, dtype=np.float32)), axis=-1).reshape(-1, 1, 2)
+        und = cv2.undistortPoints(grid, self.K, np.asarray(model.distortion, float), P=self.K)
+        und = und.reshape(h, w, 2)
+        self.map_x = und[..., 0].astype(np.float32)
+        self.map_y = und[..., 1].astype(np.float32)
+        self._tex: dict[tuple[Code, int], np.ndarray] = {}
+
+    def texture(self, code: Code, side: int) -> np.ndarray:
+        key = (code, side)
+        if key not in self._tex:
+            self._tex[key] = tag_texture(code, self.cfg.n, side, margin=MARGIN, white=205,
+                                         black=30)
+        return self._tex[key]
+
+    def finish(self, ideal: np.ndarray) -> bytes:
+        img = cv2.remap(ideal, self.map_x, self.map_y, cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_REPLICATE)
+        img = cv2.GaussianBlur(img, (0, 0), 0.7)
+        noise = self.rng.normal(0.0, self.cfg.noise_sigma, img.shape)
+        img = np.clip(img + noise, 0, 255).astype(np.uint8)
+        ok, buf = cv2.imencode(".jpg", img, [int(cv2.IMWRITE_JPEG_QUALITY), self.cfg.jpeg_quality])
+        assert ok
+        return buf.tobytes()
+
+
+def _pinhole(model: CameraModel, world_from_camera: Transform) -> PinholeCamera:
+    from dataclasses import replace
+
+    return PinholeCamera(replace(model, distortion=(0.0,) * 5, world_from_camera=world_from_camera))
+
+
+def draw_tag(img: np.ndarray, cam: PinholeCamera, tag: WallTag, tex_fn) -> None:  # noqa: ANN001
+    """Warp a tag's texture onto its projected quad (ideal, undistorted image)."""
+    ctr = np.asarray(tag.center)
+    to_cam = cam.position - ctr
+    if to_cam[0] * tag.normal[0] + to_cam[1] * tag.normal[1] <= 0.02:
+        return  # behind the wall
+    outer = tag_corners(tag, 1.0 + 2 * MARGIN)
+    pc = cam.to_camera(outer)
+    if (pc[:, 2] < 0.05).any():
+        return
+    px, _ = cam.project(outer)
+    h, w = img.shape
+    x0, y0 = np.floor(px.min(axis=0)).astype(int)
+    x1, y1 = np.ceil(px.max(axis=0)).astype(int)
+    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+    if x1 <= x0 or y1 <= y0:
+        return
+    side_px = float(np.max(np.linalg.norm(px - np.roll(px, 1, axis=0), axis=1)))
+    size = (x1 - x0, y1 - y0)
+    # supersample small quads and average down (INTER_AREA): edges land within ~0.1 px
+    ss = 4 if size[0] * size[1] < 20_000 else (2 if size[0] * size[1] < 80_000 else 1)
+    side = int(np.clip(2 ** math.ceil(math.log2(max(side_px * ss, 8))), 16, 1024))
+    tex = tex_fn(tag.code, int(round(side / (1 + 2 * MARGIN))))
+    th, tw = tex.shape
+    # texel centres are integers, so the texture's outer edges lie at -0.5 and size - 0.5
+    src = np.array([[-0.5, -0.5], [tw - 0.5, -0.5], [tw - 0.5, th - 0.5], [-0.5, th - 0.5]],
+                   np.float32)
+    dst = ((px - [x0, y0]) * ss + (ss - 1) / 2).astype(np.float32)
+    hmat = cv2.getPerspectiveTransform(src, dst)
+    big = (size[0] * ss, size[1] * ss)
+    warped = cv2.warpPerspective(tex, hmat, big, flags=cv2.INTER_LINEAR, borderValue=0)
+    mask = cv2.warpPerspective(np.full_like(tex, 255), hmat, big, flags=cv2.INTER_LINEAR,
+                               borderValue=0)
+    if ss > 1:
+        warped = cv2.resize(warped, size, interpolation=cv2.INTER_AREA)
+        mask = cv2.resize(mask, size, interpolation=cv2.INTER_AREA)
+    roi = img[y0:y1, x0:x1]
+    a = mask.astype(np.float32) / 255.0
+    roi[:] = (roi * (1 - a) + warped * a).astype(np.uint8)
+
+
+def render_view(model: CameraModel, world_from_camera: Transform, tags: list[WallTag],
+                background: np.ndarray, tex_fn, robot: tuple[float, float, float] | None = None,  # noqa: ANN001
+                ir_height_m: float = 0.65, ir_range_m: float = 7.0) -> np.ndarray:
+    """The ideal (undistorted) grayscale view: background, tags, robot body and IR light."""
+    cam = _pinhole(model, world_from_camera)
+    img = background.copy()
+    order = sorted(tags, key=lambda t: -float(np.linalg.norm(cam.position - np.asarray(t.center))))
+    for tag in order:
+        draw_tag(img, cam, tag, tex_fn)
+    if robot is not None:
+        x, y, _ = robot
+        ang = np.linspace(0, 2 * math.pi, 16, endpoint=False)
+        ring = np.column_stack([x + 0.2 * np.cos(ang), y + 0.2 * np.sin(ang), np.full(16, 0.0)])
+        top = ring + [0, 0, ir_height_m - 0.05]
+        pts, front = cam.project(np.vstack([ring, top]))
+        if front.all():
+            hull = cv2.convexHull(pts.astype(np.float32)).astype(np.int32)
+            cv2.fillConvexPoly(img, hull, 45, cv2.LINE_AA)
+        light = np.array([[x, y, ir_height_m]])
+        lp, lfront = cam.project(light)
+        d = float(np.linalg.norm(cam.position - light[0]))
+        if lfront[0]:
+            peak = 255.0 * min(1.0, (ir_range_m / d) ** 2)
+            r = max(1.5, 0.03 * model.fx_px / d)
+            spot = np.zeros_like(img, np.float32)
+            cv2.circle(spot, tuple(int(round(v)) for v in lp[0]), int(round(r * 2)), 1.0, -1,
+                       cv2.LINE_AA)
+            spot = cv2.GaussianBlur(spot, (0, 0), r)
+            spot /= max(spot.max(), 1e-6)
+            img = np.maximum(img, (spot * peak).astype(np.uint8))
+    return img
+
+
+def _background(model: CameraModel, rng: np.random.Generator, horizon: bool) -> np.ndarray:
+    h, w = model.height_px, model.width_px
+    low = cv2.resize(rng.normal(0, 1, (h // 40, w // 40)), (w, h), interpolation=cv2.INTER_CUBIC)
+    if horizon:  # robot camera, level: wall above the horizon, floor below
+        img = np.where(np.arange(h)[:, None] < model.cy_px, 150.0, 95.0) + np.zeros((h, w))
+    else:
+        img = np.full((h, w), 110.0)
+    return np.clip(img + 12 * low, 0, 255).astype(np.uint8)
+
+
+def _in_poly(poly: np.ndarray, x: float, y: float) -> bool:
+    return cv2.pointPolygonTest(poly.reshape(-1, 1, 2), (float(x), float(y)), False) >= 0
+
+
+def _compose(base_from_cam: Transform, x: float, y: float, yaw: float) -> Transform:
+    from scipy.spatial.transform import Rotation
+
+    r_base = Rotation.from_euler("z", yaw)
+    q = base_from_cam.rotation
+    r = r_base * Rotation.from_quat([q.x, q.y, q.z, q.w])
+    t = base_from_cam.translation
+    p = r_base.apply([t.x, t.y, t.z]) + [x, y, 0.0]
+    return Transform(Vec3(*map(float, p)), Quat(*map(float, r.as_quat())))
+
+
+def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) -> dict[str, int]:
+    """Write a BridgeLoc scenario log to ``out``; returns message counts per topic."""
+    cfg = cfg or BridgeLocScenario()
+    rng = np.random.default_rng(cfg.seed)
+    if cfg.field == "office":
+        layout = office_layout(cfg)
+        wps, spots = _office_spots(layout)
+        start = (float(wps[0][0]), float(wps[0][1]))
+        wps = [(start[0], start[1], wps[0][2], 0.0), *wps]
+        start_yaw = float(wps[0][2] or 0.0)
+    else:
+        layout = lobby_layout(cfg)
+        spots = []
+        if cfg.path == "random":
+            n_wp = int(cfg.duration_s * cfg.speed_mps / 2.0) + 4
+            wps = _random_waypoints(rng, layout.size, n_wp)
+        else:
+            wps = _csv_waypoints(cfg.path)
+        start_yaw = 0.0
+    dt = 1.0 / cfg.odom_hz
+    # office: the robot is driven quickly between test spots (only the spots are evaluated)
+    fast = 2.5 if cfg.field == "office" else 1.0
+    poses = _segments(wps, start_yaw, cfg.speed_mps * fast, cfg.turn_rps * fast, dt)
+    if cfg.field == "lobby":
+        poses = poses[: int(cfg.duration_s * cfg.odom_hz)]
+    duration = len(poses) * dt
+    rcam = robot_camera_model(cfg.camera_height_m)
+    base_from_cam = rcam.world_from_camera
+    assert base_from_cam is not None
+    renderers = {c.camera: _Renderer(c, rng, cfg) for c in layout.cameras}
+    rrend = _Renderer(rcam, rng, cfg)
+    backgrounds = {c.camera: _background(c, rng, False) for c in layout.cameras}
+    rbg = _background(rcam, rng, True)
+    wheel_base, ticks_per_m = 0.30, 2000.0
+    counts: dict[str, int] = {}
+    events: list[tuple[int, int, str, object]] = []
+    # odometry: wheel travel from true pose increments, scale errors of +-1.5%, tick noise
+    dyaw = np.diff(np.unwrap(poses[:, 2]), prepend=poses[0, 2])
+    ds = np.hypot(np.diff(poses[:, 0], prepend=poses[0, 0]),
+                  np.diff(poses[:, 1], prepend=poses[0, 1]))
+    left = np.cumsum((ds - dyaw * wheel_base / 2) * ticks_per_m * 1.015
+                     + rng.normal(0, 1.0, len(ds)))
+    right = np.cumsum((ds + dyaw * wheel_base / 2) * ticks_per_m * 0.985
+                      + rng.normal(0, 1.0, len(ds)))
+    for k in range(len(poses)):
+        t_ns = int(round(k * dt * S))
+        events.append((t_ns, 0, topics.odom(ROBOT),
+                       WheelOdometry(t_ns, f"robot/{ROBOT}", int(left[k]), int(right[k]))))
+
+    def pose_at(t: float) -> tuple[float, float, float]:
+        k = min(len(poses) - 1, int(round(t / dt)))
+        return float(poses[k, 0]), float(poses[k, 1]), float(poses[k, 2])
+
+    for tk in np.arange(0.0, duration - 1e-9, 1.0 / cfg.robot_fps):
+        t_ns = int(round(tk * S))
+        x, y, yaw = pose_at(tk)
+        ideal = render_view(rcam, _compose(base_from_cam, x, y, yaw), layout.tags, rbg,
+                            rrend.texture)
+        events.append((t_ns, 1, topics.image(ROBOT_CAMERA),
+                       make_compressed_image(t_ns, ROBOT_CAMERA, rrend.finish(ideal), "jpeg")))
+        ent = GroundTruthEntity(ROBOT, Vec3(x, y, 0.0), yaw_rad=float(math.atan2(math.sin(yaw),
+                                                                                  math.cos(yaw))))
+        events.append((t_ns, 3, topics.GROUND_TRUTH, GroundTruth(t_ns, (ent,))))
+    for tk in np.arange(0.0, duration - 1e-9, 1.0 / cfg.infra_fps):
+        t_ns = int(round(tk * S))
+        x, y, yaw = pose_at(tk)
+        for cam in layout.cameras:
+            occ = layout.occluded.get(cam.camera)
+            robot = None if occ is not None and _in_poly(occ, x, y) else (x, y, yaw)
+            assert cam.world_from_camera is not None
+            ideal = render_view(cam, cam.world_from_camera, layout.tags, backgrounds[cam.camera],
+                                renderers[cam.camera].texture, robot, cfg.ir_height_m,
+                                cfg.ir_range_m)
+            jpeg = renderers[cam.camera].finish(ideal)
+            events.append((t_ns, 2, topics.image(cam.camera),
+                           make_compressed_image(t_ns, cam.camera, jpeg, "jpeg")))
+    events.sort(key=lambda e: (e[0], e[1]))
+    with LogWriter(str(out)) as w:
+        meta = {
+            "generator": "trackctl simulate bridgeloc",
+            "field": cfg.field,
+            "seed": str(cfg.seed),
+            "robot": ROBOT,
+            "robot_camera": ROBOT_CAMERA,
+            "infra_cameras": ",".join(c.camera for c in layout.cameras),
+            "tag_n": str(cfg.n),
+            "tag_size_m": str(cfg.tag_size_m),
+            "border_ratio": "5.0",
+            "ir_height_m": str(cfg.ir_height_m),
+            "tags_truth": json.dumps([t.to_json() for t in layout.tags]),
+            "office_spots": json.dumps(spots),
+        }
+        w.add_metadata("bridgeloc", meta)
+        w.add_metadata(f"robot/{ROBOT}", {"ticks_per_m": str(ticks_per_m),
+                                          "wheel_base_m": str(wheel_base)})
+        for cam in [*layout.cameras, rcam]:
+            w.write(topics.camera_model(cam.camera), cam, 0)
+            counts[topics.camera_model(cam.camera)] = 1
+        for t_ns, _, topic, msg in events:
+            w.write(topic, msg, t_ns)
+            counts[topic] = counts.get(topic, 0) + 1
+    return counts
