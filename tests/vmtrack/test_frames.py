@@ -22,7 +22,7 @@ from trackctl.vmtrack.pipeline import SCENE_TOPIC, TRACKS_TOPIC
 
 VM_SAMPLE = ROOT / "sample_logs" / "vm-office.mcap"
 SAMPLE_SCENARIO = VmScenario(
-    field="office", users=2, nonusers=1, duration_s=20, seed=3, frames=True
+    field="office", users=2, nonusers=1, duration_s=18, seed=3, frames=True, jpeg_quality=50
 )
 
 

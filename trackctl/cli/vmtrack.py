@@ -108,6 +108,9 @@ def simulate_vm(
             "writing simulated ground-plane detections.",
         ),
     ] = False,
+    jpeg_quality: Annotated[
+        int, typer.Option(help="JPEG quality of rendered frames (1-100).", min=1, max=100)
+    ] = 60,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
@@ -132,6 +135,7 @@ def simulate_vm(
         trajectories=str(trajectories) if trajectories else None,
         phones=tuple(p.strip() for p in (phones or "").split(",") if p.strip()),
         frames=frames,
+        jpeg_quality=jpeg_quality,
     )
     counts = simulate(str(out), cfg)
     if json_out:
