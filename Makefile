@@ -3,6 +3,7 @@
 
 sample-logs:  ## regenerate the shipped sample logs (deterministic: same bytes every time)
 	trackctl simulate demo --out sample_logs/demo.mcap --seed 0 --duration 20
+	trackctl simulate vm --out sample_logs/vm-office.mcap --field office --users 2 --nonusers 1 --duration 20 --seed 3 --frames
 	trackctl simulate ev --out sample_logs/ev.mcap --people 400 --area 600 --duration 1200 --seed 0
 
 test:

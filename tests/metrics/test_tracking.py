@@ -73,3 +73,18 @@ def test_matches_py_motmetrics_on_random_data() -> None:
     assert s.id_switches == int(ref["num_switches"].iloc[0])
     assert s.mota == pytest.approx(float(ref["mota"].iloc[0]), abs=1e-9)
     assert s.idf1 == pytest.approx(float(ref["idf1"].iloc[0]), abs=1e-9)
+
+
+def test_initial_identity_follows_the_first_track_through_a_swap() -> None:
+    from trackctl.metrics.tracking import InitialIdentity
+
+    ident = InitialIdentity(1.0)
+    # person a starts next to track "1"; at k=5 the tracker swaps the two tracks
+    errs = []
+    for k in range(10):
+        hyp = {"1": (k, 0.0), "2": (k, 5.0)} if k < 5 else {"2": (k, 0.0), "1": (k, 5.0)}
+        errs.append(ident.error("a", (k, 0.0), hyp))
+    assert errs[:5] == [0.0] * 5
+    assert errs[5:] == [5.0] * 5
+    # nobody within the threshold: not followed (yet)
+    assert InitialIdentity(1.0).error("b", (0.0, 0.0), {"1": (3.0, 0.0)}) is None

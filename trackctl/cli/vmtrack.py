@@ -19,6 +19,21 @@ def vm_track(
     smooth: Annotated[
         bool, typer.Option("--smooth/--no-smooth", help="RTS-smooth every track (offline).")
     ] = True,
+    source: Annotated[
+        str,
+        typer.Option(help="auto (frames when the log has them), frames, or detections."),
+    ] = "auto",
+    search: Annotated[
+        str,
+        typer.Option(
+            help="In frames: predicted (motion-predicted regions, full search to initialize and "
+            "recover) or full (every frame searched whole)."
+        ),
+    ] = "predicted",
+    plot: Annotated[
+        Path | None,
+        typer.Option(help="Draw error over time and the CDF of tracking time into this folder."),
+    ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     fail_if: Annotated[
         str | None,
@@ -29,15 +44,32 @@ def vm_track(
     """VM-Tracking: identify and track people by fusing detections with phone motion sensors."""
     from trackctl.errors import InputError
     from trackctl.processing import run_processors
-    from trackctl.vmtrack import Mode, VmTrackConfig, VmTrackProcessor
+    from trackctl.vmtrack import FrameConfig, Mode, Source, VmTrackConfig, VmTrackProcessor
 
     try:
         mode_value = Mode(mode)
     except ValueError:
         raise InputError(f"--mode {mode!r}: expected vm or v-af") from None
-    proc = VmTrackProcessor(VmTrackConfig(mode=mode_value, smooth=smooth))
+    try:
+        source_value = Source(source)
+    except ValueError:
+        raise InputError(f"--source {source!r}: expected auto, frames or detections") from None
+    if search not in ("predicted", "full"):
+        raise InputError(f"--search {search!r}: expected predicted or full")
+    proc = VmTrackProcessor(
+        VmTrackConfig(
+            mode=mode_value,
+            smooth=smooth,
+            source=source_value,
+            frames=FrameConfig(predicted=search == "predicted"),
+        )
+    )
     with progress("vm-track", quiet) as bar:
         (report,) = run_processors(log, out, [proc], bar)
+    if plot is not None:
+        from trackctl.plots.vmtrack import plot_vmtrack
+
+        plot_vmtrack(out, plot)
     if json_out:
         print_json(jsonable_metrics(report.metrics))
     else:
@@ -69,7 +101,12 @@ def simulate_vm(
         ),
     ] = None,
     frames: Annotated[
-        bool, typer.Option("--frames/--no-frames", help="Render camera frames (not yet available).")
+        bool,
+        typer.Option(
+            "--frames/--no-frames",
+            help="Render JPEG camera frames (the detector finds people in them) instead of "
+            "writing simulated ground-plane detections.",
+        ),
     ] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
@@ -79,11 +116,6 @@ def simulate_vm(
     from trackctl.sim.vm import VmScenario
     from trackctl.sim.vm import simulate_vm as simulate
 
-    if frames:
-        raise InputError(
-            "--frames: rendered frames for VM scenarios are not implemented yet; "
-            "detections are simulated directly (use --no-frames)"
-        )
     try:
         parts = [float(x) for x in speed.split(",")]
     except ValueError:
@@ -99,6 +131,7 @@ def simulate_vm(
         det_noise_m=det_noise,
         trajectories=str(trajectories) if trajectories else None,
         phones=tuple(p.strip() for p in (phones or "").split(",") if p.strip()),
+        frames=frames,
     )
     counts = simulate(str(out), cfg)
     if json_out:

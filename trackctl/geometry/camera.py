@@ -4,6 +4,7 @@ z forward)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -41,24 +42,31 @@ class PinholeCamera:
         if self.model.world_from_camera is None:
             raise ValueError(f"camera {self.model.camera!r} has no world pose (world_from_camera)")
 
-    @property
+    # Derived matrices are cached: projection sits on per-frame hot paths (the model is frozen).
+    @cached_property
     def K(self) -> np.ndarray:  # noqa: N802 - the conventional name
         m = self.model
         return np.array([[m.fx_px, 0, m.cx_px], [0, m.fy_px, m.cy_px], [0, 0, 1.0]])
 
-    @property
+    @cached_property
     def dist(self) -> np.ndarray:
         return np.asarray(self.model.distortion or (0.0,) * 5, float)
 
-    @property
+    @cached_property
     def world_R_cam(self) -> np.ndarray:  # noqa: N802
         q = self.model.world_from_camera.rotation  # type: ignore[union-attr]
         return Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
 
-    @property
+    @cached_property
     def position(self) -> np.ndarray:
         t = self.model.world_from_camera.translation  # type: ignore[union-attr]
         return np.array([t.x, t.y, t.z])
+
+    @cached_property
+    def _extrinsics(self) -> tuple[np.ndarray, np.ndarray]:
+        r_cw = self.world_R_cam.T
+        rvec, _ = cv2.Rodrigues(r_cw)
+        return rvec, -r_cw @ self.position
 
     def to_camera(self, points_w: np.ndarray) -> np.ndarray:
         """World points (N, 3) in the camera optical frame."""
@@ -67,9 +75,7 @@ class PinholeCamera:
     def project(self, points_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (N, 2) of world points and a mask of those in front of the camera."""
         pts = np.asarray(points_w, float).reshape(-1, 3)
-        r_cw = self.world_R_cam.T
-        rvec, _ = cv2.Rodrigues(r_cw)
-        tvec = -r_cw @ self.position
+        rvec, tvec = self._extrinsics
         px, _ = cv2.projectPoints(pts, rvec, tvec, self.K, self.dist)
         depth = self.to_camera(pts)[:, 2]
         return px.reshape(-1, 2), depth > 1e-6
@@ -92,6 +98,8 @@ class PinholeCamera:
         Rays that do not meet the plane in front of the camera give NaN rows.
         """
         px = np.asarray(pixels, float).reshape(-1, 1, 2)
+        if len(px) == 0:
+            return np.empty((0, 3))
         norm = cv2.undistortPoints(px, self.K, self.dist).reshape(-1, 2)
         rays_c = np.column_stack([norm, np.ones(len(norm))])
         rays_w = rays_c @ self.world_R_cam.T

@@ -20,12 +20,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
+from scipy.cluster.vq import kmeans2
 from scipy.spatial.transform import Rotation
 
 from trackctl.errors import InputError
 from trackctl.geometry.camera import PinholeCamera, look_at
 from trackctl.ingest.calibration import to_foxglove_calibration
+from trackctl.ingest.video import make_compressed_image
 from trackctl.logs import topics
 from trackctl.logs.messages import (
     BBox,
@@ -41,6 +44,7 @@ from trackctl.logs.messages import (
     Vec3,
 )
 from trackctl.logs.writer import LogWriter
+from trackctl.sim.render import PersonLook, floor_image, render_frame
 from trackctl.sim.walkers import Trajectory, load_trajectories_csv, random_waypoint
 
 __all__ = ["VmScenario", "simulate_vm", "FIELDS", "mac_of"]
@@ -80,6 +84,9 @@ class VmScenario:
     phones: tuple[str, ...] = ()
     size_m: tuple[float, float] | None = None
     cameras_grid: tuple[int, int] | None = None
+    frames: bool = False
+    """Render JPEG frames (/camN/image) instead of writing simulated detections."""
+    jpeg_quality: int = 60
 
     def __post_init__(self) -> None:
         if self.field not in FIELDS:
@@ -88,6 +95,14 @@ class VmScenario:
             raise InputError("--users and --nonusers must be >= 0")
         if self.duration_s <= 0:
             raise InputError(f"--duration must be positive, got {self.duration_s}")
+
+
+@dataclass(frozen=True, slots=True)
+class _Frame:
+    """A camera frame to render when it is written."""
+
+    cam: PinholeCamera
+    t_s: float
 
 
 def _cameras(
@@ -217,6 +232,21 @@ def _imu_samples(
     return out
 
 
+def _entries(trajs: list[Trajectory], size: tuple[float, float], k: int = 2) -> list[np.ndarray]:
+    """Where people enter the scene: the ``k`` densest spots among the trajectories' first
+    points (the paper puts its check-point APs at the entries), by deterministic k-means."""
+    first = np.array([t.xy[0] for t in trajs])
+    if len(first) <= k:
+        return [np.clip(p, 0.3, np.array(size) - 0.3) for p in first]
+    # farthest-point initialisation from the first point keeps k-means deterministic
+    centres = [first[0]]
+    for _ in range(1, k):
+        d = np.min([np.linalg.norm(first - c, axis=1) for c in centres], axis=0)
+        centres.append(first[int(np.argmax(d))])
+    cent, _ = kmeans2(first, np.array(centres), iter=20, minit="matrix")
+    return [np.clip(c, 0.3, np.array(size) - 0.3) for c in cent]
+
+
 def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
     """Write a VM-Tracking scenario log to ``out``; returns message counts per topic."""
     rng = np.random.default_rng(cfg.seed)
@@ -243,6 +273,8 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
     ]
     if cfg.field == "office" and not cfg.trajectories:
         aps = aps[:1]
+    if cfg.trajectories:
+        aps = [(f"ap-entry-{k}", xy) for k, xy in enumerate(_entries(trajs, size))]
     counts: dict[str, int] = {}
     events: list[tuple[int, int, str, object]] = []
     frame_times = np.arange(0.0, duration, 1.0 / cfg.fps)
@@ -307,6 +339,11 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
                             Vec3(float(g[0]), float(g[1]), 0.0),
                         )
                     )
+            if cfg.frames:
+                # the detector finds people in the pixels; the simulated detections above only
+                # keep the random stream (and so every other topic) identical to a --no-frames log
+                events.append((t_ns, 5, topics.image(cam.model.camera), _Frame(cam, t)))
+                continue
             events.append(
                 (
                     t_ns,
@@ -348,6 +385,23 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
                 )
             )
     events.sort(key=lambda e: (e[0], e[1], e[2]))
+    draw_rng = np.random.default_rng([cfg.seed, 1])
+    looks = {tr.person: PersonLook.random(draw_rng) for tr in trajs}
+    floors = {id(cam): floor_image(cam, draw_rng) for cam in cams} if cfg.frames else {}
+
+    def render(frame: _Frame) -> object:
+        people = []
+        for tr in trajs:
+            xy = tr.at(frame.t_s)[0]
+            if not np.isnan(xy).any():
+                people.append((xy, looks[tr.person]))
+        img = render_frame(frame.cam, floors[id(frame.cam)], people, draw_rng)
+        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, cfg.jpeg_quality])
+        if not ok:  # pragma: no cover - OpenCV always encodes a uint8 BGR image
+            raise RuntimeError("JPEG encoding failed")
+        t_ns = int(round(frame.t_s * S))
+        return make_compressed_image(t_ns, frame.cam.model.camera, buf.tobytes(), "jpeg")
+
     with LogWriter(out) as w:
         w.add_metadata(
             "scenario",
@@ -357,7 +411,7 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
                 "seed": cfg.seed,
                 "users": len(phones),
                 "people": len(trajs),
-                "duration_s": duration,
+                "duration_s": float(duration),
                 "size_m": f"{size[0]:.2f}x{size[1]:.2f}",
                 "det_noise_m": cfg.det_noise_m,
                 "miss_rate": cfg.miss_rate,
@@ -365,6 +419,7 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
                 "fps": cfg.fps,
                 "imu_hz": cfg.imu_hz,
                 "trajectories": cfg.trajectories or "random-waypoint",
+                "frames": cfg.frames,
             },
         )
         w.add_metadata("phones", {mac: person for person, mac in phones.items()})
@@ -374,6 +429,8 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
             counts[topics.calibration(m.camera)] = 1
             counts[topics.camera_model(m.camera)] = 1
         for t_ns, _, topic, msg in events:
+            if isinstance(msg, _Frame):
+                msg = render(msg)  # rendered while writing: frames never pile up in memory
             w.write(topic, msg, t_ns)
             counts[topic] = counts.get(topic, 0) + 1
     return counts

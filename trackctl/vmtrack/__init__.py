@@ -2,13 +2,22 @@
 phones' motion sensors."""
 
 from trackctl.processing.base import ProcessorInfo, register_processor
+from trackctl.vmtrack.detect import BackgroundModel, DetectorConfig, detect_people, predict_region
+from trackctl.vmtrack.frames import FrameConfig, FrameDetector
 from trackctl.vmtrack.motion import MotionConfig, PhoneMotion
-from trackctl.vmtrack.pipeline import TRACKS_TOPIC, Mode, VmTrackConfig, run
+from trackctl.vmtrack.pipeline import TRACKS_TOPIC, Mode, Source, VmTrackConfig, run
 from trackctl.vmtrack.tracker import TrackerConfig, fused_probability
 
 __all__ = [
     "TRACKS_TOPIC",
+    "BackgroundModel",
+    "DetectorConfig",
+    "FrameConfig",
+    "FrameDetector",
     "Mode",
+    "Source",
+    "detect_people",
+    "predict_region",
     "MotionConfig",
     "PhoneMotion",
     "TrackerConfig",

@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 from scipy.spatial.transform import Rotation
 
 from trackctl.logs.messages import Imu
@@ -29,6 +30,9 @@ class MotionConfig:
     window_s: float = 3.0
     min_bounce_mps2: float = 0.35
     cadence_hz: tuple[float, float] = (0.6, 2.45)
+    still_window_s: float = 1.2
+    """Short centred window in which a phone whose vertical force barely varies is standing."""
+    still_std_mps2: float = 0.3
 
 
 class PhoneMotion:
@@ -106,6 +110,12 @@ class PhoneMotion:
             best = int(np.argmax(amp))
             if amp[best] >= cfg.min_bounce_mps2:
                 out[k] = freqs[best] * cfg.step_length_m
+        # the cadence window (3 s) smears short stops; a quiet short window means standing still
+        if len(ts) > 2:
+            rate = (len(ts) - 1) / max(ts[-1] - ts[0], 1e-9)
+            n = max(3, int(round(cfg.still_window_s * rate)))
+            local = pd.Series(vert).rolling(n, center=True, min_periods=3).std().to_numpy()
+            out[np.nan_to_num(local, nan=np.inf) < cfg.still_std_mps2] = 0.0
         return out
 
     def velocity_at(self, t_ns: int) -> np.ndarray | None:

@@ -14,7 +14,6 @@ and everyone in V-AF mode) are associated by q_ij alone.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -63,6 +62,8 @@ class GroundTrack:
     first_mid: str | None = None
     """The phone this track was first bound to; offline, it names the track from its birth."""
     first_bound_ns: int | None = None
+    identity_from_ns: int = 0
+    """Offline: from when before its binding the track carries ``first_mid``."""
     history: list[tuple[int, np.ndarray, np.ndarray, bool]] = field(default_factory=list)
 
     @classmethod
@@ -85,10 +86,10 @@ class GroundTrack:
     def transition(self, dt: float, cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
         f = np.eye(4)
         f[0, 2] = f[1, 3] = dt
-        q1 = np.array([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]]) * cfg.accel_sigma_mps2**2
-        q = np.zeros((4, 4))
-        q[np.ix_([0, 2], [0, 2])] = q1
-        q[np.ix_([1, 3], [1, 3])] = q1
+        # white-acceleration process noise per axis, state order (x, y, vx, vy)
+        s2 = cfg.accel_sigma_mps2**2
+        pp, pv, vv = dt**4 / 4 * s2, dt**3 / 2 * s2, dt**2 * s2
+        q = np.array([[pp, 0, pv, 0], [0, pp, 0, pv], [pv, 0, vv, 0], [0, pv, 0, vv]])
         return f, q
 
     def predicted(self, dt: float, cfg: TrackerConfig) -> tuple[np.ndarray, float]:
@@ -167,25 +168,34 @@ def associate(
 
 def merge_detections(points: list[tuple[str, np.ndarray]], merge_m: float) -> np.ndarray:
     """Merge detections of one instant seen by several cameras (overlapping views): points from
-    different cameras closer than ``merge_m`` are averaged (greedy, nearest pairs first)."""
+    different cameras closer than ``merge_m`` are averaged (greedy, nearest pairs first).
+
+    Hand-written agglomeration because it needs a cannot-link rule (two detections of one camera
+    are two people) that scipy's hierarchical clustering does not take; groups are few per frame,
+    and each step is one vectorised distance matrix.
+    """
     if not points:
         return np.empty((0, 2))
-    groups: list[tuple[set[str], list[np.ndarray]]] = [({cam}, [xy]) for cam, xy in points]
-    merged = True
-    while merged:
-        merged = False
-        best = (math.inf, -1, -1)
-        for a in range(len(groups)):
-            ca = np.mean(groups[a][1], axis=0)
-            for b in range(a + 1, len(groups)):
-                if groups[a][0] & groups[b][0]:
-                    continue
-                d = float(np.linalg.norm(ca - np.mean(groups[b][1], axis=0)))
-                if d < best[0]:
-                    best = (d, a, b)
-        if best[0] < merge_m:
-            _, a, b = best
-            groups[a] = (groups[a][0] | groups[b][0], groups[a][1] + groups[b][1])
-            del groups[b]
-            merged = True
-    return np.array([np.mean(g[1], axis=0) for g in groups])
+    cam_bit: dict[str, int] = {}
+    bits = np.array([1 << cam_bit.setdefault(cam, len(cam_bit)) for cam, _ in points], dtype=object)
+    sums = np.array([xy for _, xy in points], float).reshape(-1, 2)
+    counts = np.ones(len(points))
+    alive = np.ones(len(points), bool)
+    while True:
+        idx = np.flatnonzero(alive)
+        if len(idx) < 2:
+            break
+        cent = sums[idx] / counts[idx, None]
+        d = np.linalg.norm(cent[:, None, :] - cent[None, :, :], axis=2)
+        shared = np.array([[(bits[a] & bits[b]) != 0 for b in idx] for a in idx])
+        d[shared] = np.inf  # same camera (this also masks the diagonal)
+        flat = int(np.argmin(d))
+        i, j = divmod(flat, len(idx))
+        if d[i, j] >= merge_m:
+            break
+        a, b = idx[i], idx[j]
+        sums[a] += sums[b]
+        counts[a] += counts[b]
+        bits[a] |= bits[b]
+        alive[b] = False
+    return sums[alive] / counts[alive, None]

@@ -1,0 +1,105 @@
+"""Person detection on rendered frames: full search, motion-predicted regions, geometry checks."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from trackctl.geometry.camera import PinholeCamera
+from trackctl.sim.render import PersonLook, floor_image, render_frame
+from trackctl.sim.vm import _cameras
+from trackctl.vmtrack.detect import (
+    BackgroundModel,
+    DetectorConfig,
+    detect_people,
+    person_height_px,
+    predict_region,
+)
+
+
+@pytest.fixture(scope="module")
+def scene() -> tuple[PinholeCamera, np.ndarray, BackgroundModel]:
+    (model,) = _cameras((6.0, 5.0), (1, 1), 4.0, 1.5, 1.5)
+    cam = PinholeCamera(model)
+    rng = np.random.default_rng(0)
+    floor = floor_image(cam, rng)
+    empty = [render_frame(cam, floor, [], rng) for _ in range(5)]
+    return cam, floor, BackgroundModel(empty)
+
+
+def _frame(cam: PinholeCamera, floor: np.ndarray, people: list[np.ndarray]) -> np.ndarray:
+    rng = np.random.default_rng(1)
+    looks = [PersonLook.random(rng) for _ in people]
+    img = render_frame(cam, floor, list(zip(people, looks, strict=True)), rng)
+    ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 60])
+    assert ok
+    return cv2.imdecode(buf, cv2.IMREAD_COLOR)
+
+
+def _ground(cam: PinholeCamera, boxes: np.ndarray) -> np.ndarray:
+    feet = np.column_stack([boxes[:, 0] + boxes[:, 2] / 2, boxes[:, 1] + boxes[:, 3]])
+    return cam.ground_point(feet)[:, :2]
+
+
+PEOPLE = [np.array([1.5, 2.0]), np.array([3.0, 3.5]), np.array([4.5, 1.5])]
+
+
+def test_full_search_finds_every_person_on_the_ground(scene) -> None:
+    cam, floor, bg = scene
+    gray = _frame(cam, floor, PEOPLE)
+    cfg = DetectorConfig()
+    boxes, scores = detect_people(
+        gray, bg, cfg, None, lambda f: person_height_px(cam, f, cfg.person_height_m)
+    )
+    ground = _ground(cam, boxes)
+    assert len(boxes) == len(PEOPLE)
+    for p in PEOPLE:
+        assert np.min(np.linalg.norm(ground - p, axis=1)) < 0.3
+    assert np.all(scores >= cfg.threshold)
+
+
+def test_predicted_regions_find_the_same_people_and_nothing_else(scene) -> None:
+    cam, floor, bg = scene
+    gray = _frame(cam, floor, PEOPLE)
+    cfg = DetectorConfig()
+    # the prediction of the first two people is 0.3 m off; the third is not predicted
+    regions = [predict_region(cam, p + 0.3, 0.6) for p in PEOPLE[:2]]
+    assert all(r is not None for r in regions)
+    boxes, _ = detect_people(
+        gray,
+        bg,
+        cfg,
+        regions,
+        lambda f: person_height_px(cam, f, cfg.person_height_m),  # type: ignore[arg-type]
+    )
+    ground = _ground(cam, boxes)
+    assert len(boxes) == 2
+    for p in PEOPLE[:2]:
+        assert np.min(np.linalg.norm(ground - p, axis=1)) < 0.3
+
+
+def test_empty_scene_has_no_detection(scene) -> None:
+    cam, floor, bg = scene
+    boxes, _ = detect_people(_frame(cam, floor, []), bg, DetectorConfig())
+    assert len(boxes) == 0
+
+
+@settings(max_examples=40, deadline=None)
+@given(x=st.floats(0.5, 5.5), y=st.floats(0.5, 4.5), radius=st.floats(0.1, 1.0))
+def test_predicted_region_contains_the_person_image(
+    scene, x: float, y: float, radius: float
+) -> None:
+    cam = scene[0]
+    xy = np.array([x, y])
+    reg = predict_region(cam, xy, radius)
+    px, front = cam.project(np.array([[x, y, 0.0], [x, y, 1.7]]))
+    inside = (px[:, 0] >= 0) & (px[:, 0] < 640) & (px[:, 1] >= 0) & (px[:, 1] < 480)
+    if reg is None:
+        assert not inside.all()
+        return
+    for u, v in px[inside]:
+        assert reg.x0 <= u <= reg.x1 and reg.y0 <= v <= reg.y1
+    assert reg.height_px == pytest.approx(float(np.linalg.norm(px[0] - px[1])), rel=1e-6)

@@ -1,0 +1,150 @@
+"""vm-track on rendered camera frames (sim --frames): detection source, errors, bad frames."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from typer.testing import CliRunner
+
+from tests.conftest import ROOT, run_cli
+from tests.logs.test_plain_readers import assert_plain_decodable
+from trackctl.cli.main import app
+from trackctl.logs import LogReader, LogWriter
+from trackctl.processing import run_processors
+from trackctl.sim.vm import VmScenario, simulate_vm
+from trackctl.vmtrack import FrameConfig, VmTrackConfig, VmTrackProcessor
+from trackctl.vmtrack.frames import detections_topic
+from trackctl.vmtrack.pipeline import SCENE_TOPIC, TRACKS_TOPIC
+
+VM_SAMPLE = ROOT / "sample_logs" / "vm-office.mcap"
+SAMPLE_SCENARIO = VmScenario(
+    field="office", users=2, nonusers=1, duration_s=20, seed=3, frames=True
+)
+
+
+@pytest.fixture(scope="module")
+def frames_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("vmf") / "frames.mcap"
+    simulate_vm(
+        str(path),
+        VmScenario(field="office", users=2, nonusers=0, duration_s=40, seed=4, frames=True),
+    )
+    return path
+
+
+def test_frames_log_has_images_and_no_simulated_detections(frames_log: Path) -> None:
+    schemas = {t: i.schema_name for t, i in LogReader(frames_log).topics().items()}
+    assert schemas["/cam0/image"] == "foxglove.CompressedImage"
+    assert not any(s == "trackctl.Detections" for s in schemas.values())
+
+
+def test_vm_track_detects_in_frames_and_identifies_users(frames_log: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out.mcap"
+    (rep,) = run_processors(frames_log, out, [VmTrackProcessor()])
+    m = rep.metrics
+    assert m["source"] == "frames"
+    assert m["det_recall"] >= 0.9
+    assert m["idf1"] >= 0.9
+    assert m["error_m_mean"] <= 0.3
+    assert m["region_searches"] > m["full_searches"] > 0
+    topics = LogReader(out).topics()
+    assert topics[detections_topic("cam0")].count == 120
+    assert topics[SCENE_TOPIC].schema_name == "foxglove.SceneUpdate"
+    counts = assert_plain_decodable(out)
+    assert counts["foxglove.SceneUpdate"] == 120
+    # tracks carry velocity and covariance from the (smoothed) filter state
+    first = next(m.message for m in LogReader(out).messages([TRACKS_TOPIC]) if m.message.tracks)
+    assert first.tracks[0].velocity_mps is not None and first.tracks[0].covariance_m2 is not None
+
+
+def test_shipped_vm_sample_log_is_regenerable(tmp_path: Path) -> None:
+    fresh = tmp_path / "vm-office.mcap"
+    simulate_vm(str(fresh), SAMPLE_SCENARIO)
+    assert fresh.read_bytes() == VM_SAMPLE.read_bytes(), (
+        "sample_logs/vm-office.mcap is stale: regenerate with `make sample-logs`"
+    )
+    assert VM_SAMPLE.stat().st_size < 5_000_000
+
+
+def test_readme_main_job_on_the_sample_log(tmp_path: Path) -> None:
+    out = tmp_path / "vm-tracked.mcap"
+    proc = run_cli("vm-track", str(VM_SAMPLE), "--out", str(out), "--json")
+    assert proc.returncode == 0, proc.stderr.decode()
+    report = json.loads(proc.stdout)
+    assert report["source"] == "frames" and report["idf1"] >= 0.9
+
+
+def test_plot_draws_the_papers_figures(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    runner = CliRunner()
+    res = runner.invoke(
+        app,
+        [
+            "vm-track",
+            str(VM_SAMPLE),
+            "--out",
+            str(tmp_path / "o.mcap"),
+            "--plot",
+            str(tmp_path / "fig"),
+            "-q",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    for name in ("error_over_time.png", "tracking_time_cdf.png"):
+        png = tmp_path / "fig" / name
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_full_search_mode_searches_every_frame_whole(frames_log: Path, tmp_path: Path) -> None:
+    cfg = VmTrackConfig(frames=FrameConfig(predicted=False))
+    (rep,) = run_processors(frames_log, tmp_path / "o.mcap", [VmTrackProcessor(cfg)])
+    assert rep.metrics["region_searches"] == 0
+    assert rep.metrics["full_searches"] == 240
+
+
+def test_undecodable_frame_is_skipped_and_counted(frames_log: Path, tmp_path: Path) -> None:
+    damaged = tmp_path / "damaged.mcap"
+    reader = LogReader(frames_log)
+    with LogWriter(damaged) as w:
+        broken = 0
+        for raw in reader.raw():
+            if raw.topic == "/cam1/image" and broken < 3 and raw.log_time_ns > 5_000_000_000:
+                msg = CompressedImage()
+                msg.ParseFromString(raw.data)
+                msg.data = b"\xff\xd8 not a jpeg"
+                raw = replace(raw, data=msg.SerializeToString())
+                broken += 1
+            w.write_raw(raw)
+    (rep,) = run_processors(damaged, tmp_path / "o.mcap", [VmTrackProcessor()])
+    assert rep.metrics["bad_frames"] == 3
+    assert rep.metrics["idf1"] >= 0.9
+
+
+def test_image_topic_without_calibration_is_a_one_line_error(
+    frames_log: Path, tmp_path: Path
+) -> None:
+    stripped = tmp_path / "nocal.mcap"
+    reader = LogReader(frames_log)
+    with LogWriter(stripped) as w:
+        for raw in reader.raw():
+            if raw.topic != "/cam1/camera_model":
+                w.write_raw(raw)
+    proc = run_cli("vm-track", str(stripped), "--out", str(tmp_path / "o.mcap"))
+    assert proc.returncode == 2
+    lines = proc.stderr.decode().strip().splitlines()
+    assert len(lines) == 1
+    assert "/cam1/camera_model is missing" in lines[0] and "/cam1/image" in lines[0]
+
+
+def test_source_detections_on_a_frames_log_is_a_clear_error(
+    frames_log: Path, tmp_path: Path
+) -> None:
+    proc = run_cli(
+        "vm-track", str(frames_log), "--out", str(tmp_path / "o.mcap"), "--source", "detections"
+    )
+    assert proc.returncode == 2
+    assert "no trackctl.Detections topic" in proc.stderr.decode()

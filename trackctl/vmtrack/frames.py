@@ -1,0 +1,193 @@
+"""Camera frames as vm-track's detection source: decode, detect people, place them on the ground.
+
+Used when the log holds ``/<camera>/image`` (foxglove.CompressedImage) with a calibrated
+``/<camera>/camera_model``. Each camera gets a background model from frames sampled across the
+log; each frame is searched in full or only where the tracker predicts people (see
+:mod:`trackctl.vmtrack.detect`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from trackctl.errors import InputError, MissingTopicError
+from trackctl.geometry.camera import PinholeCamera
+from trackctl.logs import topics
+from trackctl.logs.messages import BBox, CameraModel, Detection, Detections, Vec3
+from trackctl.logs.reader import LogReader, TopicInfo
+from trackctl.vmtrack.detect import (
+    BackgroundModel,
+    DetectorConfig,
+    Region,
+    detect_people,
+    person_height_px,
+    predict_region,
+)
+
+__all__ = ["FrameConfig", "FrameDetector", "image_cameras", "detections_topic"]
+
+IMAGE_SCHEMA = "foxglove.CompressedImage"
+
+
+def detections_topic(camera: str) -> str:
+    """Where vm-track writes what it detected in a camera's frames."""
+    return f"/vmtrack/{camera}/detections"
+
+
+@dataclass(frozen=True, slots=True)
+class FrameConfig:
+    """How frames are searched."""
+
+    predicted: bool = True
+    """Confine the search to motion-predicted regions (False: full search of every frame)."""
+    full_search_every: int = 6
+    """Frames between full searches that pick up people entering the view."""
+    region_m: float = 0.4
+    """Ground radius of a predicted region on top of the prediction's uncertainty."""
+    visual_speed_sigma_mps: float = 0.6
+    """Velocity uncertainty of a track without a phone (its prediction is visual only)."""
+    background_frames: int = 25
+    """Frames sampled across the log for each camera's median background."""
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
+
+
+def image_cameras(reader: LogReader, present: dict[str, TopicInfo]) -> dict[str, PinholeCamera]:
+    """Calibrated cameras of every image topic, by camera name.
+
+    Raises:
+        MissingTopicError: an image topic's camera has no ``/<camera>/camera_model`` with a world
+            pose (needed to place detections on the ground).
+    """
+    cams: dict[str, PinholeCamera] = {}
+    for topic, info in sorted(present.items()):
+        if info.schema_name != IMAGE_SCHEMA:
+            continue
+        name = topic.strip("/").split("/")[0]
+        model_topic = topics.camera_model(name)
+        model: CameraModel | None = None
+        if model_topic in present:
+            for m in reader.messages([model_topic]):
+                model = m.message
+                break
+        if model is None or model.world_from_camera is None:
+            raise MissingTopicError(
+                f"{reader.path}: {model_topic} is missing or has no world pose; vm-track needs "
+                f"it to place people found in {topic} on the ground"
+            )
+        cams[name] = PinholeCamera(model)
+    return cams
+
+
+def _decode(data: bytes) -> np.ndarray | None:
+    """BGR image of an encoded frame, or None when the bytes do not decode."""
+    if not data:
+        return None
+    return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+
+
+class FrameDetector:
+    """Detects people in the frames of calibrated cameras; keeps stage timings and counts."""
+
+    def __init__(
+        self, reader: LogReader, cams: dict[str, PinholeCamera], config: FrameConfig
+    ) -> None:
+        self.cams = cams
+        self.config = config
+        self.backgrounds: dict[str, BackgroundModel] = {}
+        self.full_searches = 0
+        self.region_searches = 0
+        self.bad_frames = 0
+        self.seconds_decode = 0.0
+        self.seconds_detect = 0.0
+        started = time.perf_counter()
+        self._build_backgrounds(reader)
+        self.seconds_background = time.perf_counter() - started
+
+    def _build_backgrounds(self, reader: LogReader) -> None:
+        present = reader.topics()
+        for name in self.cams:
+            topic = topics.image(name)
+            count = present[topic].count if topic in present else 0
+            step = max(1, count // max(1, self.config.background_frames))
+            samples: list[np.ndarray] = []
+            for k, m in enumerate(reader.messages([topic])):
+                if k % step:
+                    continue
+                image = _decode(bytes(m.message.data))
+                if image is not None:
+                    samples.append(image)
+            if not samples:
+                raise InputError(f"{reader.path}: {topic}: no frame decodes as an image")
+            self.backgrounds[name] = BackgroundModel(samples)
+
+    def regions(
+        self, camera: str, predictions: list[tuple[np.ndarray, float, bool]]
+    ) -> list[Region]:
+        """Image regions of the predicted people seen by ``camera``: (ground xy, radius m,
+        recovering). A recovering track's region is searched at one more level either side."""
+        cam = self.cams[camera]
+        dcfg = self.config.detector
+        out = []
+        for xy, radius, recovering in predictions:
+            reg = predict_region(
+                cam, xy, radius, dcfg.person_height_m, extra_levels=1 if recovering else 0
+            )
+            if reg is not None:
+                out.append(reg)
+        return out
+
+    def detect(
+        self,
+        t_ns: int,
+        camera: str,
+        data: bytes,
+        predictions: list[tuple[np.ndarray, float, bool]] | None,
+    ) -> tuple[Detections, list[np.ndarray]]:
+        """People in one frame: the Detections message and their ground points.
+
+        ``predictions`` None asks for a full search; otherwise only their regions are searched.
+        A frame that does not decode is skipped and counted.
+        """
+        t0 = time.perf_counter()
+        image = _decode(data)
+        t1 = time.perf_counter()
+        self.seconds_decode += t1 - t0
+        if image is None:
+            self.bad_frames += 1
+            return Detections(t_ns, camera, ()), []
+        cam = self.cams[camera]
+        regions = None if predictions is None else self.regions(camera, predictions)
+        if regions is None:
+            self.full_searches += 1
+        else:
+            self.region_searches += 1
+        dcfg = self.config.detector
+        boxes, scores = detect_people(
+            image,
+            self.backgrounds[camera],
+            dcfg,
+            regions,
+            lambda feet: person_height_px(cam, feet, dcfg.person_height_m),
+        )
+        feet = np.column_stack([boxes[:, 0] + boxes[:, 2] / 2, boxes[:, 1] + boxes[:, 3]])
+        ground = cam.ground_point(feet)
+        self.seconds_detect += time.perf_counter() - t1
+        dets = []
+        points = []
+        for box, score, g in zip(boxes, scores, ground, strict=True):
+            if np.isnan(g).any():
+                continue
+            dets.append(
+                Detection(
+                    BBox(*(float(v) for v in box)),
+                    round(float(min(1.0, max(0.0, score))), 3),
+                    "person",
+                    Vec3(float(g[0]), float(g[1]), 0.0),
+                )
+            )
+            points.append(g[:2])
+        return Detections(t_ns, camera, tuple(dets)), points
