@@ -17,14 +17,9 @@ __all__ = ["require_matplotlib", "plot_run", "plot_paper"]
 
 def require_matplotlib() -> Any:
     """The pyplot module (Agg backend), or InputError naming the extra to install."""
-    try:
-        import matplotlib
+    from trackctl.plots import pyplot
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        raise InputError("--plot needs matplotlib: pip install 'trackctl[plot]'") from None
-    return plt
+    return pyplot()
 
 
 def _outdir(folder: str | os.PathLike[str]) -> Path:
