@@ -10,7 +10,7 @@ from trackctl.sim.smirror import PATHS, SmirrorScenario, path_length_m, simulate
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "sample_logs" / "smirror.mcap"
 SAMPLE_CFG = SmirrorScenario(
-    paths=1, width_px=320, height_px=240, fps=2.0, jpeg_quality=70, duration_s=50.0, seed=0
+    paths=1, width_px=320, height_px=240, fps=2.0, jpeg_quality=70, duration_s=36.0, seed=0
 )
 """What `make sample-logs` runs (keep in step with the Makefile)."""
 
@@ -29,7 +29,7 @@ def test_same_seed_same_bytes(tmp_path: Path) -> None:
 
 
 def test_shipped_sample_log_is_regenerable(tmp_path: Path) -> None:
-    assert SAMPLE.stat().st_size < 3_000_000  # all sample logs together stay < 5 MiB
+    assert SAMPLE.stat().st_size < 2_000_000  # all sample logs together stay < 5 MiB
     fresh = tmp_path / "smirror.mcap"
     simulate_smirror(str(fresh), SAMPLE_CFG)
     assert fresh.read_bytes() == SAMPLE.read_bytes(), (

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from trackctl.errors import InputError
+from trackctl.plots import pyplot
 from trackctl.smirror.pipeline import SmirrorResult, error_by_range
 
 __all__ = ["require_matplotlib", "plot_result", "per_metre"]
@@ -18,14 +18,7 @@ __all__ = ["require_matplotlib", "plot_result", "per_metre"]
 
 def require_matplotlib() -> Any:
     """The pyplot module (Agg backend), or an InputError saying how to install it."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as err:
-        raise InputError("--plot needs matplotlib: pip install 'trackctl[plot]'") from err
-    return plt
+    return pyplot()
 
 
 def per_metre(
