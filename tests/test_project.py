@@ -28,5 +28,6 @@ def test_required_top_level_layout() -> None:
 
 
 def test_sample_logs_stay_small() -> None:
+    # five logs, four of them with rendered camera frames, in a few MB
     total = sum(p.stat().st_size for p in (ROOT / "sample_logs").glob("*.mcap"))
-    assert total < 5 * 1024 * 1024
+    assert total < 6 * 1024 * 1024
