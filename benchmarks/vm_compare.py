@@ -26,10 +26,11 @@ the peers are not handicapped by double detections. The peers get no IMU (they c
 Scoring (``trackctl.metrics.tracking.MotAccumulator``, 1.0 m match threshold, every tracker
 scored by the same code from its per-frame output):
 
-* ``MOTA``, ``IDF1``, ``IDsw`` -- against the 5 users, non-users being don't-care (a track on a
-  non-user is neither a hit nor a false positive). For VM, a hypothesis id is the phone MAC the
-  track is bound to (only identified tracks count: identity = person); for the visual-only
-  trackers it is their track id (identity-aware IDF1 vs persons: one track id per person is best);
+* ``MOTA``, ``IDF1``, ``IDsw`` -- against the 5 users. For VM, a hypothesis id is the phone MAC
+  the track is bound to (only identified tracks count: identity = person; a MAC on a non-user is
+  a false positive) -- exactly vm-track's own ``mota``/``idf1``. For the visual-only trackers it
+  is their track id (identity-aware IDF1 vs persons: one track id per person is best), and
+  non-users are don't-care (a track on a non-user is neither a hit nor a false positive);
 * ``MOTA*``/``IDF1*`` -- against all 7 people, every output track counted;
 * ``err`` -- for VM the mean distance between a user and the track bound to his phone, in every
   frame where one is; for visual-only trackers the mean distance over matched pairs (MOTP);
@@ -392,16 +393,18 @@ def score(data: LogData, run: TrackerRun, threshold_m: float = THRESHOLD_M) -> S
         users = {p: xy for p, xy in gt.items() if p in data.carriers}
         nonusers = [p for p in gt if p not in data.carriers]
         all_acc.update(gt, hyp)
-        # the whole truth goes in with non-users as ``ignore``: MotAccumulator looks the ignored
-        # people up in ``gt`` to excuse the tracks on them
         if run.identified:
+            # a track named after a phone claims to be that user: on a non-user it is a false
+            # positive, so the non-users are not excused here
             user_hyp = {h: xy for h, xy in hyp.items() if h in mids}
-            users_acc.update(gt, user_hyp, ignore=nonusers)
+            users_acc.update(users, user_hyp)
             for p, xy in users.items():
                 h = user_hyp.get(data.carriers[p])
                 if h is not None:
                     errors.append(math.dist(h, xy))
         else:
+            # anonymous tracks on non-users are right to exist: don't-care. The whole truth goes
+            # in, because MotAccumulator looks the ignored people up in ``gt`` to excuse them
             matches = users_acc.update(gt, hyp, ignore=nonusers)
             errors.extend(math.dist(hyp[h], users[p]) for p, h in matches.items())
     s, a = users_acc.summary(), all_acc.summary()
@@ -552,8 +555,8 @@ def main(argv: list[str] | None = None) -> int:
                         or abs(float(rep["mota"]) - s.mota) > 1e-3
                     )
                 ):
-                    # vm-track (as of cb837ba) passes only the users' truth with ignore=non-users,
-                    # so its tracks on non-users count as false positives in its own report
+                    # V-AF: vm-track (as of cb837ba) passes only the users' truth with
+                    # ignore=non-users, so its tracks on non-users count as false positives
                     print(f"  (vm-track's own report: mota {rep['mota']}, idf1 {rep['idf1']})")
         if len(seeds) > 1:
             noise = float(np.mean(noises))
@@ -562,7 +565,7 @@ def main(argv: list[str] | None = None) -> int:
             for n in names:
                 print(fmt_row(LABELS[n], mean_score(per_tracker[n]), noise))
     print(
-        "\nMOTA/IDF1/IDsw: vs the users (non-users don't-care; VM ids = phone MACs); "
+        "\nMOTA/IDF1/IDsw: vs the users (VM ids = phone MACs; others: non-users don't-care); "
         "MOTA*/IDF1*: vs everyone.\nerr: VM = user to his phone's track, others = matched pairs; "
         "follow/ok%: error of the name given at first sight (paper's Table 3.7 metric).\n"
         "ms/fr: VM/V-AF incl. log read+write and smoothing; peers incl. log read."

@@ -86,3 +86,15 @@ def test_vm_compare_runs_end_to_end(capsys: pytest.CaptureFixture[str]) -> None:
     out = capsys.readouterr().out
     assert rc == 0
     assert "MOTA" in out and "\nVM " in out and "\nV-AF " in out
+
+
+def test_a_phone_name_on_a_non_user_is_a_false_positive() -> None:
+    data = _data()
+    hyp = {
+        t: {MACS["u0"]: fr["u0"], MACS["u1"]: fr["u1"], "02:00:00:00:00:09": fr["n0"]}
+        for t, fr in data.truth.items()
+    }
+    hyp_ok = {t: {MACS["u0"]: fr["u0"], MACS["u1"]: fr["u1"]} for t, fr in data.truth.items()}
+    data.carriers["ghost"] = "02:00:00:00:00:09"  # a phone whose carrier is never in the truth
+    assert vm_compare.score(data, _run(hyp_ok, identified=True)).mota == 1.0
+    assert vm_compare.score(data, _run(hyp, identified=True)).mota == pytest.approx(0.5)
