@@ -61,6 +61,7 @@ Deterministic: same seeds -> same table (except ``ms/fr``).
 from __future__ import annotations
 
 import argparse
+import hashlib
 import math
 import sys
 import tempfile
@@ -110,8 +111,13 @@ class LogData:
 
 
 def simulate(out_dir: Path, scenario: VmScenario, name: str) -> Path:
-    """Simulate ``scenario`` into ``out_dir/name.mcap`` (reused when already there)."""
-    path = out_dir / f"{name}.mcap"
+    """Simulate ``scenario`` into ``out_dir/<name>-<digest>.mcap``; the digest of the scenario's
+    parameters (and of its trajectories file) lets ``--keep`` reuse a log only for the same
+    scenario."""
+    key = repr(scenario).encode()
+    if scenario.trajectories:
+        key += Path(scenario.trajectories).read_bytes()
+    path = out_dir / f"{name}-{hashlib.sha256(key).hexdigest()[:10]}.mcap"
     if not path.exists():
         simulate_vm(str(path), scenario)
     return path
