@@ -425,7 +425,8 @@ def score(data: LogData, run: TrackerRun, threshold_m: float = THRESHOLD_M) -> S
         error_m=float(np.mean(errors)) if errors else math.nan,
         follow_m=follow,
         follow_ok=ok,
-        ms_per_frame=1000 * run.seconds / max(len(data.frame_times), 1),
+        # logs with camera frames instead of detections: one truth message per frame instant
+        ms_per_frame=1000 * run.seconds / max(len(data.frame_times) or len(data.truth), 1),
     )
 
 
