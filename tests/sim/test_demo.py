@@ -56,3 +56,11 @@ def test_detection_ground_error_matches_configured_mean(sample_log: Path) -> Non
             errs.append(np.hypot(d.ground_m.x - p.x, d.ground_m.y - p.y))
     assert len(errs) > 20
     assert 0.2 < float(np.mean(errs)) < 0.5
+
+
+def test_trajectories_csv_takes_numeric_and_named_ids(tmp_path: Path) -> None:
+    from trackctl.sim.walkers import load_trajectories_csv
+
+    csv = tmp_path / "t.csv"
+    csv.write_text("t_s,id,x_m,y_m\n0,alice,0,0\n1,alice,1,0\n0,7,0,1\n1,7,1,1\n")
+    assert sorted(t.person for t in load_trajectories_csv(csv)) == ["7", "alice"]

@@ -106,11 +106,14 @@ def load_trajectories_csv(path: str | Path, dt_s: float = 0.05) -> list[Trajecto
             continue
         grid = np.arange(t[0], t[-1] + 1e-9, dt_s)
         xy = np.column_stack([np.interp(grid, t, g["x_m"]), np.interp(grid, t, g["y_m"])])
-        out.append(
-            Trajectory(
-                str(int(pid)) if float(pid).is_integer() else str(pid), float(t[0]), dt_s, xy
-            )
-        )
+        out.append(Trajectory(_person_id(pid), float(t[0]), dt_s, xy))
     if not out:
         raise InputError(f"{path}: no trajectory with two or more points")
     return out
+
+
+def _person_id(pid: object) -> str:
+    """``3.0`` (ETH/UCY ids are floats) -> ``"3"``; other ids (``"alice"``) as they are."""
+    if isinstance(pid, int | float) and float(pid).is_integer():
+        return str(int(pid))
+    return str(pid)

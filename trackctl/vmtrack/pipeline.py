@@ -774,7 +774,9 @@ def _write_and_score(
                     recovery.append((fr.t_ns - lost_at.pop(person)) / 1e9)
                 ok_since[person] = good
         else:
-            users_acc.update({p: gtf[p] for p in carriers}, hyp, ignore=nonusers)
+            # visual-only tracks name nobody: tracks on non-users are don't-care, not false
+            # positives (they must be in the truth given, to be matched and ignored)
+            users_acc.update(gtf, hyp, ignore=nonusers)
             for person in carriers:
                 err = followed.error(person, gtf[person], hyp)
                 if err is not None:
