@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import apply_fail_if, print_json, progress, stderr
-from trackctl.cli.process import print_reports
-from trackctl.metrics.report import jsonable_metrics
+from trackctl.cli.common import print_json, stderr
+from trackctl.cli.process import run_system
 
 bridgeloc_app = typer.Typer(
     help="BridgeLoc (§4.2): rotation-symmetric tags, view bridging, EKF robot localization.",
@@ -91,7 +91,6 @@ def eval_(
     """BridgeLoc: localize the robot by bridging infrastructure and robot camera views."""
     from trackctl.bridgeloc import BridgeLocConfig, BridgeLocProcessor, Mode, PoseMethod
     from trackctl.errors import InputError
-    from trackctl.processing import run_processors
 
     try:
         mode_value = Mode(mode)
@@ -101,19 +100,17 @@ def eval_(
         pose_value = PoseMethod(pose)
     except ValueError:
         raise InputError(f"--pose {pose!r}: expected lstsq or pnp") from None
-    proc = BridgeLocProcessor(BridgeLocConfig(mode=mode_value, pose=pose_value,
-                                              max_sigma_m=max_sigma))
-    with progress("bridgeloc", quiet) as bar:
-        (report,) = run_processors(log, out, [proc], bar)
+    proc = BridgeLocProcessor(
+        BridgeLocConfig(mode=mode_value, pose=pose_value, max_sigma_m=max_sigma)
+    )
+    draw = None
     if plot is not None:
         from trackctl.plots.bridgeloc import plot_run
 
-        plot_run(out, plot)
-    if json_out:
-        print_json(jsonable_metrics(report.metrics))
-    else:
-        print_reports([report])
-    apply_fail_if(fail_if, [report])
+        draw = partial(plot_run, out, plot)
+    run_system(
+        "bridgeloc", log, out, proc, json_out=json_out, fail_if=fail_if, quiet=quiet, plot=draw
+    )
 
 
 def simulate_bridgeloc(
@@ -138,9 +135,15 @@ def simulate_bridgeloc(
     from trackctl.sim.bridgeloc import BridgeLocScenario
     from trackctl.sim.bridgeloc import simulate_bridgeloc as simulate
 
-    cfg = BridgeLocScenario(field=field, tags=tags if field == "lobby" else 1, path=path,
-                            seed=seed, duration_s=duration, robot_fps=robot_fps,
-                            infra_fps=infra_fps)
+    cfg = BridgeLocScenario(
+        field=field,
+        tags=tags if field == "lobby" else 1,
+        path=path,
+        seed=seed,
+        duration_s=duration,
+        robot_fps=robot_fps,
+        infra_fps=infra_fps,
+    )
     counts = simulate(str(out), cfg)
     if json_out:
         print_json({"out": str(out), "topics": counts})

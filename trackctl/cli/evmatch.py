@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import apply_fail_if, print_json, progress, stderr
-from trackctl.cli.process import print_reports
-from trackctl.metrics.report import jsonable_metrics
+from trackctl.cli.common import print_json, stderr
+from trackctl.cli.process import run_system
 
 
 def _read_eids(path: Path) -> tuple[str, ...]:
@@ -63,7 +63,6 @@ def ev_match(
     """EV-Matching: find the VID (person in video) of each EID (phone) reading little video."""
     from trackctl.errors import InputError
     from trackctl.evmatch import Algorithm, EvMatchConfig, EvMatchProcessor, MatchParams
-    from trackctl.processing import run_processors
 
     if eids is not None and all_eids:
         raise InputError("--eids and --all: give one of them")
@@ -90,17 +89,21 @@ def ev_match(
         seed=seed,
         params=MatchParams(margin=margin, max_evidence=max_evidence),
     )
-    with progress("ev-match", quiet) as bar:
-        (report,) = run_processors(log, out, [EvMatchProcessor(config)], bar)
+    draw = None
     if plot is not None:
         from trackctl.plots.evmatch import plot_run
 
-        plot_run(out, plot)
-    if json_out:
-        print_json(jsonable_metrics(report.metrics))
-    else:
-        print_reports([report])
-    apply_fail_if(fail_if, [report])
+        draw = partial(plot_run, out, plot)
+    run_system(
+        "ev-match",
+        log,
+        out,
+        EvMatchProcessor(config),
+        json_out=json_out,
+        fail_if=fail_if,
+        quiet=quiet,
+        plot=draw,
+    )
 
 
 def simulate_ev(

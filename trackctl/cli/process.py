@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Annotated
 
@@ -14,8 +14,8 @@ from trackctl.cli.common import apply_fail_if, print_json, progress, report_dict
 from trackctl.errors import InputError
 from trackctl.logs.messages import MetricReport
 from trackctl.logs.reader import LogReader
-from trackctl.metrics.report import read_reports
-from trackctl.processing import get_processor, processors, run_processors
+from trackctl.metrics.report import jsonable_metrics, read_reports
+from trackctl.processing import Processor, get_processor, processors, run_processors
 
 
 def print_reports(reports: Sequence[MetricReport]) -> None:
@@ -97,3 +97,29 @@ def report(
     else:
         print_reports(reports)
     apply_fail_if(fail_if, reports)
+
+
+def run_system(
+    name: str,
+    log: Path,
+    out: Path,
+    processor: Processor,
+    *,
+    json_out: bool,
+    fail_if: str | None,
+    quiet: bool,
+    plot: Callable[[], object] | None = None,
+) -> MetricReport:
+    """What every system command does with its processor: run it over ``log`` into ``out``
+    (progress bar on a TTY, atomic output), draw its figures, print the report (a table, or one
+    JSON object of the metrics with ``--json``), then apply ``--fail-if`` (exit 1)."""
+    with progress(name, quiet) as bar:
+        (report,) = run_processors(log, out, [processor], bar)
+    if plot is not None:
+        plot()
+    if json_out:
+        print_json(jsonable_metrics(report.metrics))
+    else:
+        print_reports([report])
+    apply_fail_if(fail_if, [report])
+    return report

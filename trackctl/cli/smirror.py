@@ -7,9 +7,8 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import apply_fail_if, print_json, progress, stderr
-from trackctl.cli.process import print_reports
-from trackctl.metrics.report import jsonable_metrics
+from trackctl.cli.common import print_json, stderr
+from trackctl.cli.process import run_system
 
 
 def smirror(
@@ -49,7 +48,6 @@ def smirror(
 ) -> None:
     """S-Mirror: localize a robot from its LEDs in node images, dead-reckoning in between."""
     from trackctl.errors import InputError
-    from trackctl.processing import run_processors
     from trackctl.smirror import Mode, SmirrorConfig, SmirrorProcessor
 
     try:
@@ -71,19 +69,25 @@ def smirror(
 
         require_matplotlib()
     proc = SmirrorProcessor(cfg)
-    with progress("smirror", quiet) as bar:
-        (report,) = run_processors(log, out, [proc], bar)
-    if plot is not None and proc.last_result is not None:
-        from trackctl.plots.smirror import plot_result
 
-        written = plot_result(proc.last_result, plot)
-        if not json_out and not quiet:
-            stderr.print(f"wrote {len(written)} figures to {plot}")
-    if json_out:
-        print_json(jsonable_metrics(report.metrics))
-    else:
-        print_reports([report])
-    apply_fail_if(fail_if, [report])
+    def draw() -> None:
+        if proc.last_result is not None and plot is not None:
+            from trackctl.plots.smirror import plot_result
+
+            written = plot_result(proc.last_result, plot)
+            if not json_out and not quiet:
+                stderr.print(f"wrote {len(written)} figures to {plot}")
+
+    run_system(
+        "smirror",
+        log,
+        out,
+        proc,
+        json_out=json_out,
+        fail_if=fail_if,
+        quiet=quiet,
+        plot=draw if plot is not None else None,
+    )
 
 
 def simulate_smirror(

@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import apply_fail_if, print_json, progress, stderr
-from trackctl.cli.process import print_reports
-from trackctl.metrics.report import jsonable_metrics
+from trackctl.cli.common import print_json, stderr
+from trackctl.cli.process import run_system
 
 
 def vm_track(
@@ -43,7 +43,6 @@ def vm_track(
 ) -> None:
     """VM-Tracking: identify and track people by fusing detections with phone motion sensors."""
     from trackctl.errors import InputError
-    from trackctl.processing import run_processors
     from trackctl.vmtrack import FrameConfig, Mode, Source, VmTrackConfig, VmTrackProcessor
 
     try:
@@ -64,17 +63,16 @@ def vm_track(
             frames=FrameConfig(predicted=search == "predicted"),
         )
     )
-    with progress("vm-track", quiet) as bar:
-        (report,) = run_processors(log, out, [proc], bar)
+    draw = None
     if plot is not None:
+        from trackctl.plots import pyplot
         from trackctl.plots.vmtrack import plot_vmtrack
 
-        plot_vmtrack(out, plot)
-    if json_out:
-        print_json(jsonable_metrics(report.metrics))
-    else:
-        print_reports([report])
-    apply_fail_if(fail_if, [report])
+        pyplot()  # fail before the run when matplotlib is missing
+        draw = partial(plot_vmtrack, out, plot)
+    run_system(
+        "vm-track", log, out, proc, json_out=json_out, fail_if=fail_if, quiet=quiet, plot=draw
+    )
 
 
 def simulate_vm(

@@ -84,7 +84,7 @@ def get_processor(name: str) -> ProcessorInfo:
 def _load_builtin() -> None:
     # Imported lazily: system packages import this module to register themselves.
     import trackctl.bridgeloc  # noqa: F401
-    import trackctl.processing.builtin  # noqa: F401
-    import trackctl.vmtrack  # noqa: F401
     import trackctl.evmatch  # noqa: F401
+    import trackctl.processing.builtin  # noqa: F401
     import trackctl.smirror  # noqa: F401
+    import trackctl.vmtrack  # noqa: F401
