@@ -56,8 +56,10 @@ def counts() -> None:
     for n in (2, 3, 4):
         u, p = count_universal(n), count_practical(n)
         pu, pp = paper.get(n, (None, None))
-        print(f" {n}  {u:9d} {theorem5(n):5d} {pu if pu is not None else '-':>6} | {p:9d} "
-              f"{theorem6(n):7d} {pp if pp is not None else '-':>6}")
+        print(
+            f" {n}  {u:9d} {theorem5(n):5d} {pu if pu is not None else '-':>6} | {p:9d} "
+            f"{theorem6(n):7d} {pp if pp is not None else '-':>6}"
+        )
 
 
 # ---------------------------------------------------------------- detection range
@@ -94,8 +96,16 @@ def _ours(n: int):  # noqa: ANN202
     return code, detect
 
 
-def max_distance(model, code, n: int, size_m: float, tex_fn, detect, seeds: int = 3,  # noqa: ANN001
-                 step: float = 0.25) -> float:
+def max_distance(
+    model,
+    code,
+    n: int,
+    size_m: float,
+    tex_fn,
+    detect,
+    seeds: int = 3,  # noqa: ANN001
+    step: float = 0.25,
+) -> float:
     """Largest frontal distance at which >= 2 of ``seeds`` noisy renders are detected."""
     cfg = BridgeLocScenario(n=n)
     best, misses, d = 0.0, 0, 0.75
@@ -104,8 +114,9 @@ def max_distance(model, code, n: int, size_m: float, tex_fn, detect, seeds: int 
     while misses < 3 and d < 40:
         ok = 0
         for ren in rens:
-            tag = WallTag("t", code, Placement.SQUARE, Mount.ABOVE, (d, 0.0, 1.0), (-1.0, 0.0),
-                          size_m)
+            tag = WallTag(
+                "t", code, Placement.SQUARE, Mount.ABOVE, (d, 0.0, 1.0), (-1.0, 0.0), size_m
+            )
             ideal = render_view(model, model.world_from_camera, [tag], bg, tex_fn)
             img = cv2.imdecode(np.frombuffer(ren.finish(ideal), np.uint8), cv2.IMREAD_GRAYSCALE)
             ok += detect(img)
@@ -147,8 +158,10 @@ def detection_range(quick: bool) -> None:
             print(f"   {size * 100:3.0f}cm " + "  ".join(f"{d:6.2f}" for d in row))
         del rng_tex
         if (0.30, 3) in table and table[(0.30, 3)] > 0:
-            print(f"   30 cm: N=2 / N=3 = {table[(0.30, 2)] / table[(0.30, 3)]:.2f}x "
-                  f"(acceptance >= 1.5x)")
+            print(
+                f"   30 cm: N=2 / N=3 = {table[(0.30, 2)] / table[(0.30, 3)]:.2f}x "
+                f"(acceptance >= 1.5x)"
+            )
         # peers at equal printed size (30 cm black square)
         peers = {
             "ours N=2": (None, 2),
@@ -188,12 +201,18 @@ def speed(log: Path) -> None:
             wall.append(time.perf_counter() - t0)
             cpu.append(time.thread_time() - c0)
     med_cpu = 1000 * statistics.median(cpu)
-    print(f"== tag detection + decoding, 640x480, one thread, {len(cpu)} runs "
-          f"({len(cpu) // 3} frames x 3)")
-    print(f"   CPU time: median {med_cpu:.2f} ms, p90 {1000 * float(np.quantile(cpu, 0.9)):.2f} ms"
-          f"  (target <= 10 ms median: {'PASS' if med_cpu <= 10 else 'FAIL'})")
-    print(f"   wall time: median {1000 * statistics.median(wall):.2f} ms (includes waiting for "
-          f"the CPU when the machine is shared)")
+    print(
+        f"== tag detection + decoding, 640x480, one thread, {len(cpu)} runs "
+        f"({len(cpu) // 3} frames x 3)"
+    )
+    print(
+        f"   CPU time: median {med_cpu:.2f} ms, p90 {1000 * float(np.quantile(cpu, 0.9)):.2f} ms"
+        f"  (target <= 10 ms median: {'PASS' if med_cpu <= 10 else 'FAIL'})"
+    )
+    print(
+        f"   wall time: median {1000 * statistics.median(wall):.2f} ms (includes waiting for "
+        f"the CPU when the machine is shared)"
+    )
 
 
 # ---------------------------------------------------------------- scenarios
@@ -218,8 +237,10 @@ def office(tmp: Path) -> None:
             cells = [m.get(f"office_median_m_d{d}_a{a:+d}") for a in angles]
             print(f"    {d} m " + " ".join("    --" if c is None else f"{c:6.3f}" for c in cells))
         worst = m.get("office_median_m_worst_d_le3_a_le45")
-        print(f"    worst median for d <= 3 m, |a| <= 45°: {worst} m "
-              f"({'PASS' if worst is not None and worst < 0.25 else 'FAIL'} < 0.25)")
+        print(
+            f"    worst median for d <= 3 m, |a| <= 45°: {worst} m "
+            f"({'PASS' if worst is not None and worst < 0.25 else 'FAIL'} < 0.25)"
+        )
 
 
 PAPER_LOBBY = {  # read off Figs. 4.22 / 4.23 and the text (approximate)
@@ -243,8 +264,9 @@ def lobby(tmp: Path, quick: bool, seeds: int) -> None:
         agg: dict[str, list[tuple[int, int, float]]] = {m.value: [] for m in Mode}
         for s in range(seeds):
             log = tmp / f"lobby_{k}_{s}.mcap"
-            simulate_bridgeloc(log, BridgeLocScenario(field="lobby", tags=k, seed=100 + s,
-                                                      duration_s=duration))
+            simulate_bridgeloc(
+                log, BridgeLocScenario(field="lobby", tags=k, seed=100 + s, duration_s=duration)
+            )
             m = _eval(log, tmp, Mode.FULL)  # one pass scores all three modes on the same frames
             for mode in Mode:
                 rate = m[f"success_rate_{mode.value}"] or 0.0
@@ -259,14 +281,20 @@ def lobby(tmp: Path, quick: bool, seeds: int) -> None:
             row[mode] = (loc / pos, sum(v[2] for v in vals) / loc if loc else float("nan"))
         rows[k] = row
         ordering_ok &= row["icam"][0] < row["basic"][0] < row["full"][0]
-        print(f" {k:4d} |        {row['icam'][0]:5.1%} {row['basic'][0]:6.1%} {row['full'][0]:6.1%}"
-              f" |              {row['icam'][1]:5.2f} {row['basic'][1]:6.2f} {row['full'][1]:6.2f}")
+        print(
+            f" {k:4d} |        {row['icam'][0]:5.1%} {row['basic'][0]:6.1%} {row['full'][0]:6.1%}"
+            f" |              {row['icam'][1]:5.2f} {row['basic'][1]:6.2f} {row['full'][1]:6.2f}"
+        )
     e4 = max(rows[k]["full"][1] for k in counts_ if k >= 4)
-    print(f"   Full mean error with >= 4 tags (worst): {e4:.3f} m "
-          f"({'PASS' if e4 <= 0.32 else 'FAIL'} <= 0.32)")
-    print(f"   Full success with 8 tags: {rows[8]['full'][0]:.1%} "
-          f"({'PASS' if rows[8]['full'][0] >= 0.90 else 'FAIL'} >= 90%), with 10: "
-          f"{rows[10]['full'][0]:.1%} ({'PASS' if rows[10]['full'][0] >= 0.98 else 'FAIL'} >= 98%)")
+    print(
+        f"   Full mean error with >= 4 tags (worst): {e4:.3f} m "
+        f"({'PASS' if e4 <= 0.32 else 'FAIL'} <= 0.32)"
+    )
+    print(
+        f"   Full success with 8 tags: {rows[8]['full'][0]:.1%} "
+        f"({'PASS' if rows[8]['full'][0] >= 0.90 else 'FAIL'} >= 90%), with 10: "
+        f"{rows[10]['full'][0]:.1%} ({'PASS' if rows[10]['full'][0] >= 0.98 else 'FAIL'} >= 98%)"
+    )
     print(f"   I-Cam < Basic < Full at every tag count: {'PASS' if ordering_ok else 'FAIL'}")
 
 

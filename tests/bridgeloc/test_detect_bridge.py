@@ -48,8 +48,9 @@ def test_rendered_tag_decodes_with_orientation(code, placement) -> None:  # noqa
 
 
 def test_oblique_view_still_reads_upright() -> None:
-    tag = WallTag("t", (1, 0, 0, 0), Placement.SQUARE, Mount.ABOVE, (3.0, 0.0, 1.0), (-1.0, 0.0),
-                  0.3)
+    tag = WallTag(
+        "t", (1, 0, 0, 0), Placement.SQUARE, Mount.ABOVE, (3.0, 0.0, 1.0), (-1.0, 0.0), 0.3
+    )
     # 55 degrees off the tag's normal
     a = math.radians(55)
     eye = (3.0 - 2.0 * math.cos(a), 2.0 * math.sin(a), 1.0)
@@ -59,8 +60,9 @@ def test_oblique_view_still_reads_upright() -> None:
 
 
 def test_half_out_of_view_gives_nothing() -> None:
-    tag = WallTag("t", (0, 1, 1, 0), Placement.SQUARE, Mount.ABOVE, (2.0, 0.0, 1.0), (-1.0, 0.0),
-                  0.3)
+    tag = WallTag(
+        "t", (0, 1, 1, 0), Placement.SQUARE, Mount.ABOVE, (2.0, 0.0, 1.0), (-1.0, 0.0), 0.3
+    )
     # aim so that the tag is cut by the left image edge
     f = 640 / (2 * math.tan(math.radians(25)))
     shift = 2.0 * 320 / f  # metres at the tag's depth from the centre to the image edge
@@ -84,8 +86,7 @@ def test_order_corners_square_and_diamond() -> None:
 
 
 @settings(max_examples=50, deadline=None)
-@given(st.floats(-5, 5), st.floats(-5, 5), st.floats(-math.pi, math.pi),
-       st.integers(2, 8))
+@given(st.floats(-5, 5), st.floats(-5, 5), st.floats(-math.pi, math.pi), st.integers(2, 8))
 def test_bridge_lstsq_recovers_pose(x: float, y: float, yaw: float, m: int) -> None:
     rng = np.random.default_rng(m)
     robot_pts = rng.uniform(-3, 3, (m, 2))
@@ -108,8 +109,9 @@ def test_bridge_pnp_recovers_base_pose() -> None:
     from dataclasses import replace
 
     world_cam = replace(rcam, world_from_camera=_compose(rcam.world_from_camera, *pose))
-    tag = WallTag("t", (0, 1, 1, 0), Placement.SQUARE, Mount.ABOVE, (5.0, 2.0, 0.9), (-1.0, 0.0),
-                  0.3)
+    tag = WallTag(
+        "t", (0, 1, 1, 0), Placement.SQUARE, Mount.ABOVE, (5.0, 2.0, 0.9), (-1.0, 0.0), 0.3
+    )
     corners = tag_corners(tag)
     px, _ = PinholeCamera(world_cam).project(corners)
     x, y, yaw = bridge_pnp(corners, px, geo)

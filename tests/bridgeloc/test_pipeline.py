@@ -17,8 +17,16 @@ from trackctl.logs.writer import LogWriter
 from trackctl.sim.bridgeloc import BridgeLocScenario, simulate_bridgeloc
 
 SAMPLE = ROOT / "sample_logs" / "bridgeloc.mcap"
-KEYS = {"system", "mode", "tags", "positions", "localized", "success_rate", "error_m_mean",
-        "error_m_median"}
+KEYS = {
+    "system",
+    "mode",
+    "tags",
+    "positions",
+    "localized",
+    "success_rate",
+    "error_m_mean",
+    "error_m_median",
+}
 
 
 @pytest.fixture(scope="module")
@@ -26,8 +34,20 @@ def reports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
     out = {}
     for mode in Mode:
         target = tmp_path_factory.mktemp("bl") / f"{mode.value}.mcap"
-        res = CliRunner().invoke(app, ["bridgeloc", "eval", str(SAMPLE), "--out", str(target),
-                                       "--mode", mode.value, "--json", "-q"])
+        res = CliRunner().invoke(
+            app,
+            [
+                "bridgeloc",
+                "eval",
+                str(SAMPLE),
+                "--out",
+                str(target),
+                "--mode",
+                mode.value,
+                "--json",
+                "-q",
+            ],
+        )
         assert res.exit_code == 0, res.output
         out[mode.value] = json.loads(res.stdout) | {"_out": str(target)}
     return out
@@ -72,17 +92,31 @@ def test_missing_robot_calibration_is_one_line_error(tmp_path: Path) -> None:
 
 
 def test_fail_if(tmp_path: Path) -> None:
-    res = CliRunner().invoke(app, ["bridgeloc", "eval", str(SAMPLE), "--out",
-                                   str(tmp_path / "o.mcap"), "--mode", "icam", "--json", "-q",
-                                   "--fail-if", "success_rate<0.99"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "bridgeloc",
+            "eval",
+            str(SAMPLE),
+            "--out",
+            str(tmp_path / "o.mcap"),
+            "--mode",
+            "icam",
+            "--json",
+            "-q",
+            "--fail-if",
+            "success_rate<0.99",
+        ],
+    )
     assert res.exit_code == 1  # the infrastructure cameras alone miss part of this path
     assert json.loads(res.stdout.splitlines()[0])["mode"] == "icam"
 
 
 def test_shipped_sample_log_is_regenerable(tmp_path: Path) -> None:
     fresh = tmp_path / "bridgeloc.mcap"
-    simulate_bridgeloc(fresh, BridgeLocScenario(field="lobby", tags=6, duration_s=10,
-                                                infra_fps=1, seed=0))
+    simulate_bridgeloc(
+        fresh, BridgeLocScenario(field="lobby", tags=6, duration_s=10, infra_fps=1, seed=0)
+    )
     assert fresh.read_bytes() == SAMPLE.read_bytes(), (
         "sample_logs/bridgeloc.mcap is stale: regenerate with `make sample-logs`"
     )
@@ -90,8 +124,9 @@ def test_shipped_sample_log_is_regenerable(tmp_path: Path) -> None:
 
 
 def test_simulate_cli_rejects_bad_field(tmp_path: Path) -> None:
-    res = CliRunner().invoke(app, ["simulate", "bridgeloc", "--out", str(tmp_path / "x.mcap"),
-                                   "--field", "moon"])
+    res = CliRunner().invoke(
+        app, ["simulate", "bridgeloc", "--out", str(tmp_path / "x.mcap"), "--field", "moon"]
+    )
     assert res.exit_code == 2 and "--field" in res.output
 
 
@@ -99,8 +134,12 @@ def test_csv_path_and_office_field(tmp_path: Path) -> None:
     path = tmp_path / "path.csv"
     path.write_text("x_m,y_m\n2.0,2.0\n2.6,2.0\n")
     log = tmp_path / "csv.mcap"
-    counts = simulate_bridgeloc(log, BridgeLocScenario(field="lobby", tags=2, path=str(path),
-                                                       duration_s=1.0, robot_fps=2, infra_fps=1))
+    counts = simulate_bridgeloc(
+        log,
+        BridgeLocScenario(
+            field="lobby", tags=2, path=str(path), duration_s=1.0, robot_fps=2, infra_fps=1
+        ),
+    )
     assert counts["/r1cam/image"] >= 2 and counts["/cam0/image"] >= 1
     truth = [m.message.entities[0].position_m for m in LogReader(log).messages(["/ground_truth"])]
     assert truth[0].x == pytest.approx(2.0) and truth[0].y == pytest.approx(2.0)

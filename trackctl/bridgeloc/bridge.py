@@ -57,16 +57,22 @@ def _object_square(size_m: float) -> np.ndarray:
     return np.array([[-h, h, 0], [h, h, 0], [h, -h, 0], [-h, -h, 0]], np.float64)
 
 
-def tag_corners_in_camera(det: TagDetection, cam: CameraGeometry, size_m: float
-                          ) -> np.ndarray | None:
+def tag_corners_in_camera(
+    det: TagDetection, cam: CameraGeometry, size_m: float
+) -> np.ndarray | None:
     """Corners (4, 3) of a detected tag in the camera's optical frame (V_o^(C), V_o^(R)).
 
     ``cv2.solvePnP`` with ``SOLVEPNP_IPPE_SQUARE`` (the planar-square solver) on the sub-pixel
     corners, distortion included.
     """
     obj = _object_square(size_m)
-    ok, rvec, tvec = cv2.solvePnP(obj, det.corners.astype(np.float64).reshape(-1, 1, 2), cam.K,
-                                  cam.dist, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    ok, rvec, tvec = cv2.solvePnP(
+        obj,
+        det.corners.astype(np.float64).reshape(-1, 1, 2),
+        cam.K,
+        cam.dist,
+        flags=cv2.SOLVEPNP_IPPE_SQUARE,
+    )
     if not ok:
         return None
     rot, _ = cv2.Rodrigues(rvec)
@@ -165,16 +171,20 @@ def bridge_lstsq(world_xy: np.ndarray, robot_xy: np.ndarray) -> tuple[float, flo
     return float(t[0]), float(t[1]), yaw
 
 
-def bridge_pnp(world_pts: np.ndarray, image_pts: np.ndarray, cam: CameraGeometry
-               ) -> tuple[float, float, float] | None:
+def bridge_pnp(
+    world_pts: np.ndarray, image_pts: np.ndarray, cam: CameraGeometry
+) -> tuple[float, float, float] | None:
     """The alternative: one ``cv2.solvePnP`` of the robot camera against the mapped corners.
 
     ``cam`` holds base <- camera; returns the base pose (x, y, yaw) in the ground frame.
     """
-    ok, rvec, tvec = cv2.solvePnP(np.asarray(world_pts, np.float64),
-                                  np.asarray(image_pts, np.float64).reshape(-1, 1, 2), cam.K,
-                                  cam.dist, flags=cv2.SOLVEPNP_IPPE if len(world_pts) == 4
-                                  else cv2.SOLVEPNP_ITERATIVE)
+    ok, rvec, tvec = cv2.solvePnP(
+        np.asarray(world_pts, np.float64),
+        np.asarray(image_pts, np.float64).reshape(-1, 1, 2),
+        cam.K,
+        cam.dist,
+        flags=cv2.SOLVEPNP_IPPE if len(world_pts) == 4 else cv2.SOLVEPNP_ITERATIVE,
+    )
     if not ok:
         return None
     r_cw, _ = cv2.Rodrigues(rvec)

@@ -65,8 +65,7 @@ class TagDetection:
         return self.corners.mean(axis=0)
 
 
-def order_corners(quad: np.ndarray, vertical_tol_deg: float = 20.0
-                  ) -> tuple[np.ndarray, Placement]:
+def order_corners(quad: np.ndarray, vertical_tol_deg: float = 20.0) -> tuple[np.ndarray, Placement]:
     """Corners in printed order TL, TR, BR, BL and the placement, for an upright camera."""
     q = np.asarray(quad, np.float64).reshape(4, 2)
     c = q.mean(axis=0)
@@ -76,8 +75,10 @@ def order_corners(quad: np.ndarray, vertical_tol_deg: float = 20.0
     from_vertical = np.degrees(np.arctan2(np.abs(edges[:, 0]), np.abs(edges[:, 1])))
     if from_vertical.min() <= vertical_tol_deg:
         # square: the top edge joins the two highest corners
-        k = max(range(4), key=lambda i: q[(i + 2) % 4, 1] + q[(i + 3) % 4, 1] - q[i, 1]
-                - q[(i + 1) % 4, 1])
+        k = max(
+            range(4),
+            key=lambda i: q[(i + 2) % 4, 1] + q[(i + 3) % 4, 1] - q[i, 1] - q[(i + 1) % 4, 1],
+        )
         placement = Placement.SQUARE
     else:
         k = int(np.argmin(q[:, 1]))  # diamond: the top corner is the printed top-left
@@ -106,15 +107,17 @@ def _rings(n: int, border_ratio: float) -> tuple[int, int, float, np.ndarray, np
     return side, m, b, ring_in, ring_out
 
 
-def _decode(gray: np.ndarray, corners: np.ndarray, cfg: DetectorConfig
-            ) -> tuple[Code, float] | None:
+def _decode(
+    gray: np.ndarray, corners: np.ndarray, cfg: DetectorConfig
+) -> tuple[Code, float] | None:
     geo = tag_geometry(cfg.n, cfg.border_ratio)
     side, m, b, ring_in, ring_out = _rings(cfg.n, cfg.border_ratio)
     dst = np.array([[m, m], [m + side, m], [m + side, m + side], [m, m + side]], np.float32)
     hmat = cv2.getPerspectiveTransform(corners.astype(np.float32), dst)
     size = side + 2 * m
-    canon = cv2.warpPerspective(gray, hmat, (size, size), flags=cv2.INTER_LINEAR,
-                                borderMode=cv2.BORDER_REPLICATE)
+    canon = cv2.warpPerspective(
+        gray, hmat, (size, size), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+    )
     # black reference: the middle line of the border; white: a ring in the quiet zone
     inner = canon[ring_in]
     outer = canon[ring_out]
@@ -153,8 +156,9 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
     # two window sizes, as ArUco does: a small one separates tiny far tags from the background,
     # a large one keeps the thick border of near tags in one piece
     for block, c in ((cfg.block_size, cfg.threshold_c), (cfg.large_block_size, 7.0)):
-        binary = cv2.adaptiveThreshold(gray, 255, cv2.ADAPTIVE_THRESH_MEAN_C,
-                                       cv2.THRESH_BINARY_INV, block, c)
+        binary = cv2.adaptiveThreshold(
+            gray, 255, cv2.ADAPTIVE_THRESH_MEAN_C, cv2.THRESH_BINARY_INV, block, c
+        )
         contours, _ = cv2.findContours(binary, cv2.RETR_LIST, cv2.CHAIN_APPROX_SIMPLE)
         for cnt in contours:
             if len(cnt) < 4:
@@ -176,9 +180,12 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
         sides = np.linalg.norm(q - np.roll(q, 1, axis=0), axis=1)
         if sides.min() < cfg.min_side_px:
             continue
-        if (q[:, 0] < cfg.edge_margin_px).any() or (q[:, 1] < cfg.edge_margin_px).any() or (
-            q[:, 0] > w - 1 - cfg.edge_margin_px).any() or (q[:, 1] > h - 1 - cfg.edge_margin_px
-                                                             ).any():
+        if (
+            (q[:, 0] < cfg.edge_margin_px).any()
+            or (q[:, 1] < cfg.edge_margin_px).any()
+            or (q[:, 0] > w - 1 - cfg.edge_margin_px).any()
+            or (q[:, 1] > h - 1 - cfg.edge_margin_px).any()
+        ):
             continue  # cut by the image border: corners would be wrong
         # keep the window inside the black border: the code cells' edges would pull the corner
         border_px = sides.min() / (cfg.border_ratio + 2)
@@ -186,8 +193,13 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
         ctr0 = q.mean(axis=0)
         if any(np.linalg.norm(d.center - ctr0) < max(3.0, sides.min() / 2) for d in out):
             continue  # the same tag found again (inner outline, or the other threshold)
-        refined = cv2.cornerSubPix(gray, q.reshape(-1, 1, 2).copy(), (win, win), (-1, -1),
-                                   (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.01))
+        refined = cv2.cornerSubPix(
+            gray,
+            q.reshape(-1, 1, 2).copy(),
+            (win, win),
+            (-1, -1),
+            (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.01),
+        )
         corners, placement = order_corners(refined.reshape(4, 2), cfg.vertical_tol_deg)
         dec = _decode(gray, corners, cfg)
         if dec is None:

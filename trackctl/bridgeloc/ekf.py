@@ -46,8 +46,9 @@ class _Ekf(ExtendedKalmanFilter):
 
     def predict_x(self, u: np.ndarray = 0) -> None:  # type: ignore[override]
         ds, dyaw = float(u[0]), float(u[1])
-        x, y, th = integrate_step(float(self.x[0, 0]), float(self.x[1, 0]), float(self.x[2, 0]),
-                                  ds, dyaw)
+        x, y, th = integrate_step(
+            float(self.x[0, 0]), float(self.x[1, 0]), float(self.x[2, 0]), ds, dyaw
+        )
         self.x = np.array([[x], [y], [wrap(th)]])
 
 
@@ -90,11 +91,15 @@ class RobotEkf:
         c = self.cfg
         th = float(self.kf.x[2, 0]) + dyaw / 2
         self.kf.F = np.array([[1, 0, -ds * math.sin(th)], [0, 1, ds * math.cos(th)], [0, 0, 1]])
-        v = np.array([[math.cos(th), -ds * math.sin(th) / 2],
-                      [math.sin(th), ds * math.cos(th) / 2], [0, 1]])
-        m = np.diag([(c.odom_dist_frac * abs(ds) + c.odom_dist_floor_m) ** 2,
-                     (c.odom_yaw_frac * abs(dyaw) + c.odom_yaw_floor_rad
-                      + 0.01 * abs(ds)) ** 2])
+        v = np.array(
+            [[math.cos(th), -ds * math.sin(th) / 2], [math.sin(th), ds * math.cos(th) / 2], [0, 1]]
+        )
+        m = np.diag(
+            [
+                (c.odom_dist_frac * abs(ds) + c.odom_dist_floor_m) ** 2,
+                (c.odom_yaw_frac * abs(dyaw) + c.odom_yaw_floor_rad + 0.01 * abs(ds)) ** 2,
+            ]
+        )
         self.kf.Q = v @ m @ v.T
         self.kf.predict(u=np.array([ds, dyaw]))
 
@@ -123,12 +128,14 @@ class RobotEkf:
         self.kf.update(z, hjac, hx, R=r_mat, residual=_res_angle(1))
         self.kf.x[2, 0] = wrap(float(self.kf.x[2, 0]))
 
-    def update_pose(self, x: float, y: float, yaw: float | None, sigma_m: float,
-                    sigma_yaw: float) -> None:
+    def update_pose(
+        self, x: float, y: float, yaw: float | None, sigma_m: float, sigma_yaw: float
+    ) -> None:
         """An absolute fix: position (I-Cam) or position + heading (bridging)."""
         if not self.initialized:
-            self.init(x, y, 0.0 if yaw is None else yaw, sigma_m, math.pi if yaw is None
-                      else sigma_yaw)
+            self.init(
+                x, y, 0.0 if yaw is None else yaw, sigma_m, math.pi if yaw is None else sigma_yaw
+            )
             return
         if yaw is None:
             h = np.array([[1.0, 0, 0], [0, 1.0, 0]])

@@ -168,7 +168,8 @@ def run(
                 f"calibration"
             )
     infra = {
-        name: m for name, m in models.items()
+        name: m
+        for name, m in models.items()
         if name != rcam_name and m.world_from_camera is not None and topics.image(name) in tops
     }
     if not infra:
@@ -192,17 +193,22 @@ def run(
         n_msgs += 1
         if progress is not None and n_msgs % 200 == 0:
             progress(n_msgs, None)
-        cam = msg.message.frame_id if msg.message.frame_id in infra else msg.topic.strip("/").split(
-            "/")[0]
+        cam = (
+            msg.message.frame_id
+            if msg.message.frame_id in infra
+            else msg.topic.strip("/").split("/")[0]
+        )
         gray = _imdecode(msg.message.data)
         t0 = time.perf_counter()
         dets = detect_tags(gray, det_cfg)
         det_times.append(time.perf_counter() - t0)
         for d in dets:
             tag_map.add(d, geos[cam], size_m)
-        writer.write(annotations_topic(cam),
-                     _annotations(msg.log_time_ns, dets, [d.pattern_id for d in dets]),
-                     msg.log_time_ns)
+        writer.write(
+            annotations_topic(cam),
+            _annotations(msg.log_time_ns, dets, [d.pattern_id for d in dets]),
+            msg.log_time_ns,
+        )
         px = ir_light(gray, cfg.ir_threshold, cfg.ir_min_area_px)
         if px is not None:
             g = pins[cam].ground_point(px[None], ground_z=ir_h)[0]
@@ -221,22 +227,31 @@ def run(
         i = int(np.searchsorted(fix_times, t_ns))
         best = None
         for j in (i - 1, i):
-            if 0 <= j < len(fix_times) and abs(int(fix_times[j]) - t_ns) <= half_period and (
-                    best is None or abs(int(fix_times[j]) - t_ns) < abs(best - t_ns)):
+            if (
+                0 <= j < len(fix_times)
+                and abs(int(fix_times[j]) - t_ns) <= half_period
+                and (best is None or abs(int(fix_times[j]) - t_ns) < abs(best - t_ns))
+            ):
                 best = int(fix_times[j])
         return None if best is None else np.mean(fixes[best], axis=0)
 
     # ---- pass 2: robot camera + odometry in time order
     rmeta = reader.metadata().get(f"robot/{robot}", {})
-    drive = DiffDrive(float(rmeta.get("ticks_per_m", 2000.0)),
-                      float(rmeta.get("wheel_base_m", 0.30)))
+    drive = DiffDrive(
+        float(rmeta.get("ticks_per_m", 2000.0)), float(rmeta.get("wheel_base_m", 0.30))
+    )
     ekf = RobotEkf(cfg.ekf)
     truth: dict[int, tuple[float, float]] = {}
     est: list[tuple[int, tuple[float, float, float] | None]] = []
     other: dict[Mode, list[tuple[int, tuple[float, float, float] | None]]] = {m: [] for m in Mode}
     bridge_only: list[tuple[int, tuple[float, float, float] | None]] = []
-    stats = {"bridge_fixes": 0, "icam_fixes": 0, "tag_observations": 0, "robot_frames": 0,
-             "ambiguous_matches": 0}
+    stats = {
+        "bridge_fixes": 0,
+        "icam_fixes": 0,
+        "tag_observations": 0,
+        "robot_frames": 0,
+        "ambiguous_matches": 0,
+    }
     prev_ticks: tuple[int, int] | None = None
     odom_topic = topics.odom(robot)
     stream = [topics.GROUND_TRUTH, odom_topic]
@@ -262,8 +277,9 @@ def run(
             if od.left_ticks is None or od.right_ticks is None:
                 continue
             if prev_ticks is not None and needs_robot:
-                ds, dyaw = drive.motion_from_ticks(od.left_ticks - prev_ticks[0],
-                                                   od.right_ticks - prev_ticks[1])
+                ds, dyaw = drive.motion_from_ticks(
+                    od.left_ticks - prev_ticks[0], od.right_ticks - prev_ticks[1]
+                )
                 ekf.predict(ds, dyaw)
             prev_ticks = (od.left_ticks, od.right_ticks)
             continue
@@ -351,22 +367,35 @@ def run(
     metrics.update({k: v for k, v in stats.items()})
     metrics["tags_mapped"] = len(tag_map.tags)
     metrics["tag_map_error_m_mean"] = _map_error(tag_map, meta)
-    metrics["detect_ms_median"] = round(1000 * float(np.median(det_times)), 3) if det_times \
-        else None
-    metrics["ms_per_frame"] = round(1000 * (time.perf_counter() - started)
-                                    / max(1, len(det_times)), 3)
+    metrics["detect_ms_median"] = (
+        round(1000 * float(np.median(det_times)), 3) if det_times else None
+    )
+    metrics["ms_per_frame"] = round(
+        1000 * (time.perf_counter() - started) / max(1, len(det_times)), 3
+    )
     return MetricReport(
         t_ns=reader.end_ns or 0,
         processor="bridgeloc",
         metrics=metrics,
-        params={"mode": cfg.mode.value, "pose": cfg.pose.value, "robot": robot,
-                "robot_camera": rcam_name, "tag_n": n, "tag_size_m": size_m,
-                "max_sigma_m": cfg.max_sigma_m, "max_range_m": cfg.max_range_m},
+        params={
+            "mode": cfg.mode.value,
+            "pose": cfg.pose.value,
+            "robot": robot,
+            "robot_camera": rcam_name,
+            "tag_n": n,
+            "tag_size_m": size_m,
+            "max_sigma_m": cfg.max_sigma_m,
+            "max_range_m": cfg.max_range_m,
+        },
     )
 
 
-def _bridge_fix(obs: list[tuple[TagDetection, str, np.ndarray]], tag_map: TagMap,
-                rgeo: CameraGeometry, method: PoseMethod) -> tuple[float, float, float] | None:
+def _bridge_fix(
+    obs: list[tuple[TagDetection, str, np.ndarray]],
+    tag_map: TagMap,
+    rgeo: CameraGeometry,
+    method: PoseMethod,
+) -> tuple[float, float, float] | None:
     """Basic bridging: corners of uniquely identified tags, mapped and seen -> robot pose."""
     world, robot, image = [], [], []
     for d, sig, pb in obs:
@@ -387,9 +416,14 @@ def _bridge_fix(obs: list[tuple[TagDetection, str, np.ndarray]], tag_map: TagMap
 Estimates = list[tuple[int, tuple[float, float, float] | None]]
 
 
-def _score(est: Estimates, truth: dict[int, tuple[float, float]], cfg: BridgeLocConfig,
-           n_tags: int, meta: dict[str, str], bridge_only: Estimates | None = None
-           ) -> dict[str, float | int | str | None]:
+def _score(
+    est: Estimates,
+    truth: dict[int, tuple[float, float]],
+    cfg: BridgeLocConfig,
+    n_tags: int,
+    meta: dict[str, str],
+    bridge_only: Estimates | None = None,
+) -> dict[str, float | int | str | None]:
     errors = []
     positions = localized = 0
     for t_ns, pose in est:
@@ -414,8 +448,11 @@ def _score(est: Estimates, truth: dict[int, tuple[float, float]], cfg: BridgeLoc
     }
     if meta.get("field") == "office" and "tags_truth" in meta and bridge_only is not None:
         # Fig. 4.20 is about view bridging itself: score the bridging fixes alone
-        rows = [(*truth[t], math.dist(p[:2], truth[t])) for t, p in bridge_only
-                if p is not None and t in truth]
+        rows = [
+            (*truth[t], math.dist(p[:2], truth[t]))
+            for t, p in bridge_only
+            if p is not None and t in truth
+        ]
         out.update(_office_grid(rows, json.loads(meta["tags_truth"])[0]))
     return out
 
@@ -455,6 +492,3 @@ def _map_error(tag_map: TagMap, meta: dict[str, str]) -> float | None:
     truth = [np.array(t["center_m"]) for t in json.loads(meta["tags_truth"])]
     errs = [min(float(np.linalg.norm(t.center - g)) for g in truth) for t in tag_map.tags]
     return round(float(np.mean(errs)), 4)
-
-
-

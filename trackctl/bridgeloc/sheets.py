@@ -31,8 +31,13 @@ def _texture(code: Code, n: int, side_px: int, placement: Placement, b: float) -
     return _diamond(img) if placement is Placement.DIAMOND else img
 
 
-def sheet_png(tags: Sequence[SheetTag], n: int, path: Path, side_px: int = 160,
-              border_ratio: float = BORDER_RATIO) -> None:
+def sheet_png(
+    tags: Sequence[SheetTag],
+    n: int,
+    path: Path,
+    side_px: int = 160,
+    border_ratio: float = BORDER_RATIO,
+) -> None:
     """A grid of tags with labels under each (for screens and quick prints)."""
     tiles = []
     cell = int(side_px * 1.5) + 24
@@ -56,8 +61,9 @@ def sheet_png(tags: Sequence[SheetTag], n: int, path: Path, side_px: int = 160,
         raise InputError(f"{path}: cannot write the PNG sheet")
 
 
-def sheet_pdf(tags: Sequence[SheetTag], n: int, path: Path, size_cm: float,
-              border_ratio: float = BORDER_RATIO) -> None:
+def sheet_pdf(
+    tags: Sequence[SheetTag], n: int, path: Path, size_cm: float, border_ratio: float = BORDER_RATIO
+) -> None:
     """One tag per page, the black square exactly ``size_cm`` wide when printed at 100%."""
     try:
         import matplotlib
@@ -74,18 +80,29 @@ def sheet_pdf(tags: Sequence[SheetTag], n: int, path: Path, size_cm: float,
             extent_in = side_in * tex.shape[0] / 400
             page = extent_in + 1.0
             fig = plt.figure(figsize=(page, page + 0.4))
-            ax = fig.add_axes((0.5 / page, 0.9 / (page + 0.4), extent_in / page,
-                               extent_in / (page + 0.4)))
+            ax = fig.add_axes(
+                (0.5 / page, 0.9 / (page + 0.4), extent_in / page, extent_in / (page + 0.4))
+            )
             ax.imshow(tex, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
             ax.set_axis_off()
-            fig.text(0.5, 0.3 / (page + 0.4), f"{label}   black square {size_cm:g} cm",
-                     ha="center", fontsize=10)
+            fig.text(
+                0.5,
+                0.3 / (page + 0.4),
+                f"{label}   black square {size_cm:g} cm",
+                ha="center",
+                fontsize=10,
+            )
             pdf.savefig(fig)
             plt.close(fig)
 
 
-def write_sheet(tags: Sequence[SheetTag], n: int, path: Path, size_cm: float = 30.0,
-                border_ratio: float = BORDER_RATIO) -> None:
+def write_sheet(
+    tags: Sequence[SheetTag],
+    n: int,
+    path: Path,
+    size_cm: float = 30.0,
+    border_ratio: float = BORDER_RATIO,
+) -> None:
     """Write a sheet; the format follows the suffix (``.png`` or ``.pdf``)."""
     if not tags:
         raise InputError(f"no tags to print for N={n}")

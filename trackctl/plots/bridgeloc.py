@@ -54,8 +54,9 @@ def plot_run(log: str | Path, out_dir: str | Path) -> list[Path]:
     for tag in json.loads(meta.get("tags_truth", "[]")):
         c = tag["center_m"]
         ax.plot(c[0], c[1], "s", color="k", ms=6)
-        ax.annotate(tag["tag_id"], (c[0], c[1]), fontsize=7, xytext=(3, 3),
-                    textcoords="offset points")
+        ax.annotate(
+            tag["tag_id"], (c[0], c[1]), fontsize=7, xytext=(3, 3), textcoords="offset points"
+        )
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")

@@ -128,8 +128,12 @@ def tag_corners(tag: WallTag, scale: float = 1.0) -> np.ndarray:
     h = tag.size_m * scale / 2
     ctr = np.asarray(tag.center, float)
     return np.stack(
-        [ctr - right * h + up * h, ctr + right * h + up * h, ctr + right * h - up * h,
-         ctr - right * h - up * h]
+        [
+            ctr - right * h + up * h,
+            ctr + right * h + up * h,
+            ctr + right * h - up * h,
+            ctr - right * h - up * h,
+        ]
     )
 
 
@@ -155,8 +159,9 @@ class Layout:
     tags: list[WallTag] = field(default_factory=list)
 
 
-def _infra(name: str, eye: tuple[float, float, float], target: tuple[float, float, float]
-           ) -> CameraModel:
+def _infra(
+    name: str, eye: tuple[float, float, float], target: tuple[float, float, float]
+) -> CameraModel:
     return _model(name, look_at(np.array(eye), np.array(target)), 50.0, (-0.02, 0.0, 0, 0, 0))
 
 
@@ -172,8 +177,15 @@ def _symbols(n: int) -> list[tuple[Code, Placement]]:
 def office_layout(cfg: BridgeLocScenario) -> Layout:
     """A 6 x 7 m office: one camera ~1.5 m from one tag on the wall x = 6 m."""
     cam = _infra("cam0", (5.0, 2.5, 1.9), (6.0, 3.5, 0.6))
-    tag = WallTag("t0", (0, 1, 1, 0), Placement.SQUARE, Mount.ABOVE, (6.0, 3.5, 0.85),
-                  (-1.0, 0.0), cfg.tag_size_m)
+    tag = WallTag(
+        "t0",
+        (0, 1, 1, 0),
+        Placement.SQUARE,
+        Mount.ABOVE,
+        (6.0, 3.5, 0.85),
+        (-1.0, 0.0),
+        cfg.tag_size_m,
+    )
     return Layout((6.0, 7.0), [cam], {}, [tag])
 
 
@@ -231,8 +243,13 @@ def lobby_layout(cfg: BridgeLocScenario) -> Layout:
 # ---------------------------------------------------------------- robot motion
 
 
-def _segments(waypoints: list[tuple[float, float, float | None, float]], start_yaw: float,
-              v: float, om: float, dt: float) -> np.ndarray:
+def _segments(
+    waypoints: list[tuple[float, float, float | None, float]],
+    start_yaw: float,
+    v: float,
+    om: float,
+    dt: float,
+) -> np.ndarray:
     """Poses (K, 3) of a diff-drive robot visiting waypoints: turn, drive, (turn), hold."""
     x, y = waypoints[0][0], waypoints[0][1]
     yaw = start_yaw
@@ -262,8 +279,9 @@ def _segments(waypoints: list[tuple[float, float, float | None, float]], start_y
     return np.array(out)
 
 
-def _office_spots(layout: Layout) -> tuple[list[tuple[float, float, float | None, float]],
-                                           list[tuple[float, float]]]:
+def _office_spots(
+    layout: Layout,
+) -> tuple[list[tuple[float, float, float | None, float]], list[tuple[float, float]]]:
     tag = layout.tags[0]
     nrm = np.array(tag.normal)
     tang = np.array([-nrm[1], nrm[0]])
@@ -279,11 +297,14 @@ def _office_spots(layout: Layout) -> tuple[list[tuple[float, float, float | None
     return wps, spots
 
 
-def _random_waypoints(rng: np.random.Generator, size: tuple[float, float], n: int
-                      ) -> list[tuple[float, float, float | None, float]]:
+def _random_waypoints(
+    rng: np.random.Generator, size: tuple[float, float], n: int
+) -> list[tuple[float, float, float | None, float]]:
     m = 0.8
-    return [(float(rng.uniform(m, size[0] - m)), float(rng.uniform(m, size[1] - m)), None, 0.0)
-            for _ in range(n)]
+    return [
+        (float(rng.uniform(m, size[0] - m)), float(rng.uniform(m, size[1] - m)), None, 0.0)
+        for _ in range(n)
+    ]
 
 
 def _csv_waypoints(path: str) -> list[tuple[float, float, float | None, float]]:
@@ -311,15 +332,17 @@ def _csv_waypoints(path: str) -> list[tuple[float, float, float | None, float]]:
 class _Renderer:
     """Draws one camera's views; keeps its distortion map and tag textures."""
 
-    def __init__(self, model: CameraModel, rng: np.random.Generator, cfg: BridgeLocScenario
-                 ) -> None:
+    def __init__(
+        self, model: CameraModel, rng: np.random.Generator, cfg: BridgeLocScenario
+    ) -> None:
         self.model = model
         self.cfg = cfg
         self.rng = rng
         self.K = np.array([[model.fx_px, 0, model.cx_px], [0, model.fy_px, model.cy_px], [0, 0, 1]])
         w, h = model.width_px, model.height_px
-        grid = np.stack(np.meshgrid(np.arange(w, dtype=np.float32),
-                                    np.arange(h, dtype=np.float32)), axis=-1).reshape(-1, 1, 2)
+        grid = np.stack(
+            np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32)), axis=-1
+        ).reshape(-1, 1, 2)
         und = cv2.undistortPoints(grid, self.K, np.asarray(model.distortion, float), P=self.K)
         und = und.reshape(h, w, 2)
         self.map_x = und[..., 0].astype(np.float32)
@@ -329,13 +352,13 @@ class _Renderer:
     def texture(self, code: Code, side: int) -> np.ndarray:
         key = (code, side)
         if key not in self._tex:
-            self._tex[key] = tag_texture(code, self.cfg.n, side, margin=MARGIN, white=205,
-                                         black=30)
+            self._tex[key] = tag_texture(code, self.cfg.n, side, margin=MARGIN, white=205, black=30)
         return self._tex[key]
 
     def finish(self, ideal: np.ndarray) -> bytes:
-        img = cv2.remap(ideal, self.map_x, self.map_y, cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_REPLICATE)
+        img = cv2.remap(
+            ideal, self.map_x, self.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+        )
         img = cv2.GaussianBlur(img, (0, 0), 0.7)
         noise = self.rng.normal(0.0, self.cfg.noise_sigma, img.shape)
         img = np.clip(img + noise, 0, 255).astype(np.uint8)
@@ -375,14 +398,16 @@ def draw_tag(img: np.ndarray, cam: PinholeCamera, tag: WallTag, tex_fn) -> None:
     tex = tex_fn(tag.code, int(round(side / (1 + 2 * MARGIN))))
     th, tw = tex.shape
     # texel centres are integers, so the texture's outer edges lie at -0.5 and size - 0.5
-    src = np.array([[-0.5, -0.5], [tw - 0.5, -0.5], [tw - 0.5, th - 0.5], [-0.5, th - 0.5]],
-                   np.float32)
+    src = np.array(
+        [[-0.5, -0.5], [tw - 0.5, -0.5], [tw - 0.5, th - 0.5], [-0.5, th - 0.5]], np.float32
+    )
     dst = ((px - [x0, y0]) * ss + (ss - 1) / 2).astype(np.float32)
     hmat = cv2.getPerspectiveTransform(src, dst)
     big = (size[0] * ss, size[1] * ss)
     warped = cv2.warpPerspective(tex, hmat, big, flags=cv2.INTER_LINEAR, borderValue=0)
-    mask = cv2.warpPerspective(np.full_like(tex, 255), hmat, big, flags=cv2.INTER_LINEAR,
-                               borderValue=0)
+    mask = cv2.warpPerspective(
+        np.full_like(tex, 255), hmat, big, flags=cv2.INTER_LINEAR, borderValue=0
+    )
     if ss > 1:
         warped = cv2.resize(warped, size, interpolation=cv2.INTER_AREA)
         mask = cv2.resize(mask, size, interpolation=cv2.INTER_AREA)
@@ -391,9 +416,16 @@ def draw_tag(img: np.ndarray, cam: PinholeCamera, tag: WallTag, tex_fn) -> None:
     roi[:] = (roi * (1 - a) + warped * a).astype(np.uint8)
 
 
-def render_view(model: CameraModel, world_from_camera: Transform, tags: list[WallTag],
-                background: np.ndarray, tex_fn, robot: tuple[float, float, float] | None = None,  # noqa: ANN001
-                ir_height_m: float = 0.65, ir_range_m: float = 7.0) -> np.ndarray:
+def render_view(
+    model: CameraModel,
+    world_from_camera: Transform,
+    tags: list[WallTag],
+    background: np.ndarray,
+    tex_fn,
+    robot: tuple[float, float, float] | None = None,  # noqa: ANN001
+    ir_height_m: float = 0.65,
+    ir_range_m: float = 7.0,
+) -> np.ndarray:
     """The ideal (undistorted) grayscale view: background, tags, robot body and IR light."""
     cam = _pinhole(model, world_from_camera)
     img = background.copy()
@@ -416,8 +448,9 @@ def render_view(model: CameraModel, world_from_camera: Transform, tags: list[Wal
             peak = 255.0 * min(1.0, (ir_range_m / d) ** 2)
             r = max(1.5, 0.03 * model.fx_px / d)
             spot = np.zeros_like(img, np.float32)
-            cv2.circle(spot, tuple(int(round(v)) for v in lp[0]), int(round(r * 2)), 1.0, -1,
-                       cv2.LINE_AA)
+            cv2.circle(
+                spot, tuple(int(round(v)) for v in lp[0]), int(round(r * 2)), 1.0, -1, cv2.LINE_AA
+            )
             spot = cv2.GaussianBlur(spot, (0, 0), r)
             spot /= max(spot.max(), 1e-6)
             img = np.maximum(img, (spot * peak).astype(np.uint8))
@@ -487,16 +520,25 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
     events: list[tuple[int, int, str, object]] = []
     # odometry: wheel travel from true pose increments, scale errors of +-1.5%, tick noise
     dyaw = np.diff(np.unwrap(poses[:, 2]), prepend=poses[0, 2])
-    ds = np.hypot(np.diff(poses[:, 0], prepend=poses[0, 0]),
-                  np.diff(poses[:, 1], prepend=poses[0, 1]))
-    left = np.cumsum((ds - dyaw * wheel_base / 2) * ticks_per_m * 1.015
-                     + rng.normal(0, 1.0, len(ds)))
-    right = np.cumsum((ds + dyaw * wheel_base / 2) * ticks_per_m * 0.985
-                      + rng.normal(0, 1.0, len(ds)))
+    ds = np.hypot(
+        np.diff(poses[:, 0], prepend=poses[0, 0]), np.diff(poses[:, 1], prepend=poses[0, 1])
+    )
+    left = np.cumsum(
+        (ds - dyaw * wheel_base / 2) * ticks_per_m * 1.015 + rng.normal(0, 1.0, len(ds))
+    )
+    right = np.cumsum(
+        (ds + dyaw * wheel_base / 2) * ticks_per_m * 0.985 + rng.normal(0, 1.0, len(ds))
+    )
     for k in range(len(poses)):
         t_ns = int(round(k * dt * S))
-        events.append((t_ns, 0, topics.odom(ROBOT),
-                       WheelOdometry(t_ns, f"robot/{ROBOT}", int(left[k]), int(right[k]))))
+        events.append(
+            (
+                t_ns,
+                0,
+                topics.odom(ROBOT),
+                WheelOdometry(t_ns, f"robot/{ROBOT}", int(left[k]), int(right[k])),
+            )
+        )
 
     def pose_at(t: float) -> tuple[float, float, float]:
         k = min(len(poses) - 1, int(round(t / dt)))
@@ -505,12 +547,20 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
     for tk in np.arange(0.0, duration - 1e-9, 1.0 / cfg.robot_fps):
         t_ns = int(round(tk * S))
         x, y, yaw = pose_at(tk)
-        ideal = render_view(rcam, _compose(base_from_cam, x, y, yaw), layout.tags, rbg,
-                            rrend.texture)
-        events.append((t_ns, 1, topics.image(ROBOT_CAMERA),
-                       make_compressed_image(t_ns, ROBOT_CAMERA, rrend.finish(ideal), "jpeg")))
-        ent = GroundTruthEntity(ROBOT, Vec3(x, y, 0.0), yaw_rad=float(math.atan2(math.sin(yaw),
-                                                                                  math.cos(yaw))))
+        ideal = render_view(
+            rcam, _compose(base_from_cam, x, y, yaw), layout.tags, rbg, rrend.texture
+        )
+        events.append(
+            (
+                t_ns,
+                1,
+                topics.image(ROBOT_CAMERA),
+                make_compressed_image(t_ns, ROBOT_CAMERA, rrend.finish(ideal), "jpeg"),
+            )
+        )
+        ent = GroundTruthEntity(
+            ROBOT, Vec3(x, y, 0.0), yaw_rad=float(math.atan2(math.sin(yaw), math.cos(yaw)))
+        )
         events.append((t_ns, 3, topics.GROUND_TRUTH, GroundTruth(t_ns, (ent,))))
     for tk in np.arange(0.0, duration - 1e-9, 1.0 / cfg.infra_fps):
         t_ns = int(round(tk * S))
@@ -519,12 +569,25 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
             occ = layout.occluded.get(cam.camera)
             robot = None if occ is not None and _in_poly(occ, x, y) else (x, y, yaw)
             assert cam.world_from_camera is not None
-            ideal = render_view(cam, cam.world_from_camera, layout.tags, backgrounds[cam.camera],
-                                renderers[cam.camera].texture, robot, cfg.ir_height_m,
-                                cfg.ir_range_m)
+            ideal = render_view(
+                cam,
+                cam.world_from_camera,
+                layout.tags,
+                backgrounds[cam.camera],
+                renderers[cam.camera].texture,
+                robot,
+                cfg.ir_height_m,
+                cfg.ir_range_m,
+            )
             jpeg = renderers[cam.camera].finish(ideal)
-            events.append((t_ns, 2, topics.image(cam.camera),
-                           make_compressed_image(t_ns, cam.camera, jpeg, "jpeg")))
+            events.append(
+                (
+                    t_ns,
+                    2,
+                    topics.image(cam.camera),
+                    make_compressed_image(t_ns, cam.camera, jpeg, "jpeg"),
+                )
+            )
     events.sort(key=lambda e: (e[0], e[1]))
     with LogWriter(str(out)) as w:
         meta = {
@@ -542,8 +605,9 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
             "office_spots": json.dumps(spots),
         }
         w.add_metadata("bridgeloc", meta)
-        w.add_metadata(f"robot/{ROBOT}", {"ticks_per_m": str(ticks_per_m),
-                                          "wheel_base_m": str(wheel_base)})
+        w.add_metadata(
+            f"robot/{ROBOT}", {"ticks_per_m": str(ticks_per_m), "wheel_base_m": str(wheel_base)}
+        )
         for cam in [*layout.cameras, rcam]:
             w.write(topics.camera_model(cam.camera), cam, 0)
             counts[topics.camera_model(cam.camera)] = 1
