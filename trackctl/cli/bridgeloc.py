@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import print_json, stderr
+from trackctl.cli.common import parse_choice, print_json, stderr
 from trackctl.cli.process import run_system
 
 bridgeloc_app = typer.Typer(
@@ -90,16 +90,9 @@ def eval_(
 ) -> None:
     """BridgeLoc: localize the robot by bridging infrastructure and robot camera views."""
     from trackctl.bridgeloc import BridgeLocConfig, BridgeLocProcessor, Mode, PoseMethod
-    from trackctl.errors import InputError
 
-    try:
-        mode_value = Mode(mode)
-    except ValueError:
-        raise InputError(f"--mode {mode!r}: expected full, basic or icam") from None
-    try:
-        pose_value = PoseMethod(pose)
-    except ValueError:
-        raise InputError(f"--pose {pose!r}: expected lstsq or pnp") from None
+    mode_value = parse_choice(Mode, mode, "--mode")
+    pose_value = parse_choice(PoseMethod, pose, "--pose")
     proc = BridgeLocProcessor(
         BridgeLocConfig(mode=mode_value, pose=pose_value, max_sigma_m=max_sigma)
     )

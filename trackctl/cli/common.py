@@ -7,14 +7,15 @@ import sys
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any
+from enum import Enum
+from typing import Any, TypeVar
 
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from typer.core import TyperGroup
 
-from trackctl.errors import TrackctlError
+from trackctl.errors import InputError, TrackctlError
 from trackctl.logs.messages import MetricReport
 from trackctl.metrics.report import failed_conditions, jsonable_metrics, parse_fail_if
 
@@ -28,6 +29,7 @@ __all__ = [
     "report_dict",
     "EXIT_BAD_INPUT",
     "EXIT_GATE",
+    "parse_choice",
 ]
 
 EXIT_BAD_INPUT = 2
@@ -63,6 +65,21 @@ class TrackctlGroup(TyperGroup):
             raise typer.Exit(130) from None
         finally:
             warnings.showwarning = previous
+
+
+E = TypeVar("E", bound=Enum)
+
+
+def parse_choice(enum_cls: type[E], value: str, option: str) -> E:
+    """``value`` as a member of ``enum_cls``, or an InputError naming ``option`` and the choices."""
+    try:
+        return enum_cls(value)
+    except ValueError:
+        choices = [str(m.value) for m in enum_cls]
+        expected = (
+            ", ".join(choices[:-1]) + f" or {choices[-1]}" if len(choices) > 1 else choices[0]
+        )
+        raise InputError(f"{option} {value!r}: expected {expected}") from None
 
 
 def print_json(obj: Any) -> None:

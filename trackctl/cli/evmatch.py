@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import print_json, stderr
+from trackctl.cli.common import parse_choice, print_json, stderr
 from trackctl.cli.process import run_system
 
 
@@ -66,10 +66,7 @@ def ev_match(
 
     if eids is not None and all_eids:
         raise InputError("--eids and --all: give one of them")
-    try:
-        algo = Algorithm(algorithm)
-    except ValueError:
-        raise InputError(f"--algorithm {algorithm!r}: expected ss or edp") from None
+    algo = parse_choice(Algorithm, algorithm, "--algorithm")
     if engine not in ("local", "spark"):
         raise InputError(f"--engine {engine!r}: expected local or spark")
     if master is not None and engine != "spark":

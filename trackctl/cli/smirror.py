@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import print_json, stderr
+from trackctl.cli.common import parse_choice, print_json, stderr
 from trackctl.cli.process import run_system
 
 
@@ -50,10 +50,7 @@ def smirror(
     from trackctl.errors import InputError
     from trackctl.smirror import Mode, SmirrorConfig, SmirrorProcessor
 
-    try:
-        mode_value = Mode(mode)
-    except ValueError:
-        raise InputError(f"--mode {mode!r}: expected mirror+odom or centralized") from None
+    mode_value = parse_choice(Mode, mode, "--mode")
     try:
         cfg = SmirrorConfig(
             mode=mode_value,

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import print_json, stderr
+from trackctl.cli.common import parse_choice, print_json, stderr
 from trackctl.cli.process import run_system
 
 
@@ -45,14 +45,8 @@ def vm_track(
     from trackctl.errors import InputError
     from trackctl.vmtrack import FrameConfig, Mode, Source, VmTrackConfig, VmTrackProcessor
 
-    try:
-        mode_value = Mode(mode)
-    except ValueError:
-        raise InputError(f"--mode {mode!r}: expected vm or v-af") from None
-    try:
-        source_value = Source(source)
-    except ValueError:
-        raise InputError(f"--source {source!r}: expected auto, frames or detections") from None
+    mode_value = parse_choice(Mode, mode, "--mode")
+    source_value = parse_choice(Source, source, "--source")
     if search not in ("predicted", "full"):
         raise InputError(f"--search {search!r}: expected predicted or full")
     proc = VmTrackProcessor(
