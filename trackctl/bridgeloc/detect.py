@@ -43,6 +43,8 @@ class DetectorConfig:
     block_size: int = 9
     threshold_c: float = 7.0
     large_block_size: int = 25
+    tiny_side_px: float = 12.0
+    """Tags up to this size are also sought as holes of their white quiet zone (far tags)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,6 +147,34 @@ def _decode(
     return tuple(bits), contrast
 
 
+def _quiet_zone_quads(gray: np.ndarray, cfg: DetectorConfig) -> list[tuple[float, np.ndarray]]:
+    """Quads of far, tiny tags found from their white quiet zone.
+
+    A few pixels wide, a tag's thin black border blurs into its white cells and the dark blob no
+    longer outlines the tag; the white quiet zone around it still does: the hole of that bright
+    ring is the tag. At that size perspective distortion is below a pixel, so the hole's
+    minimum-area rectangle is the quad.
+    """
+    bright = cv2.adaptiveThreshold(
+        gray, 255, cv2.ADAPTIVE_THRESH_MEAN_C, cv2.THRESH_BINARY, cfg.large_block_size, -7.0
+    )
+    contours, hierarchy = cv2.findContours(bright, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+    out: list[tuple[float, np.ndarray]] = []
+    if hierarchy is None:
+        return out
+    for cnt, (_, _, _, parent) in zip(contours, hierarchy[0], strict=True):
+        if parent < 0:
+            continue  # an outer boundary; tags are the holes
+        _, _, bw, bh = cv2.boundingRect(cnt)
+        if not (cfg.min_side_px - 1 <= max(bw, bh) <= cfg.tiny_side_px):
+            continue
+        if min(bw, bh) < 0.6 * max(bw, bh):
+            continue
+        box = cv2.boxPoints(cv2.minAreaRect(cnt)).astype(np.float32)
+        out.append((float(cv2.contourArea(box)), box.reshape(4, 1, 2)))
+    return out
+
+
 def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[TagDetection]:
     """All decodable tags of a grayscale image (corners in the image's own, distorted pixels)."""
     cfg = cfg or DetectorConfig()
@@ -173,6 +203,8 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
             quad = cv2.approxPolyDP(cnt, 0.06 * peri, True)
             if len(quad) == 4 and cv2.isContourConvex(quad):
                 quads.append((area, quad))
+
+    quads.extend(_quiet_zone_quads(gray, cfg))
     quads.sort(key=lambda aq: -aq[0])  # outer borders first: a tag's inner outline is a dup
     out: list[TagDetection] = []
     for _, quad in quads:
@@ -193,13 +225,16 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
         ctr0 = q.mean(axis=0)
         if any(np.linalg.norm(d.center - ctr0) < max(3.0, sides.min() / 2) for d in out):
             continue  # the same tag found again (inner outline, or the other threshold)
-        refined = cv2.cornerSubPix(
-            gray,
-            q.reshape(-1, 1, 2).copy(),
-            (win, win),
-            (-1, -1),
-            (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.01),
-        )
+        if sides.max() <= cfg.tiny_side_px:
+            refined = q  # a few pixels: no corner structure for sub-pixel refinement to lock on
+        else:
+            refined = cv2.cornerSubPix(
+                gray,
+                q.reshape(-1, 1, 2).copy(),
+                (win, win),
+                (-1, -1),
+                (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.01),
+            )
         corners, placement = order_corners(refined.reshape(4, 2), cfg.vertical_tol_deg)
         dec = _decode(gray, corners, cfg)
         if dec is None:
