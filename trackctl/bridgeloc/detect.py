@@ -170,8 +170,14 @@ def _quiet_zone_quads(gray: np.ndarray, cfg: DetectorConfig) -> list[tuple[float
             continue
         if min(bw, bh) < 0.6 * max(bw, bh):
             continue
-        box = cv2.boxPoints(cv2.minAreaRect(cnt)).astype(np.float32)
-        out.append((float(cv2.contourArea(box)), box.reshape(4, 1, 2)))
+        (cx, cy), (rw, rh), ang = cv2.minAreaRect(cnt)
+        # the blurred inner edge of the quiet zone may fall inside or outside the bright mask:
+        # try the hole as found and one pixel tighter on every side
+        for shrink in (0.0, 2.0):
+            if min(rw, rh) - shrink < cfg.min_side_px - 1:
+                continue
+            box = cv2.boxPoints(((cx, cy), (rw - shrink, rh - shrink), ang)).astype(np.float32)
+            out.append((float(cv2.contourArea(box)), box.reshape(4, 1, 2)))
     return out
 
 
@@ -202,12 +208,12 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
             peri = cv2.arcLength(cnt, True)
             quad = cv2.approxPolyDP(cnt, 0.06 * peri, True)
             if len(quad) == 4 and cv2.isContourConvex(quad):
-                quads.append((area, quad))
+                quads.append((area, quad, True))
 
-    quads.extend(_quiet_zone_quads(gray, cfg))
+    quads.extend((area, quad, False) for area, quad in _quiet_zone_quads(gray, cfg))
     quads.sort(key=lambda aq: -aq[0])  # outer borders first: a tag's inner outline is a dup
     out: list[TagDetection] = []
-    for _, quad in quads:
+    for _, quad, refine in quads:
         q = quad.reshape(4, 2).astype(np.float32)
         sides = np.linalg.norm(q - np.roll(q, 1, axis=0), axis=1)
         if sides.min() < cfg.min_side_px:
@@ -225,8 +231,8 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
         ctr0 = q.mean(axis=0)
         if any(np.linalg.norm(d.center - ctr0) < max(3.0, sides.min() / 2) for d in out):
             continue  # the same tag found again (inner outline, or the other threshold)
-        if sides.max() <= cfg.tiny_side_px:
-            refined = q  # a few pixels: no corner structure for sub-pixel refinement to lock on
+        if not refine:
+            refined = q  # a quiet-zone hole of a few pixels: no corner for sub-pixel refinement
         else:
             refined = cv2.cornerSubPix(
                 gray,
