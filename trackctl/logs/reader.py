@@ -53,6 +53,21 @@ class RawMessage:
     data: bytes
     channel_metadata: Mapping[str, str] = field(default_factory=dict)
 
+    @classmethod
+    def from_records(cls, schema: Any, channel: Any, message: Any) -> RawMessage:
+        """From mcap's Schema (or None), Channel and Message records."""
+        return cls(
+            topic=channel.topic,
+            schema_name=schema.name if schema else "",
+            schema_encoding=schema.encoding if schema else "",
+            schema_data=schema.data if schema else b"",
+            message_encoding=channel.message_encoding,
+            log_time_ns=message.log_time,
+            publish_time_ns=message.publish_time,
+            data=message.data,
+            channel_metadata=channel.metadata,
+        )
+
 
 @dataclass(frozen=True, slots=True)
 class LogMessage:
@@ -207,17 +222,7 @@ class LogReader:
         topic_list = None if topics is None else list(topics)
         with self.path.open("rb") as f:
             for schema, channel, message in self._iter_records(f, topic_list, start_ns, end_ns):
-                yield RawMessage(
-                    topic=channel.topic,
-                    schema_name=schema.name if schema else "",
-                    schema_encoding=schema.encoding if schema else "",
-                    schema_data=schema.data if schema else b"",
-                    message_encoding=channel.message_encoding,
-                    log_time_ns=message.log_time,
-                    publish_time_ns=message.publish_time,
-                    data=message.data,
-                    channel_metadata=channel.metadata,
-                )
+                yield RawMessage.from_records(schema, channel, message)
 
     def codec(self, raw: RawMessage) -> Codec:
         """The codec that decodes ``raw``'s channel."""
@@ -477,19 +482,7 @@ class IndexedWindowReader:
                 length = int.from_bytes(data[off + 1 : off + 9], "little")
                 body = data[off + 9 : off + 9 + length]
                 message = Message.read(ReadDataStream(io.BytesIO(body)), length)
-                out.append(
-                    RawMessage(
-                        topic=topic,
-                        schema_name=schema.name if schema else "",
-                        schema_encoding=schema.encoding if schema else "",
-                        schema_data=schema.data if schema else b"",
-                        message_encoding=channel.message_encoding,
-                        log_time_ns=message.log_time,
-                        publish_time_ns=message.publish_time,
-                        data=message.data,
-                        channel_metadata=channel.metadata,
-                    )
-                )
+                out.append(RawMessage.from_records(schema, channel, message))
         out.sort(key=lambda r: r.log_time_ns)
         return out
 
