@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from trackctl.bridgeloc.tags import BORDER_RATIO, Code, Placement, tag_geometry
+from trackctl.bridgeloc.tinyfit import TinyFitConfig, fit_tiny_tag
 
 __all__ = ["DetectorConfig", "TagDetection", "detect_tags", "order_corners"]
 
@@ -45,6 +46,11 @@ class DetectorConfig:
     large_block_size: int = 25
     tiny_side_px: float = 12.0
     """Tags up to this size are also sought as holes of their white quiet zone (far tags)."""
+    fit_min_side_px: float = 4.0
+    """Quiet-zone holes from this size up to ``tiny_side_px`` that no quad reads are located by
+    the model fit, then read by the same cell rule."""
+    fit: TinyFitConfig | None = TinyFitConfig()
+    """The tiny-tag model fit (:mod:`trackctl.bridgeloc.tinyfit`); ``None`` turns it off."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -132,45 +138,61 @@ def _decode(
     if np.mean(inner < mid) < 0.6 or np.mean(outer < mid) > 0.25:
         return None  # not a black border inside a white margin
     cell = geo.cell * side
-    bits = []
+    vals = []
     for r in range(cfg.n):
         for q in range(cfg.n):
             y0 = m + b + (r + 0.25) * cell
             x0 = m + b + (q + 0.25) * cell
             patch = canon[int(y0) : int(y0 + cell / 2), int(x0) : int(x0 + cell / 2)]
-            v = float(patch.mean())
-            if abs(v - mid) < cfg.cell_margin * contrast:
-                return None  # a grey cell: too small or blurred to read safely
-            bits.append(1 if v < mid else 0)
+            vals.append(float(patch.mean()))
+    # the cells' own threshold (Otsu over the N*N cell means, as ArUco reads its bits): a thin
+    # border blurs lighter than a black cell, so the rings' midpoint sits too close to white
+    sv = np.sort(vals)
+    k = len(sv)
+    split = max(range(1, k), key=lambda i: i * (k - i) * (sv[i:].mean() - sv[:i].mean()) ** 2)
+    mid = (sv[split - 1] + sv[split]) / 2
+    bits = []
+    for v in vals:
+        if abs(v - mid) < cfg.cell_margin * contrast:
+            return None  # a grey cell: too small or blurred to read safely
+        bits.append(1 if v < mid else 0)
     if all(bits) or not any(bits):
         return None  # uniform codes are not tags (practical rule: too many false positives)
     return tuple(bits), contrast
 
 
-def _quiet_zone_quads(gray: np.ndarray, cfg: DetectorConfig) -> list[tuple[float, np.ndarray]]:
-    """Quads of far, tiny tags found from their white quiet zone.
+def _quiet_zone_quads(
+    gray: np.ndarray, cfg: DetectorConfig
+) -> tuple[list[tuple[float, np.ndarray]], list[np.ndarray]]:
+    """Quads of far, tiny tags found from their white quiet zone, and starts for the model fit.
 
     A few pixels wide, a tag's thin black border blurs into its white cells and the dark blob no
     longer outlines the tag; the white quiet zone around it still does: the hole of that bright
     ring is the tag. At that size perspective distortion is below a pixel, so the hole's
-    minimum-area rectangle is the quad.
+    minimum-area rectangle is the quad. A white cell on the tag's edge joins the quiet zone, so the
+    hole is lopsided: the model fit starts from a square of the hole's area instead.
     """
     bright = cv2.adaptiveThreshold(
         gray, 255, cv2.ADAPTIVE_THRESH_MEAN_C, cv2.THRESH_BINARY, cfg.large_block_size, -7.0
     )
     contours, hierarchy = cv2.findContours(bright, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
     out: list[tuple[float, np.ndarray]] = []
+    starts: list[tuple[float, np.ndarray]] = []
     if hierarchy is None:
-        return out
+        return out, []
     for cnt, (_, _, _, parent) in zip(contours, hierarchy[0], strict=True):
         if parent < 0:
             continue  # an outer boundary; tags are the holes
         _, _, bw, bh = cv2.boundingRect(cnt)
-        if not (cfg.min_side_px - 1 <= max(bw, bh) <= cfg.tiny_side_px):
+        if not (cfg.fit_min_side_px <= max(bw, bh) <= cfg.tiny_side_px):
             continue
         if min(bw, bh) < 0.6 * max(bw, bh):
             continue
         (cx, cy), (rw, rh), ang = cv2.minAreaRect(cnt)
+        side = max(float(np.sqrt(max(rw, 1.0) * max(rh, 1.0))), cfg.fit_min_side_px)
+        starts.append((side, cv2.boxPoints(((cx, cy), (side, side), ang)).astype(np.float32)))
+        if max(bw, bh) < cfg.min_side_px - 1:
+            continue
         # the blurred inner edge of the quiet zone may fall inside or outside the bright mask:
         # try the hole as found and one pixel tighter on every side
         for shrink in (0.0, 2.0):
@@ -178,7 +200,31 @@ def _quiet_zone_quads(gray: np.ndarray, cfg: DetectorConfig) -> list[tuple[float
                 continue
             box = cv2.boxPoints(((cx, cy), (rw - shrink, rh - shrink), ang)).astype(np.float32)
             out.append((float(cv2.contourArea(box)), box.reshape(4, 1, 2)))
-    return out
+    starts.sort(key=lambda sq: -sq[0])
+    return out, [box for _, box in starts]
+
+
+def _cut_by_edge(q: np.ndarray, w: int, h: int, margin: float) -> bool:
+    return bool(
+        (q[:, 0] < margin).any()
+        or (q[:, 1] < margin).any()
+        or (q[:, 0] > w - 1 - margin).any()
+        or (q[:, 1] > h - 1 - margin).any()
+    )
+
+
+def _fit_tiny(gray: np.ndarray, box: np.ndarray, cfg: DetectorConfig) -> TagDetection | None:
+    """Locate a tiny tag by the model fit from a quiet-zone hole no quad read, then read it."""
+    assert cfg.fit is not None
+    start, _ = order_corners(box, cfg.vertical_tol_deg)
+    got = fit_tiny_tag(gray, start, cfg.n, cfg.border_ratio, cfg.fit)
+    if got is None:
+        return None
+    corners, placement = order_corners(got.corners, cfg.vertical_tol_deg)
+    dec = _decode(gray, corners, cfg)
+    if dec is None:
+        return None
+    return TagDetection(dec[0], placement, corners, dec[1])
 
 
 def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[TagDetection]:
@@ -210,7 +256,8 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
             if len(quad) == 4 and cv2.isContourConvex(quad):
                 quads.append((area, quad, True))
 
-    quads.extend((area, quad, False) for area, quad in _quiet_zone_quads(gray, cfg))
+    hole_quads, fit_starts = _quiet_zone_quads(gray, cfg)
+    quads.extend((area, quad, False) for area, quad in hole_quads)
     quads.sort(key=lambda aq: -aq[0])  # outer borders first: a tag's inner outline is a dup
     out: list[TagDetection] = []
     for _, quad, refine in quads:
@@ -218,12 +265,7 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
         sides = np.linalg.norm(q - np.roll(q, 1, axis=0), axis=1)
         if sides.min() < cfg.min_side_px:
             continue
-        if (
-            (q[:, 0] < cfg.edge_margin_px).any()
-            or (q[:, 1] < cfg.edge_margin_px).any()
-            or (q[:, 0] > w - 1 - cfg.edge_margin_px).any()
-            or (q[:, 1] > h - 1 - cfg.edge_margin_px).any()
-        ):
+        if _cut_by_edge(q, w, h, cfg.edge_margin_px):
             continue  # cut by the image border: corners would be wrong
         # keep the window inside the black border: the code cells' edges would pull the corner
         border_px = sides.min() / (cfg.border_ratio + 2)
@@ -247,4 +289,20 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
             continue
         code, contrast = dec
         out.append(TagDetection(code, placement, corners, contrast))
+    if cfg.fit is None:
+        return out
+    tried: list[np.ndarray] = []
+    for box in fit_starts:
+        ctr0 = box.mean(axis=0)
+        side = float(np.linalg.norm(box[1] - box[0]))
+        if any(np.linalg.norm(d.center - ctr0) < max(3.0, side) for d in out):
+            continue  # inside a tag already read (a white cell's hole) or the tag itself
+        if any(np.linalg.norm(c - ctr0) < 1.5 for c in tried):
+            continue  # the same hole at another size: the fit already failed there
+        tried.append(ctr0)
+        if _cut_by_edge(box, w, h, cfg.edge_margin_px):
+            continue
+        det = _fit_tiny(gray, box, cfg)
+        if det is not None:
+            out.append(det)
     return out
