@@ -90,7 +90,9 @@ def _synthetic(centre: tuple[float, float], side: float, angle: float, code, n: 
     angle=st.floats(-0.15, 0.15),
     n=st.sampled_from([2, 3]),
 )
-def test_fit_recovers_centre_and_size(cx: float, cy: float, side: float, angle: float, n: int) -> None:
+def test_fit_recovers_centre_and_size(
+    cx: float, cy: float, side: float, angle: float, n: int
+) -> None:
     code = tuple(([1, 0] * (n * n))[: n * n])
     img = _synthetic((cx, cy), side, angle, code, n)
     # a start off by a pixel and 15 % too small, as a far tag's quiet-zone hole gives
