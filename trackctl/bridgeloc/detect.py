@@ -145,12 +145,6 @@ def _decode(
             x0 = m + b + (q + 0.25) * cell
             patch = canon[int(y0) : int(y0 + cell / 2), int(x0) : int(x0 + cell / 2)]
             vals.append(float(patch.mean()))
-    # the cells' own threshold (Otsu over the N*N cell means, as ArUco reads its bits): a thin
-    # border blurs lighter than a black cell, so the rings' midpoint sits too close to white
-    sv = np.sort(vals)
-    k = len(sv)
-    split = max(range(1, k), key=lambda i: i * (k - i) * (sv[i:].mean() - sv[:i].mean()) ** 2)
-    mid = (sv[split - 1] + sv[split]) / 2
     bits = []
     for v in vals:
         if abs(v - mid) < cfg.cell_margin * contrast:
