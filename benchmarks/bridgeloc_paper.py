@@ -65,12 +65,16 @@ def counts() -> None:
 # ---------------------------------------------------------------- detection range
 
 
-def _aruco_texture(dict_id: int, bits: int):  # noqa: ANN202
+SEEDS = 6
+"""Renders per distance: each with its own noise, sub-pixel placement and tag code / marker id."""
+
+
+def _aruco_texture(dict_id: int):  # noqa: ANN202
     dic = cv2.aruco.getPredefinedDictionary(dict_id)
 
-    def tex(_code, side: int) -> np.ndarray:  # noqa: ANN001
+    def tex(code, side: int) -> np.ndarray:  # noqa: ANN001
         # marker (its 1-cell black border included) = the printed black square, same quiet zone
-        img = cv2.aruco.generateImageMarker(dic, 0, side, borderBits=1)
+        img = cv2.aruco.generateImageMarker(dic, int(code[0]), side, borderBits=1)
         pad = int(round(side * MARGIN))
         return cv2.copyMakeBorder(img, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
 
@@ -78,25 +82,30 @@ def _aruco_texture(dict_id: int, bits: int):  # noqa: ANN202
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
     det = cv2.aruco.ArucoDetector(dic, params)
 
-    def detect(img: np.ndarray) -> tuple[bool, int]:
+    def detect(img: np.ndarray, code) -> tuple[bool, int]:  # noqa: ANN001
         _, ids, _ = det.detectMarkers(img)
         found = [] if ids is None else ids.ravel().tolist()
-        return 0 in found, sum(i != 0 for i in found)
+        return code[0] in found, sum(i != code[0] for i in found)
 
-    return tex, detect
+    return [(i,) for i in range(SEEDS)], tex, detect
 
 
 def _ours(n: int):  # noqa: ANN202
+    """Codes (distinct, non-uniform, drawn with a fixed seed: one per render) and a detector."""
     cfg = DetectorConfig(n=n)
-    code = tuple(([1, 0] * (n * n))[: n * n])
-    code = code if 0 < sum(code) < n * n else (1,) + (0,) * (n * n - 1)
+    rng = np.random.default_rng(416 + n)
+    codes: list[tuple[int, ...]] = []
+    while len(codes) < SEEDS:
+        code = tuple(int(b) for b in rng.integers(0, 2, n * n))
+        if 0 < sum(code) < n * n and code not in codes:
+            codes.append(code)
 
-    def detect(img: np.ndarray) -> tuple[bool, int]:
+    def detect(img: np.ndarray, code) -> tuple[bool, int]:  # noqa: ANN001
         """(the tag was read, detections with a wrong code: misreads)."""
         found = [d.code for d in detect_tags(img, cfg)]
         return code in found, sum(c != code for c in found)
 
-    return code, detect
+    return codes, detect
 
 
 MISREADS: dict[str, list[int]] = {}
@@ -105,28 +114,28 @@ MISREADS: dict[str, list[int]] = {}
 
 def max_distance(
     model,
-    code,
+    codes,
     n: int,
     size_m: float,
     tex_fn,
-    detect,
-    seeds: int = 6,  # noqa: ANN001
+    detect,  # noqa: ANN001
     step: float = 0.25,
 ) -> float:
-    """Largest frontal distance at which >= 2/3 of ``seeds`` renders are detected.
+    """Largest frontal distance at which >= 2/3 of the renders (one per code) are read.
 
-    Each seed renders its own noise and places the tag up to one pixel off the optical axis, so
-    the tag's edges fall at a random phase of the pixel grid (a fixed phase favours one N or the
-    other by luck). The scan stops after three failing steps in a row.
+    Each render has its own noise, its own code (so no N is judged by one lucky or unlucky
+    pattern) and places the tag up to one pixel off the optical axis, so its edges fall at a
+    random phase of the pixel grid. The scan stops after three failing steps in a row.
     """
     cfg = BridgeLocScenario(n=n)
     best, misses, d = 0.0, 0, 0.75
     bg = np.full((model.height_px, model.width_px), 110, np.uint8)
-    rens = [_Renderer(model, np.random.default_rng(s), cfg) for s in range(seeds)]
-    phases = np.random.default_rng(1000).uniform(-1.0, 1.0, (seeds, 2))
+    rens = [_Renderer(model, np.random.default_rng(s), cfg) for s in range(len(codes))]
+    phases = np.random.default_rng(1000).uniform(-1.0, 1.0, (len(codes), 2))
+    tally = MISREADS.setdefault(model.camera, [0, 0])
     while misses < 3 and d < 80:
         ok = 0
-        for ren, (px, py) in zip(rens, phases, strict=True):
+        for ren, code, (px, py) in zip(rens, codes, phases, strict=True):
             m_per_px = d / model.fx_px
             tag = WallTag(
                 "t",
@@ -139,12 +148,11 @@ def max_distance(
             )
             ideal = render_view(model, model.world_from_camera, [tag], bg, tex_fn)
             img = cv2.imdecode(np.frombuffer(ren.finish(ideal), np.uint8), cv2.IMREAD_GRAYSCALE)
-            hit, wrong = detect(img)
+            hit, wrong = detect(img, code)
             ok += hit
-            tally = MISREADS.setdefault(model.camera, [0, 0])
             tally[0] += 1
             tally[1] += wrong
-        if ok * 3 >= 2 * seeds:
+        if ok * 3 >= 2 * len(codes):
             best, misses = d, 0
         else:
             misses += 1
@@ -174,9 +182,9 @@ def detection_range(quick: bool) -> None:
         for size in sizes:
             row = []
             for n in ns:
-                code, detect = _ours(n)
+                codes, detect = _ours(n)
                 tex = _Renderer(model, np.random.default_rng(0), BridgeLocScenario(n=n)).texture
-                d = max_distance(model, code, n, size, tex, detect)
+                d = max_distance(model, codes, n, size, tex, detect)
                 row.append(d)
                 table[(size, n)] = d
             print(f"   {size * 100:3.0f}cm " + "  ".join(f"{d:6.2f}" for d in row))
@@ -191,8 +199,8 @@ def detection_range(quick: bool) -> None:
         peers = {
             "ours N=2": (None, 2),
             "ours N=3": (None, 3),
-            "ArUco DICT_4X4_50": (cv2.aruco.DICT_4X4_50, 4),
-            "AprilTag 36h11": (cv2.aruco.DICT_APRILTAG_36h11, 6),
+            "ArUco DICT_4X4_50": (cv2.aruco.DICT_4X4_50, 2),
+            "AprilTag 36h11": (cv2.aruco.DICT_APRILTAG_36h11, 2),
         }
         print("   peers at 30 cm printed size: max distance (m)")
         res = {}
@@ -202,13 +210,11 @@ def detection_range(quick: bool) -> None:
                 print(f"     {label:20s} {res[label]:6.2f}")
                 continue
             if dict_id is None:
-                code, detect = _ours(bits)
+                codes, detect = _ours(bits)
                 tex = _Renderer(model, np.random.default_rng(0), BridgeLocScenario(n=bits)).texture
-                n = bits
             else:
-                tex, detect = _aruco_texture(dict_id, bits)
-                code, n = (1, 0, 0, 0), 2
-            res[label] = max_distance(model, code, n, 0.30, tex, detect)
+                codes, tex, detect = _aruco_texture(dict_id)
+            res[label] = max_distance(model, codes, bits, 0.30, tex, detect)
             print(f"     {label:20s} {res[label]:6.2f}")
         ok = res["ours N=2"] > max(res["ArUco DICT_4X4_50"], res["AprilTag 36h11"])
         print(f"   ours N=2 farther than ArUco 4x4 and AprilTag 36h11: {'PASS' if ok else 'FAIL'}")

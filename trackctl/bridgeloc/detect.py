@@ -47,8 +47,9 @@ class DetectorConfig:
     tiny_side_px: float = 12.0
     """Tags up to this size are also sought as holes of their white quiet zone (far tags)."""
     fit_min_side_px: float = 4.0
-    """Quiet-zone holes from this size up to ``tiny_side_px`` that no quad reads are located by
-    the model fit, then read by the same cell rule."""
+    fit_max_side_px: float = 16.0
+    """Quiet-zone holes of this size range that no quad reads are located by the model fit, then
+    read by the same cell rule (above 12 px the quads take over, with a margin)."""
     fit: TinyFitConfig | None = TinyFitConfig()
     """The tiny-tag model fit (:mod:`trackctl.bridgeloc.tinyfit`); ``None`` turns it off."""
 
@@ -178,14 +179,14 @@ def _quiet_zone_quads(
         if parent < 0:
             continue  # an outer boundary; tags are the holes
         _, _, bw, bh = cv2.boundingRect(cnt)
-        if not (cfg.fit_min_side_px <= max(bw, bh) <= cfg.tiny_side_px):
+        if not (cfg.fit_min_side_px <= max(bw, bh) <= cfg.fit_max_side_px):
             continue
         if min(bw, bh) < 0.6 * max(bw, bh):
             continue
         (cx, cy), (rw, rh), ang = cv2.minAreaRect(cnt)
         side = max(float(np.sqrt(max(rw, 1.0) * max(rh, 1.0))), cfg.fit_min_side_px)
         starts.append((side, cv2.boxPoints(((cx, cy), (side, side), ang)).astype(np.float32)))
-        if max(bw, bh) < cfg.min_side_px - 1:
+        if not cfg.min_side_px - 1 <= max(bw, bh) <= cfg.tiny_side_px:
             continue
         # the blurred inner edge of the quiet zone may fall inside or outside the bright mask:
         # try the hole as found and one pixel tighter on every side
