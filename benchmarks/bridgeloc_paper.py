@@ -108,8 +108,9 @@ def _ours(n: int):  # noqa: ANN202
     return codes, detect
 
 
-MISREADS: dict[str, list[int]] = {}
-"""Per camera: [renders, detections with a wrong code] over every scan of the range section."""
+MISREADS: dict[tuple[str, int], list[int]] = {}
+"""Per (camera, N): [renders, detections with a wrong code] over the range section's scans
+(N = 0 for the peers)."""
 
 
 def max_distance(
@@ -120,6 +121,7 @@ def max_distance(
     tex_fn,
     detect,  # noqa: ANN001
     step: float = 0.25,
+    peer: str | None = None,
 ) -> float:
     """Largest frontal distance at which >= 2/3 of the renders (one per code) are read.
 
@@ -132,7 +134,7 @@ def max_distance(
     bg = np.full((model.height_px, model.width_px), 110, np.uint8)
     rens = [_Renderer(model, np.random.default_rng(s), cfg) for s in range(len(codes))]
     phases = np.random.default_rng(1000).uniform(-1.0, 1.0, (len(codes), 2))
-    tally = MISREADS.setdefault(model.camera, [0, 0])
+    tally = MISREADS.setdefault((model.camera, n if peer is None else 0), [0, 0])
     while misses < 3 and d < 80:
         ok = 0
         for ren, code, (px, py) in zip(rens, codes, phases, strict=True):
@@ -214,12 +216,15 @@ def detection_range(quick: bool) -> None:
                 tex = _Renderer(model, np.random.default_rng(0), BridgeLocScenario(n=bits)).texture
             else:
                 codes, tex, detect = _aruco_texture(dict_id)
-            res[label] = max_distance(model, codes, bits, 0.30, tex, detect)
+            res[label] = max_distance(
+                model, codes, bits, 0.30, tex, detect, peer=None if dict_id is None else label
+            )
             print(f"     {label:20s} {res[label]:6.2f}")
         ok = res["ours N=2"] > max(res["ArUco DICT_4X4_50"], res["AprilTag 36h11"])
         print(f"   ours N=2 farther than ArUco 4x4 and AprilTag 36h11: {'PASS' if ok else 'FAIL'}")
-        renders, wrong = MISREADS.get(model.camera, [0, 0])
-        print(f"   misreads (a detection with a wrong code or id): {wrong} in {renders} renders")
+        tallies = sorted((k[1], v) for k, v in MISREADS.items() if k[0] == model.camera)
+        parts = [f"{'peers' if k == 0 else f'N={k}'} {w}/{r}" for k, (r, w) in tallies]
+        print("   misreads (detections with a wrong code or id / renders): " + ", ".join(parts))
 
 
 # ---------------------------------------------------------------- speed
