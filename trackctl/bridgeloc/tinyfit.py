@@ -36,8 +36,10 @@ class TinyFitConfig:
 
     blur_px: float = 0.8
     """Gaussian blur of lens + pixel + compression (px); the fit is insensitive to +-0.2."""
-    reach: float = 0.45
+    reach: float = 0.4
     """Pixels up to this fraction of the side outside the tag are fitted (quiet zone + a rim)."""
+    max_pixels: int = 320
+    """Larger patches are subsampled to about this many pixels (the fit's cost is linear in it)."""
     min_contrast: float = 25.0
     """Quiet-zone white minus printed black, grey levels."""
     max_rms_frac: float = 0.12
@@ -158,6 +160,10 @@ def fit_tiny_tag(
     ys, xs = np.mgrid[y0 : y1 + 1, x0 : x1 + 1]
     px, py = xs.ravel().astype(np.float64), ys.ravel().astype(np.float64)
     vals = gray[y0 : y1 + 1, x0 : x1 + 1].ravel().astype(np.float64)
+    if len(vals) > cfg.max_pixels:
+        # a larger tag has pixels to spare: fit a checkerboard half (or less) of them
+        keep = ((xs + ys).ravel() % int(np.ceil(len(vals) / cfg.max_pixels))) == 0
+        px, py, vals = px[keep], py[keep], vals[keep]
     if _darkness(gray, t, side) < cfg.min_dark:
         return None  # cheap screen first: a tag's black is far below its margin even blurred
     edges = _edges(n, border_ratio)
@@ -168,13 +174,15 @@ def fit_tiny_tag(
     def resid(thetas: np.ndarray) -> np.ndarray:
         return _solve(_design(thetas, px, py, n, edges, cfg.blur_px), vals)[0]
 
-    # a coarse start: the hole's centre may be off by a pixel and its size by 15 %
+    # a coarse start: the hole's centre may be off by a pixel and its size by 15 %; a pixel
+    # matters below 8 px only (and the grid costs most on large patches)
+    shifts = (-0.75, 0.0, 0.75) if side < 8.0 else (0.0,)
     starts = np.array(
         [
             [t[0] + ox, t[1] + oy, *(k * u0), *(k * v0), _Z0]
             for k in (0.85, 1.0, 1.15)
-            for ox in (-0.75, 0.0, 0.75)
-            for oy in (-0.75, 0.0, 0.75)
+            for ox in shifts
+            for oy in shifts
         ]
     )
     theta0 = starts[int(np.argmin((resid(starts) ** 2).sum(axis=1)))]
