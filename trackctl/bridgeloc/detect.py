@@ -139,18 +139,16 @@ def _decode(
     if np.mean(inner < mid) < 0.6 or np.mean(outer < mid) > 0.25:
         return None  # not a black border inside a white margin
     cell = geo.cell * side
-    vals = []
+    bits = []
     for r in range(cfg.n):
         for q in range(cfg.n):
             y0 = m + b + (r + 0.25) * cell
             x0 = m + b + (q + 0.25) * cell
             patch = canon[int(y0) : int(y0 + cell / 2), int(x0) : int(x0 + cell / 2)]
-            vals.append(float(patch.mean()))
-    bits = []
-    for v in vals:
-        if abs(v - mid) < cfg.cell_margin * contrast:
-            return None  # a grey cell: too small or blurred to read safely
-        bits.append(1 if v < mid else 0)
+            v = float(patch.mean())
+            if abs(v - mid) < cfg.cell_margin * contrast:
+                return None  # a grey cell: too small or blurred to read safely
+            bits.append(1 if v < mid else 0)
     if all(bits) or not any(bits):
         return None  # uniform codes are not tags (practical rule: too many false positives)
     return tuple(bits), contrast

@@ -149,6 +149,8 @@ def fit_tiny_tag(
     side = float(np.sqrt(abs(u0[0] * v0[1] - u0[1] * v0[0])))
     if side < 2.0 or np.linalg.norm(u0) < 1e-6 or np.linalg.norm(v0) < 1e-6:
         return None
+    if _darkness(gray, t, side) < cfg.min_dark:
+        return None  # cheap screen first: a tag's black is far below its margin even blurred
     u0 = u0 / np.linalg.norm(u0) * side  # the hole of a far tag is lopsided: start square
     v0 = v0 / np.linalg.norm(v0) * side
     r = (0.5 + cfg.reach) * (np.abs(u0) + np.abs(v0))
@@ -164,8 +166,6 @@ def fit_tiny_tag(
         # a larger tag has pixels to spare: fit a checkerboard half (or less) of them
         keep = ((xs + ys).ravel() % int(np.ceil(len(vals) / cfg.max_pixels))) == 0
         px, py, vals = px[keep], py[keep], vals[keep]
-    if _darkness(gray, t, side) < cfg.min_dark:
-        return None  # cheap screen first: a tag's black is far below its margin even blurred
     edges = _edges(n, border_ratio)
     k_lin = 3 + n * n
     if len(vals) <= k_lin + 7 + 4:
