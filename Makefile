@@ -1,5 +1,5 @@
 # Convenience targets; each is one documented command.
-.PHONY: sample-logs test bench
+.PHONY: sample-logs test bench lock
 
 sample-logs:  ## regenerate the shipped sample logs (deterministic: same bytes every time)
 	trackctl simulate demo --out sample_logs/demo.mcap --seed 0 --duration 20
@@ -13,3 +13,12 @@ test:
 
 bench:
 	python benchmarks/replay_throughput.py
+
+lock:  ## re-resolve every dependency (today's newest allowed by pyproject.toml) into constraints.txt
+	rm -rf .venv-lock && python3 -m venv .venv-lock
+	.venv-lock/bin/pip install --quiet --upgrade pip
+	.venv-lock/bin/pip install --quiet -e '.[dev]'
+	( echo "# Pinned versions CI and the README install with (pip install -c constraints.txt ...)."; \
+	  echo "# Regenerate with 'make lock' (a fresh venv, today's resolver, then pip freeze); see docs/install.md."; \
+	  .venv-lock/bin/pip freeze --exclude-editable ) > constraints.txt
+	rm -rf .venv-lock

@@ -8,7 +8,7 @@ from tests.conftest import ROOT
 def test_ci_runs_the_readme_test_command() -> None:
     readme = (ROOT / "README.md").read_text()
     ci = (ROOT / ".ci" / "run").read_text()
-    command = "pip install -e '.[dev]' && pytest -q"
+    command = "pip install -c constraints.txt -e '.[dev]' && pytest -q"
     assert command in readme
     assert command in ci
 

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tests.logcompare import assert_same_log
 from trackctl.logs import topics
 from trackctl.logs.reader import LogReader
 from trackctl.sim.ev import EvScenario, simulate_ev
@@ -34,9 +35,7 @@ def test_same_seed_same_bytes(tmp_path: Path) -> None:
 def test_shipped_sample_log_is_regenerable(tmp_path: Path) -> None:
     fresh = tmp_path / "ev.mcap"
     simulate_ev(str(fresh), EvScenario(people=400, area_m=600.0, duration_s=1200.0, seed=0))
-    assert fresh.read_bytes() == SAMPLE.read_bytes(), (
-        "sample_logs/ev.mcap is stale: regenerate with `make sample-logs`"
-    )
+    assert_same_log(fresh, SAMPLE)
     assert SAMPLE.stat().st_size < 2_000_000
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from tests.logcompare import assert_same_log
 from trackctl.logs import LogReader
 from trackctl.sim.smirror import PATHS, SmirrorScenario, path_length_m, simulate_smirror
 
@@ -32,9 +33,7 @@ def test_shipped_sample_log_is_regenerable(tmp_path: Path) -> None:
     assert SAMPLE.stat().st_size < 2_000_000  # all sample logs together stay < 5 MiB
     fresh = tmp_path / "smirror.mcap"
     simulate_smirror(str(fresh), SAMPLE_CFG)
-    assert fresh.read_bytes() == SAMPLE.read_bytes(), (
-        "sample_logs/smirror.mcap is stale: regenerate with `make sample-logs`"
-    )
+    assert_same_log(fresh, SAMPLE)
 
 
 def test_sample_has_the_scenario_topics() -> None:
