@@ -97,7 +97,7 @@ def test_jsonl_passthrough_and_parse_round_trip() -> None:
         (
             '{"topic": "/a", "schema": "trackctl.Imu", "log_time_ns": -5, "message": {}}',
             InputError,
-            "log_time_ns' must be a non-negative integer",
+            r"log_time_ns' must be an integer in 0..2\^64-1 \(got -5\)",
         ),
     ],
 )

@@ -70,7 +70,16 @@ def tags(
 @bridgeloc_app.command("eval")
 def eval_(
     log: Annotated[Path, typer.Argument(help="MCAP log: camera images + models, wheel odometry.")],
-    out: Annotated[Path, typer.Option(help="Output MCAP: input + /bridgeloc/pose + annotations.")],
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            help="Output MCAP: input + /bridgeloc/pose + annotations (omit: report only)."
+        ),
+    ] = None,
+    outputs_only: Annotated[
+        bool,
+        typer.Option("--outputs-only", help="Write only what the run adds, not the input."),
+    ] = False,
     mode: Annotated[str, typer.Option(help="full (EKF), basic (bridging) or icam.")] = "full",
     pose: Annotated[
         str, typer.Option(help="Robot pose from bridged corners: lstsq (Eq. 4.9) or pnp.")
@@ -90,6 +99,7 @@ def eval_(
 ) -> None:
     """BridgeLoc: localize the robot by bridging infrastructure and robot camera views."""
     from trackctl.bridgeloc import BridgeLocConfig, BridgeLocProcessor, Mode, PoseMethod
+    from trackctl.errors import InputError
 
     mode_value = parse_choice(Mode, mode, "--mode")
     pose_value = parse_choice(PoseMethod, pose, "--pose")
@@ -100,9 +110,19 @@ def eval_(
     if plot is not None:
         from trackctl.plots.bridgeloc import plot_run
 
+        if out is None:
+            raise InputError("--plot draws from the output log: give --out too")
         draw = partial(plot_run, out, plot)
     run_system(
-        "bridgeloc", log, out, proc, json_out=json_out, fail_if=fail_if, quiet=quiet, plot=draw
+        "bridgeloc",
+        log,
+        out,
+        proc,
+        json_out=json_out,
+        fail_if=fail_if,
+        quiet=quiet,
+        plot=draw,
+        outputs_only=outputs_only,
     )
 
 

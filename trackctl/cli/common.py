@@ -12,6 +12,7 @@ from typing import Any, TypeVar
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from typer.core import TyperGroup
 
@@ -26,6 +27,7 @@ __all__ = [
     "progress",
     "split_csv",
     "apply_fail_if",
+    "check_fail_if",
     "report_dict",
     "EXIT_BAD_INPUT",
     "EXIT_GATE",
@@ -46,7 +48,7 @@ def _show_warning(
     file: Any = None,
     line: str | None = None,
 ) -> None:
-    stderr.print(f"[yellow]warning:[/] {message}", markup=True)
+    stderr.print(f"[yellow]warning:[/] {escape(str(message))}", markup=True)
 
 
 class TrackctlGroup(TyperGroup):
@@ -58,13 +60,18 @@ class TrackctlGroup(TyperGroup):
         try:
             return super().invoke(ctx)
         except TrackctlError as err:
-            stderr.print(f"[red]error:[/] {err}", markup=True)
+            stderr.print(f"[red]error:[/] {escape(one_line(str(err)))}", markup=True)
             raise typer.Exit(EXIT_BAD_INPUT) from None
         except KeyboardInterrupt:
             stderr.print("interrupted")
             raise typer.Exit(130) from None
         finally:
             warnings.showwarning = previous
+
+
+def one_line(text: str) -> str:
+    """``text`` on one line (error messages quote user input, which may hold newlines)."""
+    return " ".join(text.split("\n"))
 
 
 E = TypeVar("E", bound=Enum)
@@ -130,6 +137,12 @@ def report_dict(report: MetricReport) -> dict[str, Any]:
         "metrics": jsonable_metrics(report.metrics),
         "params": jsonable_metrics(report.params),
     }
+
+
+def check_fail_if(expr: str | None) -> None:
+    """Raise InputError now, before any work, when ``--fail-if`` does not parse."""
+    if expr:
+        parse_fail_if(expr)
 
 
 def apply_fail_if(expr: str | None, reports: Sequence[MetricReport]) -> None:

@@ -31,7 +31,14 @@ def _read_eids(path: Path) -> tuple[str, ...]:
 
 def ev_match(
     log: Annotated[Path, typer.Argument(help="MCAP log with /ev/e and /ev/cell/<i>_<j>/v.")],
-    out: Annotated[Path, typer.Option(help="Output MCAP: input + /evmatch/matches + report.")],
+    out: Annotated[
+        Path | None,
+        typer.Option(help="Output MCAP: input + /evmatch/matches + report (omit: report only)."),
+    ] = None,
+    outputs_only: Annotated[
+        bool,
+        typer.Option("--outputs-only", help="Write only what the run adds, not the input."),
+    ] = False,
     eids: Annotated[
         Path | None, typer.Option(help="File with the EIDs to match, one per line.")
     ] = None,
@@ -90,6 +97,8 @@ def ev_match(
     if plot is not None:
         from trackctl.plots.evmatch import plot_run
 
+        if out is None:
+            raise InputError("--plot draws from the output log: give --out too")
         draw = partial(plot_run, out, plot)
     run_system(
         "ev-match",
@@ -100,6 +109,7 @@ def ev_match(
         fail_if=fail_if,
         quiet=quiet,
         plot=draw,
+        outputs_only=outputs_only,
     )
 
 

@@ -10,7 +10,14 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from trackctl.cli.common import apply_fail_if, print_json, progress, report_dict, split_csv
+from trackctl.cli.common import (
+    apply_fail_if,
+    check_fail_if,
+    print_json,
+    progress,
+    report_dict,
+    split_csv,
+)
 from trackctl.errors import InputError
 from trackctl.logs.messages import MetricReport
 from trackctl.logs.reader import LogReader
@@ -36,7 +43,14 @@ def process(
         list[str] | None,
         typer.Option("--with", help="Processor(s) to run in order (repeat or comma-separate)."),
     ] = None,
-    out: Annotated[Path | None, typer.Option(help="Output MCAP: input + derived channels.")] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(help="Output MCAP: input + derived channels (omit: report only)."),
+    ] = None,
+    outputs_only: Annotated[
+        bool,
+        typer.Option("--outputs-only", help="Write only the derived channels, not the input."),
+    ] = False,
     list_: Annotated[bool, typer.Option("--list", help="List registered processors.")] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     fail_if: Annotated[
@@ -57,15 +71,16 @@ def process(
                 typer.echo(f"{p.name:14s} {p.description}")
         return
     names = split_csv(with_)
-    if log is None or not names or out is None:
-        raise InputError(
-            "process needs LOG, --with NAME and --out OUT.mcap (or --list to see processors)"
-        )
+    if log is None or not names:
+        raise InputError("process needs LOG and --with NAME (or --list to see processors)")
+    check_fail_if(fail_if)  # a typo fails before the run, not after it
     chain = [get_processor(name).factory() for name in names]
     with progress("processing", quiet) as bar:
-        reports = run_processors(log, out, chain, bar)
+        reports = run_processors(log, out, chain, bar, outputs_only=outputs_only)
     if json_out:
-        print_json({"out": str(out), "reports": [report_dict(r) for r in reports]})
+        print_json(
+            {"out": None if out is None else str(out), "reports": [report_dict(r) for r in reports]}
+        )
     else:
         print_reports(reports)
     apply_fail_if(fail_if, reports)
@@ -102,19 +117,22 @@ def report(
 def run_system(
     name: str,
     log: Path,
-    out: Path,
+    out: Path | None,
     processor: Processor,
     *,
     json_out: bool,
     fail_if: str | None,
     quiet: bool,
     plot: Callable[[], object] | None = None,
+    outputs_only: bool = False,
 ) -> MetricReport:
     """What every system command does with its processor: run it over ``log`` into ``out``
-    (progress bar on a TTY, atomic output), draw its figures, print the report (a table, or one
-    JSON object of the metrics with ``--json``), then apply ``--fail-if`` (exit 1)."""
+    (progress bar on a TTY, atomic output; no ``out``: report only), draw its figures, print the
+    report (a table, or one JSON object of the metrics with ``--json``), then apply ``--fail-if``
+    (exit 1)."""
+    check_fail_if(fail_if)
     with progress(name, quiet) as bar:
-        (report,) = run_processors(log, out, [processor], bar)
+        (report,) = run_processors(log, out, [processor], bar, outputs_only=outputs_only)
     if plot is not None:
         plot()
     if json_out:

@@ -1,4 +1,4 @@
-"""``trackctl record``."""
+"""``trackctl record`` and ``trackctl recover``."""
 
 from __future__ import annotations
 
@@ -6,18 +6,14 @@ import signal
 import sys
 from collections import Counter
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
+from rich.markup import escape
 
-from trackctl.cli.common import print_json, progress, stderr
+from trackctl.cli.common import one_line, print_json, progress, stderr
 from trackctl.errors import InputError
 from trackctl.logs.writer import COMPRESSIONS, LogWriter
-
-
-def _stdin_lines() -> Any:
-    for lineno, line in enumerate(sys.stdin.buffer, 1):
-        yield line, "<stdin>", lineno
 
 
 def record(
@@ -93,6 +89,7 @@ def record(
     # Imported here: OpenCV/pandas/SciPy cost ~0.5 s and other commands do not need them.
     from trackctl.ingest.record import (
         RecordConfig,
+        StreamSource,
         UdpSource,
         parse_named,
         record_files,
@@ -131,17 +128,23 @@ def record(
     previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
     previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
-        # Live logs use smaller chunks: a recorder killed with SIGKILL loses at most one chunk.
-        chunk = 256 * 1024 if (stdin or source is not None) else 1 << 20
-        with LogWriter(out, inputs=inputs, compression=compression, chunk_size=chunk) as writer:
+        # Live logs are written to OUT.partial, flushed every second and kept if the recorder
+        # dies: a recorder killed with SIGKILL loses at most the last second.
+        live = stdin or source is not None
+        chunk = 256 * 1024 if live else 1 << 20
+        with LogWriter(
+            out, inputs=inputs, compression=compression, chunk_size=chunk, keep_partial=live
+        ) as writer:
             if not cfg.empty:
                 with progress("recording files", quiet) as bar:
                     counts.update(record_files(writer, cfg, lambda n: bar(n, None)))
             if stdin or source is not None:
 
                 def reject(msg: str) -> None:
-                    if not quiet:
-                        stderr.print(f"[yellow]rejected:[/] {msg}", markup=True)
+                    # always shown, --quiet included: a dropped message is a warning
+                    stderr.print(
+                        f"[yellow]warning:[/] rejected {escape(one_line(msg))}", markup=True
+                    )
 
                 # The ready line goes out even with --quiet: with --udp 0 it carries the port.
                 if source is not None:
@@ -150,7 +153,7 @@ def record(
                 else:
                     if not quiet:
                         stderr.print("recording JSON lines from stdin until EOF or Ctrl-C")
-                    stats = record_live(writer, _stdin_lines(), reject)
+                    stats = record_live(writer, StreamSource(sys.stdin.fileno()), reject)
                 counts.update(stats.counts)
                 rejected, interrupted = stats.rejected, stats.interrupted
     finally:
@@ -170,6 +173,30 @@ def record(
     elif not quiet:
         stderr.print(
             f"wrote {summary['messages']} messages on {len(counts)} topics to {out}"
-            + (f" ({rejected} lines rejected)" if rejected else "")
+            + f", rejected {rejected}"
             + (" (stopped by interrupt)" if interrupted else "")
         )
+
+
+def recover(
+    partial: Annotated[
+        Path, typer.Argument(help="Unfinished log: OUT.partial of a killed recording, a cut copy.")
+    ],
+    out: Annotated[
+        Path | None,
+        typer.Option(help="Finished log to write (default: PARTIAL without .partial)."),
+    ] = None,
+    keep: Annotated[bool, typer.Option("--keep", help="Keep PARTIAL after recovering.")] = False,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No notes.")] = False,
+) -> None:
+    """Finish an unfinished recording into a complete, indexed log (every readable message)."""
+    from trackctl.logs.copy import recover_log
+
+    result = recover_log(partial, out, keep=keep)
+    if json_out:
+        print_json(
+            {"out": str(result.out), "messages": result.messages, "warnings": len(result.warnings)}
+        )
+    elif not quiet:
+        stderr.print(f"recovered {result.messages} messages from {partial} into {result.out}")

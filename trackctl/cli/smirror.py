@@ -14,11 +14,16 @@ from trackctl.cli.process import run_system
 def smirror(
     log: Annotated[Path, typer.Argument(help="MCAP log with node frames (+ robot odometry).")],
     out: Annotated[
-        Path,
+        Path | None,
         typer.Option(
-            help="Output MCAP: input + /smirror/<robot>/pose, /smirror/<node>/sent, report."
+            help="Output MCAP: input + /smirror/<robot>/pose, /smirror/<node>/sent, report "
+            "(omit: report only)."
         ),
-    ],
+    ] = None,
+    outputs_only: Annotated[
+        bool,
+        typer.Option("--outputs-only", help="Write only what the run adds, not the input."),
+    ] = False,
     mode: Annotated[
         str,
         typer.Option(help="mirror+odom (S-Mirror + motion sensor) or centralized (vision only)."),
@@ -84,6 +89,7 @@ def smirror(
         fail_if=fail_if,
         quiet=quiet,
         plot=draw if plot is not None else None,
+        outputs_only=outputs_only,
     )
 
 

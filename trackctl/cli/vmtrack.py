@@ -14,7 +14,14 @@ from trackctl.cli.process import run_system
 
 def vm_track(
     log: Annotated[Path, typer.Argument(help="MCAP log with detections (+ phone IMU, RSSI).")],
-    out: Annotated[Path, typer.Option(help="Output MCAP: input + /vmtrack/tracks + report.")],
+    out: Annotated[
+        Path | None,
+        typer.Option(help="Output MCAP: input + /vmtrack/tracks + report (omit: report only)."),
+    ] = None,
+    outputs_only: Annotated[
+        bool,
+        typer.Option("--outputs-only", help="Write only what the run adds, not the input."),
+    ] = False,
     mode: Annotated[str, typer.Option(help="vm (visual + motion) or v-af (visual only).")] = "vm",
     smooth: Annotated[
         bool, typer.Option("--smooth/--no-smooth", help="RTS-smooth every track (offline).")
@@ -63,9 +70,19 @@ def vm_track(
         from trackctl.plots.vmtrack import plot_vmtrack
 
         pyplot()  # fail before the run when matplotlib is missing
+        if out is None:
+            raise InputError("--plot draws from the output log: give --out too")
         draw = partial(plot_vmtrack, out, plot)
     run_system(
-        "vm-track", log, out, proc, json_out=json_out, fail_if=fail_if, quiet=quiet, plot=draw
+        "vm-track",
+        log,
+        out,
+        proc,
+        json_out=json_out,
+        fail_if=fail_if,
+        quiet=quiet,
+        plot=draw,
+        outputs_only=outputs_only,
     )
 
 

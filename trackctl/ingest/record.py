@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import heapq
+import os
+import select
 import socket
+import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from trackctl.errors import InputError, SchemaError
+from trackctl.errors import InputError, TrackctlError
 from trackctl.ingest.calibration import read_calibration, to_foxglove_calibration
 from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv, seconds_to_ns
 from trackctl.ingest.video import read_frames
@@ -18,7 +21,15 @@ from trackctl.logs import topics
 from trackctl.logs.jsonl import parse_jsonl
 from trackctl.logs.writer import LogWriter
 
-__all__ = ["RecordConfig", "record_files", "record_live", "LiveStats", "UdpSource", "parse_named"]
+__all__ = [
+    "RecordConfig",
+    "record_files",
+    "record_live",
+    "LiveStats",
+    "UdpSource",
+    "StreamSource",
+    "parse_named",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,8 +151,17 @@ class LiveStats:
     interrupted: bool = False
 
 
+Line = tuple[bytes | str, str, int]  # (line, where it came from, line number)
+FLUSH_EVERY_S = 1.0  # a live log loses at most this much to kill -9
+_TICK_S = 0.25  # how often an idle source wakes the recorder to flush
+
+
 class UdpSource:
-    """JSON lines from UDP datagrams on a local port (one or more lines per datagram)."""
+    """JSON lines from UDP datagrams on a local port (one or more lines per datagram).
+
+    Iterating yields lines, and ``None`` about every quarter second while no datagram arrives, so
+    the recorder can flush its chunk even when the stream goes quiet.
+    """
 
     def __init__(self, port: int, host: str = "127.0.0.1") -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -149,58 +169,103 @@ class UdpSource:
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
         try:
             self.sock.bind((host, port))
-        except OSError as err:
+        except (OSError, OverflowError) as err:
             self.sock.close()
-            raise InputError(f"--udp {port}: cannot bind {host}:{port} ({err.strerror})") from err
+            reason = getattr(err, "strerror", None) or str(err)
+            raise InputError(f"--udp {port}: cannot bind {host}:{port} ({reason})") from err
+        self.sock.settimeout(_TICK_S)
         self.address = self.sock.getsockname()
         self.where = f"udp:{self.address[1]}"
         self._n = 0
 
-    def _lines(self, datagram: bytes) -> Iterator[tuple[bytes, str, int]]:
+    def _lines(self, datagram: bytes, sender: Any) -> Iterator[Line]:
+        where = f"{self.where} from {sender[0]}:{sender[1]}" if sender else self.where
         for line in datagram.splitlines():
             if line.strip():
                 self._n += 1
-                yield line, self.where, self._n
+                yield line, where, self._n
 
-    def __iter__(self) -> Iterator[tuple[bytes, str, int]]:
+    def __iter__(self) -> Iterator[Line | None]:
         while True:
-            datagram = self.sock.recv(65535)
-            yield from self._lines(datagram)
+            try:
+                datagram, sender = self.sock.recvfrom(65535)
+            except TimeoutError:
+                yield None
+                continue
+            yield from self._lines(datagram, sender)
 
-    def drain(self) -> Iterator[tuple[bytes, str, int]]:
+    def drain(self) -> Iterator[Line]:
         """Datagrams already received by the kernel but not yet read."""
         self.sock.setblocking(False)
         while True:
             try:
-                datagram = self.sock.recv(65535)
+                datagram, sender = self.sock.recvfrom(65535)
             except (BlockingIOError, InterruptedError):
                 return
-            yield from self._lines(datagram)
+            yield from self._lines(datagram, sender)
 
     def close(self) -> None:
+        """Close the socket."""
         self.sock.close()
+
+
+class StreamSource:
+    """JSON lines from a file descriptor (stdin), with ``None`` ticks while it is idle."""
+
+    def __init__(self, fd: int, where: str = "<stdin>") -> None:
+        self.fd = fd
+        self.where = where
+
+    def __iter__(self) -> Iterator[Line | None]:
+        pending = b""
+        lineno = 0
+        while True:
+            try:
+                ready, _, _ = select.select([self.fd], [], [], _TICK_S)
+            except (OSError, ValueError):  # not selectable (some Windows-like fds): block
+                ready = [self.fd]
+            if not ready:
+                yield None
+                continue
+            block = os.read(self.fd, 1 << 16)
+            if not block:
+                break
+            pending += block
+            *lines, pending = pending.split(b"\n")
+            for line in lines:
+                lineno += 1
+                yield line, self.where, lineno
+        if pending:
+            yield pending, self.where, lineno + 1
 
 
 def record_live(
     writer: LogWriter,
-    lines: Iterable[tuple[bytes | str, str, int]],
+    lines: Iterable[Line | None],
     on_reject: Callable[[str], None] | None = None,
-    drain: Callable[[], Iterable[tuple[bytes | str, str, int]]] | None = None,
+    drain: Callable[[], Iterable[Line]] | None = None,
+    flush_every_s: float = FLUSH_EVERY_S,
 ) -> LiveStats:
     """Write JSON lines as they arrive until the source ends or Ctrl-C (KeyboardInterrupt).
 
-    A bad line is rejected (reported through ``on_reject``) and recording goes on: a live sensor
-    stream must not be lost to one malformed message. On Ctrl-C, lines already received
-    (``drain``) are still written, and the caller closes ``writer`` into a valid log.
+    A bad line (not JSON, not UTF-8, NaN or infinity, a time outside uint64, a message that does
+    not fit its schema...) is rejected, reported through ``on_reject`` with its line number or
+    sender, counted, and recording goes on: a live sensor stream must not be lost to one
+    malformed message. The writer is flushed at least every ``flush_every_s`` (``None`` items
+    are idle ticks from the source), so a killed recorder loses at most that much. On Ctrl-C,
+    lines already received (``drain``) are still written, and the caller closes ``writer`` into
+    a valid log.
     """
     stats = LiveStats()
+    last_flush = time.monotonic()
 
     def take(line: bytes | str, where: str, lineno: int) -> None:
         if not line.strip():
             return
         try:
             rec = parse_jsonl(line, where, lineno)
-        except (InputError, SchemaError) as err:
+            writer.check_log_time(rec.log_time_ns)
+        except TrackctlError as err:
             stats.rejected += 1
             if on_reject is not None:
                 on_reject(str(err))
@@ -209,8 +274,13 @@ def record_live(
         stats.counts[rec.topic] += 1
 
     try:
-        for line, where, lineno in lines:
-            take(line, where, lineno)
+        for item in lines:
+            if item is not None:
+                take(*item)
+            now = time.monotonic()
+            if now - last_flush >= flush_every_s:
+                writer.flush()
+                last_flush = now
     except KeyboardInterrupt:
         stats.interrupted = True
         if drain is not None:

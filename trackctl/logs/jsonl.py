@@ -20,6 +20,21 @@ from trackctl.logs.reader import RawMessage
 __all__ = ["to_jsonl", "parse_jsonl", "JsonlRecord"]
 
 
+class _NonFinite(ValueError):
+    pass
+
+
+def _no_constant(name: str) -> Any:
+    raise _NonFinite(f"non-finite number {name}")
+
+
+def _finite_float(text: str) -> float:
+    value = float(text)
+    if value in (float("inf"), float("-inf")):
+        raise _NonFinite(f"number {text[:40]} overflows a 64-bit float")
+    return value
+
+
 def to_jsonl(raw: RawMessage, codec: Codec) -> str:
     """One JSON line (without the newline) for a stored message."""
     head = (
@@ -54,10 +69,21 @@ def parse_jsonl(
         SchemaError: ``message`` does not fit the schema.
     """
     at = f"{where}:{lineno}" if lineno else where
+    if isinstance(line, bytes):
+        try:
+            line = line.decode("utf-8")
+        except UnicodeDecodeError as err:
+            raise InputError(
+                f"{at}: not UTF-8 text (byte 0x{line[err.start]:02x} at column {err.start + 1})"
+            ) from None
     try:
-        obj: Any = json.loads(line)
+        obj: Any = json.loads(line, parse_constant=_no_constant, parse_float=_finite_float)
     except json.JSONDecodeError as err:
         raise InputError(f"{at}: not valid JSON ({err.msg} at column {err.colno})") from err
+    except _NonFinite as err:
+        raise InputError(f"{at}: {err} (JSON has no NaN or infinity)") from None
+    except RecursionError:
+        raise InputError(f"{at}: JSON nested too deeply") from None
     if not isinstance(obj, dict):
         raise InputError(f"{at}: expected a JSON object, got {type(obj).__name__}")
     for key in ("topic", "schema", "message"):
@@ -69,8 +95,10 @@ def parse_jsonl(
     t = obj.get("log_time_ns")
     if t is None:
         t = time.time_ns() if now_ns is None else now_ns
-    elif isinstance(t, bool) or not isinstance(t, int) or t < 0:
-        raise InputError(f"{at}: topic {topic}: field 'log_time_ns' must be a non-negative integer")
+    elif isinstance(t, bool) or not isinstance(t, int) or not 0 <= t < 1 << 64:
+        raise InputError(
+            f"{at}: topic {topic}: field 'log_time_ns' must be an integer in 0..2^64-1 (got {t!r})"
+        )
     encoding = "protobuf" if str(schema).startswith("foxglove.") else "json"
     try:
         codec = codec_for(str(schema), encoding)
@@ -84,4 +112,7 @@ def parse_jsonl(
         data = codec.from_jsonable(obj["message"])
     except SchemaError as err:
         raise SchemaError(f"{at}: topic {topic}: {err}") from err
+    except (TypeError, ValueError, KeyError, AttributeError, OverflowError) as err:
+        # a payload of the right JSON shape but wrong types deep inside (e.g. a list for a number)
+        raise SchemaError(f"{at}: topic {topic}: message does not fit {schema}: {err}") from err
     return JsonlRecord(topic, int(t), codec, data)

@@ -1,14 +1,23 @@
-"""Atomic MCAP writer.
+"""Atomic MCAP writer with a visible partial file and an exclusive lock.
 
-The log is written to a temporary file beside the output and renamed over it only when
-:meth:`LogWriter.close` finishes it, so a crash or an error never leaves a half-written output,
-and an input is never overwritten (the writer refuses an output path equal to an input).
+A log is written to ``OUT.partial`` beside the output and renamed over ``OUT`` only when
+:meth:`LogWriter.close` finishes it, so an error never leaves a half-written output and an input
+is never overwritten (the writer refuses an output path equal to an input). The partial file is
+locked (``flock``) while it is written: a second writer of the same output fails at once instead of
+racing the first. After a ``kill -9`` the partial file stays, readable (``trackctl info`` and
+``replay`` read it as far as it goes) and finishable with ``trackctl recover``; the next writer of
+that output refuses to start rather than throw it away.
+
+Only regular files (or new paths) are written: devices, FIFOs, directories and symlinks to them
+are refused, so ``--out /dev/full`` cannot replace a device node with a file.
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import os
-import tempfile
+import stat
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from types import TracebackType
@@ -20,7 +29,7 @@ from trackctl.errors import OutputError
 from trackctl.logs.codecs import Codec, codec_for_type
 from trackctl.logs.reader import RawMessage
 
-__all__ = ["LogWriter", "COMPRESSIONS"]
+__all__ = ["LogWriter", "COMPRESSIONS", "PARTIAL_SUFFIX", "check_output_path", "partial_path"]
 
 COMPRESSIONS = {
     "zstd": CompressionType.ZSTD,
@@ -28,6 +37,8 @@ COMPRESSIONS = {
     "none": CompressionType.NONE,
 }
 PROFILE = "trackctl"
+PARTIAL_SUFFIX = ".partial"
+MAX_LOG_TIME_NS = (1 << 64) - 1
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -35,6 +46,87 @@ def _same_file(a: Path, b: Path) -> bool:
         return a.exists() and b.exists() and os.path.samefile(a, b)
     except OSError:
         return False
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISDIR(mode):
+        return "a directory"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
+
+
+def check_output_path(path: str | os.PathLike[str]) -> Path:
+    """The file a log for ``path`` will really be written to (a symlink's regular target).
+
+    Raises:
+        OutputError: ``path`` is (or links to) a directory, device, FIFO or socket, or its folder
+            does not exist.
+    """
+    path = Path(path)
+    try:
+        st = os.stat(path)  # follows symlinks: a link to a device is a device
+    except FileNotFoundError:
+        st = None
+    except OSError as err:
+        raise OutputError(f"{path}: cannot use as output ({err.strerror})") from err
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        raise OutputError(
+            f"{path}: is {_kind(st.st_mode)}; trackctl writes logs only to regular files or new "
+            "paths (nothing was written)"
+        )
+    target = Path(os.path.realpath(path)) if path.is_symlink() else path
+    parent = target.parent
+    if not parent.is_dir():
+        raise OutputError(f"{path}: folder {parent} does not exist")
+    return target
+
+
+def partial_path(path: str | os.PathLike[str], suffix: str = PARTIAL_SUFFIX) -> Path:
+    """Where the log for ``path`` is written until it is finished."""
+    path = Path(path)
+    return path.with_name(path.name + suffix)
+
+
+def _open_locked(partial: Path, final: Path) -> int:
+    """Create and exclusively lock ``partial``; the fd of an empty, locked regular file."""
+    while True:
+        try:
+            fd = os.open(partial, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+        except OSError as err:
+            raise OutputError(f"{final}: cannot create {partial.name} ({err.strerror})") from err
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode):
+                raise OutputError(f"{partial}: is {_kind(st.st_mode)}; remove it and try again")
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise OutputError(
+                    f"{final}: another process is writing it ({partial.name} is locked); "
+                    "wait for it or choose another output"
+                ) from None
+            try:
+                same = os.stat(partial).st_ino == st.st_ino
+            except FileNotFoundError:
+                same = False
+            if not same:  # the previous writer renamed it away between our open and lock
+                os.close(fd)
+                continue
+            if os.fstat(fd).st_size > 0:
+                raise OutputError(
+                    f"{partial}: holds an unfinished log from an earlier run that was stopped "
+                    f"(killed or out of disk); finish it with `trackctl recover {partial}` "
+                    "or delete it"
+                )
+            return fd
+        except BaseException:
+            os.close(fd)
+            raise
 
 
 class LogWriter:
@@ -49,6 +141,14 @@ class LogWriter:
         inputs: files the output must not overwrite.
         compression: ``zstd`` (default), ``lz4`` or ``none``.
         chunk_size: target uncompressed chunk size in bytes.
+        keep_partial: on failure keep ``OUT.partial`` (a live recording: it holds data) instead
+            of deleting it.
+        partial_suffix: suffix of the file written until :meth:`close`.
+
+    Raises:
+        OutputError: the output is an input, not a regular file or new path, its folder is
+            missing or unwritable, another process writes it, or an unfinished ``OUT.partial``
+            from an earlier run is in the way.
     """
 
     def __init__(
@@ -58,6 +158,8 @@ class LogWriter:
         inputs: Iterable[str | os.PathLike[str]] = (),
         compression: str = "zstd",
         chunk_size: int = 1 << 20,
+        keep_partial: bool = False,
+        partial_suffix: str = PARTIAL_SUFFIX,
     ) -> None:
         self.path = Path(path)
         for inp in inputs:
@@ -71,18 +173,18 @@ class LogWriter:
             raise OutputError(
                 f"compression {compression!r} unknown; expected one of {sorted(COMPRESSIONS)}"
             )
-        if self.path.is_dir():
-            raise OutputError(f"{self.path}: is a directory, expected an output file path")
-        parent = self.path.parent
-        if not parent.exists():
-            raise OutputError(f"{self.path}: folder {parent} does not exist")
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=parent)
-        self._tmp_path = Path(tmp)
+        self._target = check_output_path(self.path)
+        self.partial_path = partial_path(self._target, partial_suffix)
+        self.keep_partial = keep_partial
+        fd = _open_locked(self.partial_path, self.path)
         self._stream: IO[bytes] = os.fdopen(fd, "wb")
         self._writer = Writer(
             self._stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression]
         )
-        self._writer.start(profile=PROFILE, library="trackctl")
+        try:
+            self._writer.start(profile=PROFILE, library="trackctl")
+        except OSError as err:
+            self._fail(err, "start")
         self._schemas: dict[tuple[str, str, bytes], int] = {}
         self._channels: dict[str, tuple[int, str, str]] = {}
         self._closed = False
@@ -178,23 +280,36 @@ class LogWriter:
         )
         self._add(cid, raw.data, raw.log_time_ns, raw.publish_time_ns)
 
+    def check_log_time(self, log_time_ns: int) -> None:
+        """Raise :class:`OutputError` unless ``log_time_ns`` fits MCAP's uint64."""
+        if not 0 <= log_time_ns <= MAX_LOG_TIME_NS:
+            raise OutputError(
+                f"{self.path}: log time {log_time_ns} ns is outside 0..2^64-1 (MCAP's uint64)"
+            )
+
     def _add(self, cid: int, data: bytes, log_time_ns: int, publish_time_ns: int | None) -> None:
         if self._closed:
             raise OutputError(f"{self.path}: writer is closed")
         log_time_ns = int(log_time_ns)
-        if log_time_ns < 0:
-            raise OutputError(f"{self.path}: negative log time {log_time_ns} ns")
-        self._writer.add_message(
-            channel_id=cid,
-            log_time=log_time_ns,
-            publish_time=log_time_ns if publish_time_ns is None else int(publish_time_ns),
-            data=data,
-        )
+        publish = log_time_ns if publish_time_ns is None else int(publish_time_ns)
+        if not (0 <= log_time_ns <= MAX_LOG_TIME_NS and 0 <= publish <= MAX_LOG_TIME_NS):
+            raise OutputError(
+                f"{self.path}: log time {log_time_ns} ns is outside 0..2^64-1 (MCAP's uint64)"
+            )
+        try:
+            self._writer.add_message(
+                channel_id=cid, log_time=log_time_ns, publish_time=publish, data=data
+            )
+        except OSError as err:
+            self._fail(err, "write")
         self.message_count += 1
 
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
         """Add a metadata record (values are stored as strings, as MCAP requires)."""
-        self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+        try:
+            self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+        except OSError as err:
+            self._fail(err, "write")
 
     def add_attachment(
         self,
@@ -204,40 +319,80 @@ class LogWriter:
         log_time_ns: int = 0,
     ) -> None:
         """Attach a file (calibration source, configuration...) to the log."""
-        self._writer.add_attachment(
-            create_time=log_time_ns,
-            log_time=log_time_ns,
-            name=name,
-            media_type=media_type,
-            data=data,
-        )
+        try:
+            self._writer.add_attachment(
+                create_time=log_time_ns,
+                log_time=log_time_ns,
+                name=name,
+                media_type=media_type,
+                data=data,
+            )
+        except OSError as err:
+            self._fail(err, "write")
 
     # -- lifecycle ----------------------------------------------------------------------------
+    def flush(self) -> None:
+        """Close the chunk in progress and hand everything written so far to the OS.
+
+        A live recorder calls this about once a second: after a ``kill -9`` the partial file then
+        holds every message up to the last flush, readable by ``info``/``replay``/``recover``.
+        """
+        if self._closed:
+            return
+        try:
+            self._writer.flush()
+        except OSError as err:
+            self._fail(err, "write")
+
+    def _fail(self, err: OSError, doing: str) -> None:
+        """Drop (or keep, for a live recording) the partial file; raise a one-line OutputError."""
+        self.abort()
+        kept = (
+            f"; what was written so far is in {self.partial_path} (`trackctl recover` finishes it)"
+            if self.keep_partial and self.partial_path.exists()
+            else ""
+        )
+        reason = err.strerror or str(err)
+        raise OutputError(f"{self.path}: cannot {doing} the log ({reason}){kept}") from err
+
     def close(self) -> Path:
         """Finish the log, flush it to disk and move it to its final path."""
         if self._closed:
             return self.path
-        self._writer.finish()
-        self._stream.flush()
-        os.fsync(self._stream.fileno())
-        self._stream.close()
-        # mkstemp creates 0600 files; give the log the permissions a plain open() would.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(self._tmp_path, 0o666 & ~umask)
-        os.replace(self._tmp_path, self.path)
+        try:
+            self._writer.finish()
+            self._stream.flush()
+            os.fsync(self._stream.fileno())
+            os.replace(self.partial_path, self._target)  # still locked while renamed
+        except OSError as err:
+            self._fail(err, "finish")
         self._closed = True
+        try:
+            self._stream.close()  # releases the lock
+        except OSError as err:
+            if err.errno != errno.EBADF:
+                raise OutputError(f"{self.path}: cannot close the log ({err.strerror})") from err
         return self.path
 
     def abort(self) -> None:
-        """Drop the unfinished log; the output path is left as it was."""
+        """Drop the unfinished log (kept as ``OUT.partial`` with ``keep_partial``); the output
+        path is left as it was."""
         if self._closed:
             return
         self._closed = True
+        keep = self.keep_partial and self.message_count > 0
         try:
-            self._stream.close()
+            if keep:
+                self._stream.flush()
+            else:
+                self.partial_path.unlink(missing_ok=True)
+        except OSError:
+            pass
         finally:
-            self._tmp_path.unlink(missing_ok=True)
+            try:
+                self._stream.close()
+            except OSError:
+                pass
 
     def __enter__(self) -> LogWriter:
         return self

@@ -6,34 +6,19 @@ import json
 import os
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Container, Sequence
 from dataclasses import replace
 from pathlib import Path
 
 from trackctl.errors import OutputError
+from trackctl.logs.copy import copy_log
 from trackctl.logs.messages import MetricReport
 from trackctl.logs.reader import LogReader
-from trackctl.logs.writer import LogWriter
+from trackctl.logs.writer import LogWriter, check_output_path
 from trackctl.metrics.report import METADATA_PREFIX, jsonable_metrics, report_topic
 from trackctl.processing.base import Processor, Progress
 
 __all__ = ["run_processors", "copy_log", "store_report"]
-
-
-def copy_log(reader: LogReader, writer: LogWriter, progress: Progress | None = None) -> int:
-    """Copy every message, metadata record and attachment of ``reader`` into ``writer``."""
-    total = reader.message_count
-    n = 0
-    for raw in reader.raw():
-        writer.write_raw(raw)
-        n += 1
-        if progress is not None and n % 2000 == 0:
-            progress(n, total)
-    for name, data in reader.metadata().items():
-        writer.add_metadata(name, data)
-    for name, (media_type, data) in reader.attachments().items():
-        writer.add_attachment(name, data, media_type)
-    return n
 
 
 def store_report(writer: LogWriter, report: MetricReport) -> None:
@@ -53,10 +38,18 @@ def _run_one(
     processor: Processor,
     inputs: Sequence[Path],
     progress: Progress | None,
+    skip_topics: Container[str] = (),
+    skip_metadata: Container[str] = (),
 ) -> MetricReport:
     reader = LogReader(input_path)
     with LogWriter(out_path, inputs=inputs) as writer:
-        copy_log(reader, writer)
+        copy_log(
+            reader,
+            writer,
+            skip_topics=skip_topics,
+            skip_metadata=skip_metadata,
+            attachments=not skip_topics,
+        )
         started = time.perf_counter()
         report = processor.run(reader, writer, progress)
         metrics = dict(report.metrics)
@@ -72,26 +65,46 @@ def _run_one(
 
 def run_processors(
     input_path: str | os.PathLike[str],
-    out_path: str | os.PathLike[str],
+    out_path: str | os.PathLike[str] | None,
     chain: Sequence[Processor],
     progress: Progress | None = None,
+    *,
+    outputs_only: bool = False,
 ) -> list[MetricReport]:
     """Run ``chain`` in order; each processor sees the input plus what the earlier ones wrote.
 
     The output is written atomically; intermediate logs live in temporary files beside it.
 
+    Args:
+        out_path: the output log, or None to only compute the reports (a CI gate): the derived
+            channels then go to a temporary file that is deleted.
+        outputs_only: the output holds only what the processors add (their channels, reports
+            and metadata), not a copy of the input.
+
     Raises:
         OutputError: the output path is the input, or the chain is empty.
     """
-    input_path, out_path = Path(input_path), Path(out_path)
     if not chain:
         raise OutputError("no processor given; pass --with NAME (see `trackctl process --list`)")
-    LogReader(input_path)  # fail early on a bad input, before creating anything
+    input_path = Path(input_path)
+    source = LogReader(input_path)  # fail early on a bad input, before creating anything
+    if out_path is None:
+        with tempfile.TemporaryDirectory(prefix="trackctl-") as tmp:
+            return run_processors(
+                input_path, Path(tmp) / "out.mcap", chain, progress, outputs_only=True
+            )
+    out_path = Path(out_path)
     if out_path.resolve() == input_path.resolve():
         raise OutputError(
             f"{out_path}: output path is the input log; choose another --out "
             "(trackctl never overwrites its input)"
         )
+    check_output_path(out_path)  # refuse a device or directory before any work
+    skip_topics: Container[str] = ()
+    skip_metadata: Container[str] = ()
+    if outputs_only:
+        skip_topics = set(source.topics())
+        skip_metadata = set(source.metadata())
     reports: list[MetricReport] = []
     current = input_path
     temps: list[Path] = []
@@ -108,7 +121,16 @@ def run_processors(
                 target = Path(tmp)
                 temps.append(target)
             reports.append(
-                _run_one(current, target, processor, [input_path, *temps[:-1]], progress)
+                _run_one(
+                    current,
+                    target,
+                    processor,
+                    [input_path, *temps[:-1]],
+                    progress,
+                    # intermediate stages copy everything: the next processor reads them
+                    skip_topics if last else (),
+                    skip_metadata if last else (),
+                )
             )
             current = target
     finally:

@@ -1,0 +1,109 @@
+"""Copying logs: every message, metadata record and attachment; finishing unfinished recordings."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+from collections.abc import Callable, Container
+from dataclasses import dataclass
+from pathlib import Path
+
+from trackctl.errors import LogError, OutputError
+from trackctl.logs.reader import LogReader
+from trackctl.logs.writer import PARTIAL_SUFFIX, LogWriter
+
+__all__ = ["copy_log", "recover_log", "RecoverResult"]
+
+Progress = Callable[[int, int | None], None]
+
+
+def copy_log(
+    reader: LogReader,
+    writer: LogWriter,
+    progress: Progress | None = None,
+    *,
+    skip_topics: Container[str] = (),
+    skip_metadata: Container[str] = (),
+    attachments: bool = True,
+) -> int:
+    """Copy the messages, metadata records and attachments of ``reader`` into ``writer``.
+
+    Args:
+        skip_topics: topics not copied.
+        skip_metadata: metadata record names not copied.
+        attachments: copy attachments too.
+
+    Returns:
+        The number of messages copied.
+    """
+    total = reader.message_count
+    n = 0
+    for raw in reader.raw():
+        if raw.topic in skip_topics:
+            continue
+        writer.write_raw(raw)
+        n += 1
+        if progress is not None and n % 2000 == 0:
+            progress(n, total)
+    for name, data in reader.metadata().items():
+        if name not in skip_metadata:
+            writer.add_metadata(name, data)
+    if attachments:
+        for name, (media_type, data) in reader.attachments().items():
+            writer.add_attachment(name, data, media_type)
+    return n
+
+
+@dataclass(frozen=True, slots=True)
+class RecoverResult:
+    """What :func:`recover_log` wrote."""
+
+    out: Path
+    messages: int
+    warnings: tuple[str, ...]
+
+
+def recover_log(
+    partial: str | os.PathLike[str],
+    out: str | os.PathLike[str] | None = None,
+    *,
+    keep: bool = False,
+) -> RecoverResult:
+    """Finish an unfinished log (``OUT.partial`` of a killed recording, a cut copy) into ``out``.
+
+    Every message that can be read is copied, with the metadata and attachments, into a complete,
+    indexed log. The partial file is deleted afterwards unless ``keep``.
+
+    Args:
+        partial: the unfinished log.
+        out: the finished log; by default ``partial`` without its ``.partial`` suffix.
+
+    Raises:
+        OutputError: a recorder still writes ``partial`` (it is locked), or no output name.
+        LogError: ``partial`` is not an MCAP log.
+    """
+    partial = Path(partial)
+    if out is None:
+        if not partial.name.endswith(PARTIAL_SUFFIX) or partial.name == PARTIAL_SUFFIX:
+            raise OutputError(f"{partial}: name does not end in {PARTIAL_SUFFIX}; give --out")
+        out = partial.with_name(partial.name[: -len(PARTIAL_SUFFIX)])
+    reader = LogReader(partial)
+    try:
+        fd = os.open(partial, os.O_RDONLY | os.O_CLOEXEC)
+    except OSError as err:
+        raise LogError(f"{partial}: cannot open ({err.strerror})") from err
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise OutputError(
+                f"{partial}: a recorder is still writing it; stop it (Ctrl-C finishes the log "
+                "itself) before recovering"
+            ) from None
+        with LogWriter(out, inputs=[partial], partial_suffix=".recovering") as writer:
+            n = copy_log(reader, writer)
+        if not keep:
+            partial.unlink(missing_ok=True)
+    finally:
+        os.close(fd)
+    return RecoverResult(Path(out), n, tuple(reader.warnings))
