@@ -11,16 +11,30 @@ could read. Such a log is iterated in file order, which trackctl's writer keeps 
 
 from __future__ import annotations
 
+import heapq
+import io
 import os
+import struct
 import warnings
+import zlib
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from mcap.exceptions import McapError
-from mcap.reader import SeekingReader
-from mcap.records import Attachment, Channel, Message, MessageIndex, Metadata, Schema, Statistics
+from mcap.opcode import Opcode
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    ChunkIndex,
+    Message,
+    MessageIndex,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+)
 from mcap.stream_reader import StreamReader
 from mcap.summary import Summary
 
@@ -32,7 +46,21 @@ from trackctl.errors import (
     TruncatedLogWarning,
 )
 from trackctl.logs.codecs import Codec, codec_for
-from trackctl.logs.recovery import ScanEnd, scan_damaged
+from trackctl.logs.recovery import (
+    ChunkError,
+    Damage,
+    ScanEnd,
+    decode_chunk,
+    parse_message_index,
+    scan_damaged,
+)
+
+
+def one_line_reason(err: BaseException) -> str:
+    """An exception as a short one-line reason (its type when it says nothing)."""
+    text = " ".join(str(err).split())
+    return text[:200] if text else type(err).__name__
+
 
 __all__ = ["LogReader", "RawMessage", "LogMessage", "TopicInfo", "MCAP_MAGIC"]
 
@@ -99,32 +127,90 @@ class TopicInfo:
         return (self.count - 1) * 1e9 / span if span > 0 else 0.0
 
 
-_READ_ERRORS = (McapError, EOFError, ValueError, OSError, KeyError, IndexError)
+FOOTER_RECORD_SIZE = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, summary offset start, crc
+DATA_END_RECORD_SIZE = 1 + 8 + 4
 
 
-def _is_damage(err: BaseException) -> bool:
-    """True for errors that mean "the bytes end or break here" (zstd/lz4 raise their own types)."""
-    return (
-        isinstance(err, _READ_ERRORS)
-        or type(err).__module__.split(".")[0]
-        in (
-            "zstandard",
-            "lz4",
-            "struct",
-        )
-        or type(err).__name__ in ("ZstdError", "error")
-    )
+@dataclass(frozen=True, slots=True)
+class _Layout:
+    """What the footer and summary say, after checking them against the file."""
+
+    summary: Summary | None
+    data_end: int  # offset of the DataEnd record (end of the data section)
+    problem: str  # why the summary cannot be used ("" when it can, or there is none)
+
+
+def _read_layout(f: IO[bytes], size: int) -> _Layout | None:
+    """Footer and summary of a finished log, or None when the log has no valid footer."""
+    tail = FOOTER_RECORD_SIZE + len(MCAP_MAGIC)
+    if size < len(MCAP_MAGIC) + tail:
+        return None
+    f.seek(size - tail)
+    footer = f.read(tail)
+    if footer[-len(MCAP_MAGIC) :] != MCAP_MAGIC or footer[0] != Opcode.FOOTER:
+        return None
+    length, summary_start, _, summary_crc = struct.unpack_from("<QQQI", footer, 1)
+    footer_start = size - tail
+    if length != FOOTER_RECORD_SIZE - 9:
+        return None
+    if summary_start == 0:
+        return _Layout(None, footer_start - DATA_END_RECORD_SIZE, "")
+    if not len(MCAP_MAGIC) + DATA_END_RECORD_SIZE <= summary_start <= footer_start:
+        return _Layout(None, footer_start - DATA_END_RECORD_SIZE, "summary offset is out of range")
+    data_end = summary_start - DATA_END_RECORD_SIZE
+    f.seek(summary_start)
+    section = f.read(footer_start - summary_start)
+    if summary_crc:
+        crc = zlib.crc32(footer[: FOOTER_RECORD_SIZE - 4], zlib.crc32(section))
+        if crc != summary_crc:
+            return _Layout(None, data_end, "summary CRC mismatch")
+    try:
+        summary = _parse_summary(section + footer)
+    except Exception as err:  # noqa: BLE001 - mcap raises struct/unicode/EOF errors
+        return _Layout(None, data_end, f"summary does not parse ({type(err).__name__})")
+    for ci in summary.chunk_indexes:
+        if not (
+            len(MCAP_MAGIC) <= ci.chunk_start_offset
+            and ci.chunk_start_offset + ci.chunk_length <= data_end
+            and ci.chunk_start_offset + ci.chunk_length + ci.message_index_length <= data_end
+        ):
+            return _Layout(None, data_end, "a chunk index points outside the data section")
+    return _Layout(summary, data_end, "")
+
+
+def _parse_summary(section: bytes) -> Summary:
+    summary = Summary()
+    for record in StreamReader(io.BytesIO(section), skip_magic=True).records:
+        if isinstance(record, Statistics):
+            summary.statistics = record
+        elif isinstance(record, Schema):
+            summary.schemas[record.id] = record
+        elif isinstance(record, Channel):
+            summary.channels[record.id] = record
+        elif isinstance(record, ChunkIndex):
+            summary.chunk_indexes.append(record)
+        elif isinstance(record, MetadataIndex):
+            summary.metadata_indexes.append(record)
+        elif isinstance(record, AttachmentIndex):
+            summary.attachment_indexes.append(record)
+    return summary
 
 
 class LogReader:
-    """Reads an MCAP log lazily.
+    """Reads an MCAP log lazily and defensively.
+
+    A finished log is read through its summary (chunk indexes, statistics); every chunk's CRC is
+    checked and a chunk that fails (or does not decompress, or holds a record that runs past it)
+    is skipped whole with a warning naming its byte offset and the messages lost; no changed
+    message is ever emitted. A log without a valid footer, or whose summary is damaged, is read
+    sequentially as far as it goes, with a warning.
 
     Args:
         path: the log file.
 
     Raises:
         NotAFileError: the path is missing or not a regular file.
-        NotAnMcapError: the file does not start with the MCAP magic.
+        NotAnMcapError: the file does not start with the MCAP magic bytes.
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
@@ -133,34 +219,52 @@ class LogReader:
             raise NotAFileError(f"{self.path}: no such file")
         if not self.path.is_file():
             raise NotAFileError(f"{self.path}: not a regular file")
-        with self.path.open("rb") as f:
-            head = f.read(len(MCAP_MAGIC))
+        try:
+            with self.path.open("rb") as f:
+                head = f.read(len(MCAP_MAGIC))
+                self.size = os.fstat(f.fileno()).st_size
+                layout = _read_layout(f, self.size) if head == MCAP_MAGIC else None
+        except OSError as err:
+            raise NotAFileError(f"{self.path}: cannot read ({err.strerror})") from err
         if head != MCAP_MAGIC:
             raise NotAnMcapError(
                 f"{self.path}: not an MCAP file (it does not start with the MCAP magic bytes)"
             )
         self.warnings: list[str] = []
-        self._summary: Summary | None = None
-        self.truncated = False
-        try:
-            with self.path.open("rb") as f:
-                self._summary = SeekingReader(f).get_summary()
-        except Exception as err:  # noqa: BLE001 - any failure here means the footer is unusable
-            if not _is_damage(err):
-                raise
-            self.truncated = True
+        self.damage: dict[int, Damage] = {}
+        self.decode_errors = 0
+        self.truncated = layout is None
+        self._summary: Summary | None = None if layout is None else layout.summary
+        self._data_end = None if layout is None else layout.data_end
+        if layout is None:
             self._warn(
                 f"{self.path}: no valid footer or summary (unfinished recording or cut copy); "
                 "reading it sequentially as far as it goes"
             )
+        elif layout.problem:
+            self._warn(f"{self.path}: {layout.problem}; reading the log sequentially instead")
+        stats = None if self._summary is None else self._summary.statistics
+        # An indexed read needs chunk indexes for every message (unchunked logs are scanned).
+        self._indexed = self._summary is not None and (
+            bool(self._summary.chunk_indexes) or (stats is not None and stats.message_count == 0)
+        )
         self._stats_cache: dict[str, TopicInfo] | None = None
-        self._codecs: dict[int, Codec] = {}
 
     # -- warnings -----------------------------------------------------------------------------
     def _warn(self, text: str) -> None:
         if text not in self.warnings:
             self.warnings.append(text)
             warnings.warn(text, TruncatedLogWarning, stacklevel=3)
+
+    def _damaged(self, damage: Damage) -> None:
+        if damage.offset not in self.damage:
+            self.damage[damage.offset] = damage
+            self._warn(f"{self.path}: {damage.describe()}")
+
+    @property
+    def lost_messages(self) -> int:
+        """Messages known to be lost in damaged chunks seen so far."""
+        return sum(d.lost_messages or 0 for d in self.damage.values())
 
     # -- iteration ----------------------------------------------------------------------------
     def _iter_records(
@@ -170,14 +274,116 @@ class LogReader:
         start_ns: int | None,
         end_ns: int | None,
     ) -> Iterator[tuple[Schema | None, Channel, Message]]:
-        if not self.truncated:
+        if self._indexed:
+            yield from self._iter_indexed(f, topics, start_ns, end_ns)
+        else:
+            yield from self._iter_sequential(f, topics, start_ns, end_ns)
+
+    def _wanted_channels(self, topics: list[str] | None) -> dict[int, Channel]:
+        assert self._summary is not None
+        wanted = None if topics is None else set(topics)
+        return {
+            cid: ch
+            for cid, ch in self._summary.channels.items()
+            if wanted is None or ch.topic in wanted
+        }
+
+    def _iter_indexed(
+        self,
+        f: IO[bytes],
+        topics: list[str] | None,
+        start_ns: int | None,
+        end_ns: int | None,
+    ) -> Iterator[tuple[Schema | None, Channel, Message]]:
+        """Chunks in start-time order, merged into log-time order through a heap (memory: the
+        chunks that overlap in time); ties keep file order."""
+        assert self._summary is not None
+        channels = self._wanted_channels(topics)
+        schemas = self._summary.schemas
+        chunks = sorted(
+            (
+                ci
+                for ci in self._summary.chunk_indexes
+                if (start_ns is None or ci.message_end_time >= start_ns)
+                and (end_ns is None or ci.message_start_time < end_ns)
+                and (not ci.message_index_offsets or channels.keys() & ci.message_index_offsets)
+            ),
+            key=lambda ci: (ci.message_start_time, ci.chunk_start_offset),
+        )
+        heap: list[tuple[int, int, int, Message]] = []
+        i = 0
+        while i < len(chunks) or heap:
+            while i < len(chunks) and (not heap or chunks[i].message_start_time <= heap[0][0]):
+                ci = chunks[i]
+                for j, record in enumerate(self._chunk_messages(f, ci, channels, start_ns, end_ns)):
+                    heapq.heappush(heap, (record.log_time, ci.chunk_start_offset, j, record))
+                i += 1
+            if heap:
+                record = heapq.heappop(heap)[3]
+                channel = channels[record.channel_id]
+                yield schemas.get(channel.schema_id), channel, record
+
+    def _chunk_messages(
+        self,
+        f: IO[bytes],
+        ci: ChunkIndex,
+        channels: Mapping[int, Channel],
+        start_ns: int | None,
+        end_ns: int | None,
+    ) -> list[Message]:
+        f.seek(ci.chunk_start_offset)
+        head = f.read(9)
+        try:
+            if len(head) < 9 or head[0] != Opcode.CHUNK:
+                raise ChunkError("no chunk record at the indexed offset")
+            (length,) = struct.unpack_from("<Q", head, 1)
+            if length != ci.chunk_length - 9:
+                raise ChunkError("chunk length differs from its index")
+            records = decode_chunk(f.read(length))
+        except ChunkError as err:
+            self._damaged(
+                Damage(ci.chunk_start_offset, str(err), self._indexed_count(f, ci, channels))
+            )
+            return []
+        out = []
+        for record in records:
+            if not isinstance(record, Message) or record.channel_id not in channels:
+                continue
+            if start_ns is not None and record.log_time < start_ns:
+                continue
+            if end_ns is not None and record.log_time >= end_ns:
+                continue
+            out.append(record)
+        return out
+
+    def _indexed_count(
+        self, f: IO[bytes], ci: ChunkIndex, channels: Mapping[int, Channel]
+    ) -> int | None:
+        """How many messages of ``channels`` a chunk holds, from its message indexes."""
+        total = 0
+        for channel_id, offset in ci.message_index_offsets.items():
+            if channel_id not in channels:
+                continue
+            f.seek(offset)
+            head = f.read(9)
+            if len(head) < 9 or head[0] != Opcode.MESSAGE_INDEX:
+                return None
+            (length,) = struct.unpack_from("<Q", head, 1)
+            if length > ci.message_index_length:
+                return None
             try:
-                yield from SeekingReader(f).iter_messages(
-                    topics=topics, starting_at=start_ns, ending_before=end_ns, log_time_order=True
-                )
-            except McapError as err:
-                raise LogError(f"{self.path}: corrupt log: {err}") from err
-            return
+                total += len(parse_message_index(f.read(length)).records)
+            except ChunkError:
+                return None
+        return total if ci.message_index_offsets else None
+
+    def _iter_sequential(
+        self,
+        f: IO[bytes],
+        topics: list[str] | None,
+        start_ns: int | None,
+        end_ns: int | None,
+    ) -> Iterator[tuple[Schema | None, Channel, Message]]:
         end = ScanEnd()
         schemas: dict[int, Schema] = {}
         channels: dict[int, Channel] = {}
@@ -200,15 +406,16 @@ class LogReader:
                     continue
                 count += 1
                 yield schemas.get(channel.schema_id), channel, record
+        for damage in end.damage:
+            self._damaged(damage)
         if end.reason != "end":
             partial = (
                 f", {end.partial_chunk_messages} of them recovered from the cut-off chunk"
                 if end.partial_chunk_messages
                 else ""
             )
-            size = self.path.stat().st_size
             self._warn(
-                f"{self.path}: log is cut at byte {size}, {end.reason} starting at byte "
+                f"{self.path}: log is cut at byte {self.size}, {end.reason} starting at byte "
                 f"{end.offset}; read {count} messages{partial}; the rest is lost"
             )
 
@@ -230,66 +437,129 @@ class LogReader:
             raw.schema_name, raw.message_encoding, raw.schema_encoding, raw.schema_data
         )
 
-    def messages(
-        self,
-        topics: Iterable[str] | None = None,
-        start_ns: int | None = None,
-        end_ns: int | None = None,
-    ) -> Iterator[LogMessage]:
-        """Decoded messages in log-time order (see :meth:`raw` for the filters)."""
+    def decoded(self, raws: Iterable[RawMessage]) -> Iterator[LogMessage]:
+        """Decode raw messages with their channel's codec (looked up once per channel).
+
+        A message that does not decode is skipped with a warning naming its topic and time (a
+        log written by another tool may hold anything); the count is in :attr:`decode_errors`.
+        """
         codecs: dict[tuple[str, str, bytes], Codec] = {}
-        for raw in self.raw(topics, start_ns, end_ns):
+        for raw in raws:
             key = (raw.schema_name, raw.message_encoding, raw.schema_data)
             codec = codecs.get(key)
             if codec is None:
                 codec = codecs[key] = self.codec(raw)
             try:
                 decoded = codec.decode(raw.data)
-            except Exception as err:
-                raise LogError(
+            except Exception as err:  # noqa: BLE001 - foreign bytes may break any decoder
+                self.decode_errors += 1
+                self._warn(
                     f"{self.path}: {raw.topic} at {raw.log_time_ns} ns: cannot decode "
-                    f"{raw.schema_name}: {err}"
-                ) from err
+                    f"{raw.schema_name or 'the message'} ({one_line_reason(err)}); skipped"
+                )
+                continue
             yield LogMessage(raw.topic, raw.log_time_ns, raw.schema_name, decoded)
+
+    def messages(
+        self,
+        topics: Iterable[str] | None = None,
+        start_ns: int | None = None,
+        end_ns: int | None = None,
+    ) -> Iterator[LogMessage]:
+        """Decoded messages in log-time order (see :meth:`raw` for the filters and
+        :meth:`decoded` for undecodable messages)."""
+        return self.decoded(self.raw(topics, start_ns, end_ns))
+
+    def verify_data_crc(self) -> bool | None:
+        """Whether the data section's CRC (in its DataEnd record) matches; None when the log has
+        none (no footer, or written without one). Reads the whole data section."""
+        if self._data_end is None:
+            return None
+        with self.path.open("rb") as f:
+            f.seek(self._data_end)
+            tail = f.read(DATA_END_RECORD_SIZE)
+            if len(tail) < DATA_END_RECORD_SIZE or tail[0] != Opcode.DATA_END:
+                return None
+            (expected,) = struct.unpack_from("<I", tail, 9)
+            if expected == 0:
+                return None
+            f.seek(0)
+            crc, left = 0, self._data_end
+            while left > 0:
+                block = f.read(min(left, 1 << 20))
+                if not block:
+                    return False
+                crc = zlib.crc32(block, crc)
+                left -= len(block)
+        return crc == expected
 
     # -- summary ------------------------------------------------------------------------------
     def topics(self) -> dict[str, TopicInfo]:
-        """Per-topic schema, encoding, count and time span (from the index when there is one)."""
+        """Per-topic schema, encoding, count and time span (from the summary when there is one:
+        O(channels), not O(messages))."""
         if self._stats_cache is None:
             stats = None
-            if self._summary is not None and self._summary.statistics is not None:
+            if self._indexed and self._summary is not None and self._summary.statistics:
                 stats = self._topics_from_summary(self._summary)
             self._stats_cache = stats if stats is not None else self._topics_by_scan()
         return self._stats_cache
 
     def _topics_from_summary(self, summary: Summary) -> dict[str, TopicInfo] | None:
         statistics: Statistics = summary.statistics  # type: ignore[assignment]
-        first: dict[int, int] = {}
-        last: dict[int, int] = {}
-        with self.path.open("rb") as f:
-            for chunk_index in summary.chunk_indexes:
-                for channel_id, offset in chunk_index.message_index_offsets.items():
-                    f.seek(offset)
-                    record = next(StreamReader(f, skip_magic=True).records, None)
-                    if not isinstance(record, MessageIndex) or not record.records:
-                        continue
-                    times = [t for t, _ in record.records]
-                    first[channel_id] = min(first.get(channel_id, times[0]), min(times))
-                    last[channel_id] = max(last.get(channel_id, times[0]), max(times))
-        if summary.chunk_indexes and not first and statistics.message_count:
+        by_channel: dict[int, list[ChunkIndex]] = {}
+        for ci in summary.chunk_indexes:
+            for channel_id in ci.message_index_offsets:
+                by_channel.setdefault(channel_id, []).append(ci)
+        if summary.chunk_indexes and not by_channel and statistics.message_count:
             return None  # no message indexes: count by scanning instead
         out: dict[str, TopicInfo] = {}
-        for channel_id, channel in summary.channels.items():
-            schema = summary.schemas.get(channel.schema_id)
-            out[channel.topic] = TopicInfo(
-                topic=channel.topic,
-                schema_name=schema.name if schema else "",
-                message_encoding=channel.message_encoding,
-                count=statistics.channel_message_counts.get(channel_id, 0),
-                first_ns=first.get(channel_id),
-                last_ns=last.get(channel_id),
-            )
+        with self.path.open("rb") as f:
+            for channel_id, channel in summary.channels.items():
+                schema = summary.schemas.get(channel.schema_id)
+                first, last = self._channel_span(f, channel_id, by_channel.get(channel_id, []))
+                out[channel.topic] = TopicInfo(
+                    topic=channel.topic,
+                    schema_name=schema.name if schema else "",
+                    message_encoding=channel.message_encoding,
+                    count=statistics.channel_message_counts.get(channel_id, 0),
+                    first_ns=first,
+                    last_ns=last,
+                )
         return out
+
+    def _index_times(self, f: IO[bytes], ci: ChunkIndex, channel_id: int) -> list[int]:
+        f.seek(ci.message_index_offsets[channel_id])
+        head = f.read(9)
+        if len(head) < 9 or head[0] != Opcode.MESSAGE_INDEX:
+            return []
+        (length,) = struct.unpack_from("<Q", head, 1)
+        if length > ci.message_index_length:
+            return []
+        try:
+            return [t for t, _ in parse_message_index(f.read(length)).records]
+        except ChunkError:
+            return []
+
+    def _channel_span(
+        self, f: IO[bytes], channel_id: int, chunks: list[ChunkIndex]
+    ) -> tuple[int | None, int | None]:
+        """First and last log time of one channel, reading as few message indexes as the chunk
+        times allow (one or two per channel when chunks do not overlap)."""
+        first: int | None = None
+        for ci in sorted(chunks, key=lambda c: c.message_start_time):
+            if first is not None and ci.message_start_time >= first:
+                break
+            times = self._index_times(f, ci, channel_id)
+            if times:
+                first = min(times) if first is None else min(first, min(times))
+        last: int | None = None
+        for ci in sorted(chunks, key=lambda c: c.message_end_time, reverse=True):
+            if last is not None and ci.message_end_time <= last:
+                break
+            times = self._index_times(f, ci, channel_id)
+            if times:
+                last = max(times) if last is None else max(last, max(times))
+        return first, last
 
     def _topics_by_scan(self) -> dict[str, TopicInfo]:
         counts: dict[str, list[Any]] = {}
@@ -328,33 +598,53 @@ class LogReader:
         """Total number of messages (readable ones, for a truncated log)."""
         return sum(t.count for t in self.topics().values())
 
+    def _indexed_records(self, indexes: Iterable[Any], kind: type) -> Iterator[Any]:
+        """Records at the offsets of metadata or attachment indexes; a damaged one is skipped
+        with a warning."""
+        with self.path.open("rb") as f:
+            for index in indexes:
+                f.seek(index.offset)
+                try:
+                    data = f.read(min(index.length, max(0, self.size - index.offset)))
+                    record = next(StreamReader(io.BytesIO(data), skip_magic=True).records)
+                    if not isinstance(record, kind):
+                        raise ValueError(f"no {kind.__name__.lower()} record there")
+                except Exception as err:  # noqa: BLE001 - mcap raises struct/unicode/EOF errors
+                    what = kind.__name__.lower()
+                    self._damaged(Damage(index.offset, one_line_reason(err), 0, what))
+                    continue
+                yield record
+
     def metadata(self) -> dict[str, dict[str, str]]:
         """Metadata records by name (a later record of the same name wins)."""
         out: dict[str, dict[str, str]] = {}
-        with self.path.open("rb") as f:
-            try:
-                if self.truncated:
-                    for record in scan_damaged(f, ScanEnd()):
-                        if isinstance(record, Metadata):
-                            out[record.name] = dict(record.metadata)
-                else:
-                    for md in SeekingReader(f).iter_metadata():
-                        out[md.name] = dict(md.metadata)
-            except McapError as err:
-                raise LogError(f"{self.path}: cannot read metadata: {err}") from err
+        if self._summary is not None:
+            for md in self._indexed_records(self._summary.metadata_indexes, Metadata):
+                out[md.name] = dict(md.metadata)
+        else:
+            with self.path.open("rb") as f:
+                for record in scan_damaged(f, ScanEnd()):
+                    if isinstance(record, Metadata):
+                        out[record.name] = dict(record.metadata)
         return out
+
+    def attachment_sizes(self) -> dict[str, tuple[str, int]]:
+        """Attachments by name: (media type, size in bytes), from the index when there is one."""
+        if self._summary is not None:
+            return {a.name: (a.media_type, a.data_size) for a in self._summary.attachment_indexes}
+        return {name: (mt, len(data)) for name, (mt, data) in self.attachments().items()}
 
     def attachments(self) -> dict[str, tuple[str, bytes]]:
         """Attachments by name: (media type, data)."""
         out: dict[str, tuple[str, bytes]] = {}
-        with self.path.open("rb") as f:
-            if self.truncated:
+        if self._summary is not None:
+            for att in self._indexed_records(self._summary.attachment_indexes, Attachment):
+                out[att.name] = (att.media_type, att.data)
+        else:
+            with self.path.open("rb") as f:
                 for record in scan_damaged(f, ScanEnd()):
                     if isinstance(record, Attachment):
                         out[record.name] = (record.media_type, record.data)
-            else:
-                for att in SeekingReader(f).iter_attachments():
-                    out[att.name] = (att.media_type, att.data)
         return out
 
     def require(self, topics: Iterable[str], needed_by: str, why: str = "") -> None:
@@ -389,7 +679,7 @@ class IndexedWindowReader:
     def __init__(self, reader: LogReader, cache_chunks: int = 4) -> None:
         import numpy as np
 
-        if reader.truncated or reader._summary is None or not reader._summary.chunk_indexes:
+        if not reader._indexed or reader._summary is None or not reader._summary.chunk_indexes:
             raise LogError(f"{reader.path}: no chunk index, cannot read a topic window directly")
         self.path = reader.path
         self._summary = reader._summary

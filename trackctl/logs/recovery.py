@@ -1,125 +1,337 @@
-"""Sequential reading of damaged MCAP logs (no footer: killed recordings, cut copies).
+"""Defensive decoding of MCAP chunks and records: damage is reported, never passed on or raised.
 
-mcap's own readers stop at the first incomplete record, which for a chunked log throws away the
-whole last chunk (by default up to 1 MiB of messages). This scanner walks the top-level records
-itself and, when the log ends inside a chunk, decompresses that chunk's bytes as far as they go
-(zstd and lz4 frames decode incrementally; uncompressed chunks trivially), keeping every complete
-message in it.
+mcap's own readers trust every length and never check a chunk's CRC: a flipped byte inside a
+compressed chunk yields changed messages, a forged length an OverflowError or MemoryError, and
+they stop at the first incomplete record (which, for a killed recording, throws away the whole
+last chunk). Here every length is checked against the bytes that are really there, every chunk
+with a CRC is verified after decompression, and a chunk that fails is skipped whole (no message of
+it is emitted) with a :class:`Damage` saying where and how many messages were lost.
+
+:func:`decode_chunk` serves the indexed reader; :func:`scan_damaged` walks a log without a usable
+summary (no footer: killed recordings, cut copies; or a damaged summary) record by record, and when
+the log ends inside a chunk decompresses that chunk's bytes as far as they go (zstd and lz4 frames
+decode incrementally), keeping every complete message in it.
 """
 
 from __future__ import annotations
 
 import io
+import os
 import struct
+import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import IO, Any
 
+from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import Attachment, Channel, Chunk, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.records import Attachment, Channel, Message, MessageIndex, Metadata, Schema
 
-__all__ = ["scan_damaged", "ScanEnd"]
+__all__ = [
+    "scan_damaged",
+    "ScanEnd",
+    "Damage",
+    "ChunkHeader",
+    "ChunkError",
+    "decode_chunk",
+    "parse_chunk_header",
+    "parse_message_index",
+]
 
 _HEAD = struct.Struct("<BQ")
+_CHUNK_FIXED = struct.Struct("<QQQI")  # start, end, uncompressed size, uncompressed crc
+_MESSAGE = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
 _NAMES = {int(op): op.name.lower() for op in Opcode}
 _MAGIC_LEN = 8
+# A chunk's uncompressed size is trusted only up to this (a forged size must not allocate GBs).
+MAX_CHUNK_BYTES = 1 << 31
+
+
+class ChunkError(ValueError):
+    """A chunk's bytes are damaged (bad length, compression, CRC or record inside)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Damage:
+    """One damaged piece of a log that was skipped."""
+
+    offset: int
+    what: str
+    lost_messages: int | None  # None: unknown
+    kind: str = "chunk"
+
+    def describe(self) -> str:
+        """One line: where, what, and how much was lost."""
+        lost = (
+            "an unknown number of messages"
+            if self.lost_messages is None
+            else f"{self.lost_messages} message{'s' if self.lost_messages != 1 else ''}"
+        )
+        return f"damaged {self.kind} at byte {self.offset} ({self.what}); skipped it, {lost} lost"
 
 
 @dataclass
 class ScanEnd:
-    """Where and why a scan stopped (filled in as the scan runs)."""
+    """Where and why a scan stopped, and what it skipped (filled in as the scan runs)."""
 
     offset: int = 0
     reason: str = ""
     partial_chunk_messages: int = 0
+    damage: list[Damage] = field(default_factory=list)
 
 
-def _partial_chunk(body: bytes) -> list[Any]:
-    """Records of a chunk whose bytes end early (possibly empty)."""
-    fixed = struct.Struct("<QQQII")
-    if len(body) < fixed.size:
-        return []
-    _, _, uncompressed_size, _, comp_len = fixed.unpack_from(body)
-    pos = fixed.size
-    compression = body[pos : pos + comp_len].decode("utf-8", "replace")
-    pos += comp_len + 8  # skip records length
-    data = body[pos:]
+@dataclass(frozen=True, slots=True)
+class ChunkHeader:
+    """The fixed fields of a chunk record and where its compressed data lies in the body."""
+
+    start_ns: int
+    end_ns: int
+    uncompressed_size: int
+    uncompressed_crc: int
+    compression: str
+    data_start: int
+    data_length: int
+
+
+def parse_chunk_header(body: bytes) -> ChunkHeader:
+    """The header of a chunk record body (the bytes after opcode and length).
+
+    Raises:
+        ChunkError: a field runs past the body.
+    """
+    if len(body) < _CHUNK_FIXED.size + 4:
+        raise ChunkError("chunk header cut short")
+    start, end, size, crc, name_len = struct.unpack_from("<QQQII", body)
+    pos = _CHUNK_FIXED.size + 4
+    if pos + name_len + 8 > len(body):
+        raise ChunkError("compression name runs past the chunk")
     try:
-        if compression == "zstd":
+        compression = body[pos : pos + name_len].decode("utf-8")
+    except UnicodeDecodeError:
+        raise ChunkError("compression name is not UTF-8") from None
+    pos += name_len
+    (data_len,) = struct.unpack_from("<Q", body, pos)
+    pos += 8
+    return ChunkHeader(start, end, size, crc, compression, pos, data_len)
+
+
+def _decompress(head: ChunkHeader, data: bytes) -> bytes:
+    if head.uncompressed_size > MAX_CHUNK_BYTES:
+        raise ChunkError(f"implausible uncompressed size {head.uncompressed_size}")
+    try:
+        if head.compression == "zstd":
             import zstandard
 
-            raw = zstandard.ZstdDecompressor().decompressobj().decompress(data)
-        elif compression == "lz4":
+            out = zstandard.ZstdDecompressor().decompress(
+                data, max_output_size=head.uncompressed_size
+            )
+        elif head.compression == "lz4":
             import lz4.frame
 
-            raw = lz4.frame.LZ4FrameDecompressor().decompress(data)
-        elif compression == "":
-            raw = data
+            out = lz4.frame.decompress(data)
+        elif head.compression == "":
+            out = data
         else:
-            return []
-    except Exception:  # noqa: BLE001 - a damaged frame simply yields nothing more
-        return []
-    raw = raw[:uncompressed_size]
-    out: list[Any] = []
-    reader = StreamReader(io.BytesIO(raw), skip_magic=True)
-    try:
-        for record in reader.records:
-            out.append(record)
-    except Exception:  # noqa: BLE001 - the last record is cut: keep the complete ones
-        pass
+            raise ChunkError(f"unknown compression {head.compression[:20]!r}")
+    except ChunkError:
+        raise
+    except Exception as err:  # noqa: BLE001 - zstd/lz4 raise their own error types
+        raise ChunkError(f"{head.compression} data does not decompress: {err}") from None
+    if len(out) != head.uncompressed_size:
+        raise ChunkError(f"decompressed to {len(out)} bytes, header says {head.uncompressed_size}")
     return out
 
 
-def scan_damaged(f: IO[bytes], end: ScanEnd) -> Iterator[Any]:
-    """Yield Schema, Channel, Message, Metadata and Attachment records of a damaged log in file
-    order, recovering the complete messages of a cut-off last chunk. ``end`` says where it stopped.
+def _records(data: bytes, *, lenient: bool = False) -> Iterator[tuple[int, bytes]]:
+    """(opcode, body) of the records in ``data``; a record running past the end is an error
+    (or, with ``lenient``, the end)."""
+    pos, end = 0, len(data)
+    while pos < end:
+        if pos + _HEAD.size > end:
+            if lenient:
+                return
+            raise ChunkError("record header cut short inside the chunk")
+        opcode, length = _HEAD.unpack_from(data, pos)
+        pos += _HEAD.size
+        if length > end - pos:
+            if lenient:
+                return
+            raise ChunkError(f"record length {length} runs past the chunk")
+        yield opcode, data[pos : pos + length]
+        pos += length
+
+
+def _message(body: bytes) -> Message:
+    if len(body) < _MESSAGE.size:
+        raise ChunkError("message record too short")
+    channel_id, sequence, log_time, publish_time = _MESSAGE.unpack_from(body)
+    return Message(
+        channel_id=channel_id,
+        sequence=sequence,
+        log_time=log_time,
+        publish_time=publish_time,
+        data=body[_MESSAGE.size :],
+    )
+
+
+def _record(opcode: int, body: bytes) -> Any:
+    """A Schema, Channel or Message record from its body, None for other kinds."""
+    if opcode == Opcode.MESSAGE:
+        return _message(body)
+    if opcode not in (Opcode.SCHEMA, Opcode.CHANNEL):
+        return None
+    stream = ReadDataStream(io.BytesIO(body))
+    try:
+        record = Schema.read(stream) if opcode == Opcode.SCHEMA else Channel.read(stream)
+    except Exception as err:  # noqa: BLE001 - mcap raises struct/unicode/EOF errors
+        raise ChunkError(f"{_NAMES[opcode]} record does not parse ({type(err).__name__})") from None
+    if stream.count > len(body):
+        raise ChunkError(f"{_NAMES[opcode]} record runs past its length")
+    return record
+
+
+def decode_chunk(body: bytes, *, lenient: bool = False) -> list[Any]:
+    """The Schema, Channel and Message records of a chunk record body, all or none.
+
+    The CRC of the uncompressed data is checked when the chunk has one.
+
+    Args:
+        lenient: the body was cut short (the last chunk of a killed recording): decompress as
+            far as the bytes go and keep every complete record instead of failing.
+
+    Raises:
+        ChunkError: the chunk is damaged; no record of it should be used.
     """
+    head = parse_chunk_header(body)
+    data = body[head.data_start : head.data_start + head.data_length]
+    if lenient:
+        raw = _partial_decompress(head, data)
+        out = []
+        try:
+            for opcode, rec_body in _records(raw, lenient=True):
+                record = _record(opcode, rec_body)
+                if record is not None:
+                    out.append(record)
+        except ChunkError:
+            pass
+        return out
+    if len(data) != head.data_length:
+        raise ChunkError(f"compressed length {head.data_length} runs past the chunk")
+    raw = _decompress(head, data)
+    if head.uncompressed_crc and zlib.crc32(raw) != head.uncompressed_crc:
+        raise ChunkError("CRC mismatch")
+    return [r for opcode, rec_body in _records(raw) if (r := _record(opcode, rec_body)) is not None]
+
+
+def _partial_decompress(head: ChunkHeader, data: bytes) -> bytes:
+    try:
+        if head.compression == "zstd":
+            import zstandard
+
+            raw = zstandard.ZstdDecompressor().decompressobj().decompress(data)
+        elif head.compression == "lz4":
+            import lz4.frame
+
+            raw = lz4.frame.LZ4FrameDecompressor().decompress(data)
+        elif head.compression == "":
+            raw = data
+        else:
+            return b""
+    except Exception:  # noqa: BLE001 - a damaged frame simply yields nothing more
+        return b""
+    return raw[: min(head.uncompressed_size, MAX_CHUNK_BYTES)]
+
+
+def parse_message_index(body: bytes) -> MessageIndex:
+    """A message index record from its body.
+
+    Raises:
+        ChunkError: it does not parse.
+    """
+    if len(body) < 6:
+        raise ChunkError("message index too short")
+    channel_id, size = struct.unpack_from("<HI", body)
+    if 6 + size > len(body) or size % 16:
+        raise ChunkError("message index length is inconsistent")
+    records = list(struct.iter_unpack("<QQ", body[6 : 6 + size]))
+    return MessageIndex(channel_id=channel_id, records=records)
+
+
+def _top_level(opcode: int, head: bytes, body: bytes) -> Any:
+    if opcode in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.MESSAGE):
+        return _record(opcode, body)
+    if opcode not in (Opcode.METADATA, Opcode.ATTACHMENT):
+        return None
+    from mcap.stream_reader import StreamReader
+
+    try:
+        record = next(StreamReader(io.BytesIO(head + body), skip_magic=True).records)
+    except Exception as err:  # noqa: BLE001 - mcap raises struct/unicode/EOF/CRC errors
+        raise ChunkError(f"{_NAMES[opcode]} record does not parse ({type(err).__name__})") from None
+    return record if isinstance(record, Metadata | Attachment) else None
+
+
+def scan_damaged(f: IO[bytes], end: ScanEnd) -> Iterator[Any]:
+    """Yield Schema, Channel, Message, Metadata and Attachment records in file order.
+
+    Damaged chunks and records are skipped (listed in ``end.damage``); a record whose length runs
+    past the end of the file ends the scan there (a cut log: the complete messages of a cut-off
+    last chunk are still recovered). ``end`` says where and why the scan stopped.
+    """
+    size = os.fstat(f.fileno()).st_size
     f.seek(_MAGIC_LEN)
+    lost_chunk: Damage | None = None  # counted from the message indexes that follow it
     while True:
         start = f.tell()
         head = f.read(_HEAD.size)
         if len(head) < _HEAD.size:
             end.offset, end.reason = start, "inside a record header" if head else "end"
-            return
+            break
         opcode, length = _HEAD.unpack(head)
-        body = f.read(length)
-        if len(body) < length:
+        if length > size - start - _HEAD.size:
             end.offset, end.reason = start, f"inside a {_NAMES.get(opcode, hex(opcode))} record"
             if opcode == Opcode.CHUNK:
-                for record in _partial_chunk(body):
+                body = f.read(size - start - _HEAD.size)
+                try:
+                    records = decode_chunk(body, lenient=True)
+                except ChunkError:
+                    records = []
+                for record in records:
                     if isinstance(record, Message):
                         end.partial_chunk_messages += 1
                     yield record
-            return
-        if opcode == Opcode.FOOTER or opcode == Opcode.DATA_END:
+            break
+        body = f.read(length)
+        if opcode == Opcode.MESSAGE_INDEX and lost_chunk is not None:
+            try:
+                counted = len(parse_message_index(body).records)
+                lost_chunk = Damage(
+                    lost_chunk.offset, lost_chunk.what, (lost_chunk.lost_messages or 0) + counted
+                )
+            except ChunkError:
+                pass
+            continue
+        if lost_chunk is not None:
+            end.damage.append(lost_chunk)
+            lost_chunk = None
+        if opcode in (Opcode.FOOTER, Opcode.DATA_END):
             end.offset, end.reason = start, "end"
-            return
+            break
         if opcode == Opcode.CHUNK:
             try:
-                chunk = Chunk.read(_stream(body))
-                records = breakup_chunk(chunk)
-            except Exception as err:  # noqa: BLE001
-                end.offset, end.reason = start, f"corrupt chunk ({type(err).__name__})"
-                return
+                records = decode_chunk(body)
+            except ChunkError as err:
+                lost_chunk = Damage(start, str(err), None)
+                continue
             yield from records
-        elif opcode in (
-            Opcode.SCHEMA,
-            Opcode.CHANNEL,
-            Opcode.MESSAGE,
-            Opcode.METADATA,
-            Opcode.ATTACHMENT,
-        ):
-            try:
-                record = next(StreamReader(io.BytesIO(head + body), skip_magic=True).records)
-            except Exception as err:  # noqa: BLE001
-                end.offset, end.reason = start, f"corrupt record ({type(err).__name__})"
-                return
-            if isinstance(record, Schema | Channel | Message | Metadata | Attachment):
-                yield record
-
-
-def _stream(body: bytes) -> Any:
-    from mcap.data_stream import ReadDataStream
-
-    return ReadDataStream(io.BytesIO(body))
+            continue
+        try:
+            record = _top_level(opcode, head, body)
+        except ChunkError as err:
+            kind = _NAMES.get(opcode, "record")
+            end.damage.append(Damage(start, str(err), 1 if opcode == Opcode.MESSAGE else 0, kind))
+            continue
+        if record is not None:
+            yield record
+    if lost_chunk is not None:
+        end.damage.append(lost_chunk)

@@ -179,7 +179,10 @@ class LogWriter:
         fd = _open_locked(self.partial_path, self.path)
         self._stream: IO[bytes] = os.fdopen(fd, "wb")
         self._writer = Writer(
-            self._stream, chunk_size=chunk_size, compression=COMPRESSIONS[compression]
+            self._stream,
+            chunk_size=chunk_size,
+            compression=COMPRESSIONS[compression],
+            enable_data_crcs=True,  # so readers can verify the whole data section
         )
         try:
             self._writer.start(profile=PROFILE, library="trackctl")

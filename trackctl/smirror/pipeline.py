@@ -18,11 +18,10 @@ from enum import StrEnum
 import cv2
 import numpy as np
 
-from trackctl.errors import InputError, LogError, MissingTopicError
+from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.geometry.odometry import DiffDrive
 from trackctl.logs import topics
-from trackctl.logs.codecs import Codec
 from trackctl.logs.foxglove import pose_in_frame
 from trackctl.logs.messages import CameraModel, MetricReport, MirrorTransmission, WheelOdometry
 from trackctl.logs.reader import LogMessage, LogReader
@@ -242,25 +241,13 @@ def _decode(data: bytes, flags: int = cv2.IMREAD_COLOR) -> np.ndarray | None:
 def _stream(
     reader: LogReader, wanted: list[str], images: set[str], res: SmirrorResult
 ) -> Iterator[LogMessage]:
-    """Decoded messages in log order; a node frame whose message does not decode is skipped and
-    counted (a camera glitch must not end a localization run), anything else raises."""
-    codecs: dict[tuple[str, str, bytes], Codec] = {}
-    for raw in reader.raw(wanted):
-        key = (raw.schema_name, raw.message_encoding, raw.schema_data)
-        codec = codecs.get(key)
-        if codec is None:
-            codec = codecs[key] = reader.codec(raw)
-        try:
-            decoded = codec.decode(raw.data)
-        except Exception as err:  # noqa: BLE001 - any decoder failure of a frame is a bad frame
-            if raw.topic in images:
-                res.decode_failures += 1
-                continue
-            raise LogError(
-                f"{reader.path}: {raw.topic} at {raw.log_time_ns} ns: cannot decode "
-                f"{raw.schema_name}: {err}"
-            ) from err
-        yield LogMessage(raw.topic, raw.log_time_ns, raw.schema_name, decoded)
+    """Decoded messages in log order through the reader's one decode path; a message that does
+    not decode is skipped with a warning and counted (a camera glitch must not end a run)."""
+    start = reader.decode_errors
+    try:
+        yield from reader.messages(wanted)
+    finally:
+        res.decode_failures += reader.decode_errors - start
 
 
 def localize(
