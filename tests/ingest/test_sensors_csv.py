@@ -49,8 +49,8 @@ def test_odometry_ticks_and_velocities(odom_csv: Path, tmp_path: Path) -> None:
 
 def test_missing_column_names_file_and_columns(tmp_path: Path) -> None:
     path = tmp_path / "imu.csv"
-    path.write_text("t_s,ax,ay,az\n0,0,0,9.8\n")
-    with pytest.raises(InputError, match=r"imu.csv: IMU CSV lacks column\(s\) gx, gy, gz"):
+    path.write_text("t_s,ax,gx,gy,gz\n0,0,0,0,0\n")
+    with pytest.raises(InputError, match=r"imu.csv: IMU CSV lacks column\(s\) ay, az"):
         list(read_imu(path, "p"))
 
 
@@ -76,7 +76,10 @@ def test_non_monotonic_time_names_the_line(tmp_path: Path) -> None:
     path.write_text(
         "t_s,ax,ay,az,gx,gy,gz\n0,0,0,9.8,0,0,0\n0.2,0,0,9.8,0,0,0\n0.1,0,0,9.8,0,0,0\n"
     )
-    with pytest.raises(NonMonotonicTimeError, match=r"line 4, column t_s: 0.1 is earlier"):
+    with pytest.raises(
+        NonMonotonicTimeError,
+        match=r"line 4, column t_s: 0.1 s is earlier than the previous row \(0.2 s\)",
+    ):
         list(read_imu(path, "p"))
 
 
@@ -131,9 +134,103 @@ def test_sensor_logger_folder_and_zip(tmp_path: Path, with_total: bool) -> None:
         assert s.orientation == Quat(0.0, 0.0, 0.0, 1.0)
 
 
-def test_sensor_logger_folder_without_gyro_is_refused(tmp_path: Path) -> None:
+def test_sensor_logger_folder_without_gyro_is_accelerometer_only(tmp_path: Path) -> None:
     folder = tmp_path / "export"
     folder.mkdir()
     (folder / "TotalAcceleration.csv").write_text("time,seconds_elapsed,z,y,x\n1,0,9.8,0,0\n")
+    (sample,) = list(read_imu(folder, "p1"))
+    assert sample.gyro_rps is None and sample.accel_mps2.z == pytest.approx(9.8)
+
+
+def test_sensor_logger_folder_without_accelerometer_is_refused(tmp_path: Path) -> None:
+    folder = tmp_path / "export"
+    folder.mkdir()
+    (folder / "Gyroscope.csv").write_text("time,seconds_elapsed,z,y,x\n1,0,0,0,0\n")
     with pytest.raises(InputError, match="not a Sensor Logger export"):
         list(read_imu(folder, "p1"))
+
+
+# -- strict parsing ----------------------------------------------------------------------------
+
+
+def _csv(tmp_path: Path, text: str, name: str = "s.csv") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_accelerometer_only_imu_csv_is_valid(tmp_path: Path) -> None:
+    path = _csv(tmp_path, "t_s,ax,ay,az\n0,0,0,9.8\n0.01,0.1,0,9.7\n")
+    samples = list(read_imu(path, "p"))
+    assert [s.gyro_rps for s in samples] == [None, None]
+    assert samples[1].accel_mps2.x == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("value", ["true", "False", "abc", "1,5", "0x10"])
+def test_boolean_or_text_in_a_number_column_names_line_and_column(
+    tmp_path: Path, value: str
+) -> None:
+    cell = f'"{value}"' if "," in value else value
+    path = _csv(tmp_path, f"t_s,ax,ay,az\n0,0,0,9.8\n{cell},0,0,9.8\n")
+    with pytest.raises(InputError, match=r"s.csv: line 3, column t_s: .* is not a finite number"):
+        list(read_imu(path, "p"))
+
+
+def test_rssi_ids_are_kept_exactly_as_written(tmp_path: Path) -> None:
+    path = _csv(tmp_path, "t_s,observer,eid,rssi_dbm\n0,01,007,-50\n0,01,1e3,-60\n1,02,0x1F,-70\n")
+    scans = list(read_rssi_csv(path))
+    assert [s.observer for s in scans] == ["01", "02"]
+    assert [r.eid for s in scans for r in s.readings] == ["007", "1e3", "0x1F"]
+
+
+def test_blank_rssi_id_is_an_error(tmp_path: Path) -> None:
+    path = _csv(tmp_path, "t_s,observer,eid,rssi_dbm\n0,ap,aa,-50\n1,ap,,-60\n")
+    with pytest.raises(InputError, match=r"s.csv: line 3, column eid: empty id"):
+        list(read_rssi_csv(path))
+
+
+@pytest.mark.parametrize(
+    "rows, line",
+    [("0,0,0,9.8\n1,0,0,9.8,5\n", 3), ("0,0,0,9.8,5\n1,0,0,9.8\n", 2)],
+)
+def test_row_with_more_fields_than_the_header_names_the_line(
+    tmp_path: Path, rows: str, line: int
+) -> None:
+    path = _csv(tmp_path, "t_s,ax,ay,az\n" + rows)
+    with pytest.raises(InputError, match=rf"s.csv: line {line}: .*fields.* header"):
+        list(read_imu(path, "p"))
+
+
+def test_millisecond_stamps_are_refused_with_a_hint(tmp_path: Path) -> None:
+    path = _csv(tmp_path, "t_s,ax,ay,az\n0,0,0,9.8\n10,0,0,9.8\n20,0,0,9.8\n30,0,0,9.8\n")
+    with pytest.raises(InputError, match=r"look like milliseconds.*--time-unit ms"):
+        list(read_imu(path, "p"))
+    samples = list(read_imu(path, "p", time_unit="ms"))
+    assert [s.t_ns for s in samples] == [0, 10_000_000, 20_000_000, 30_000_000]
+
+
+def test_epoch_millisecond_stamps_are_refused_and_converted_exactly(tmp_path: Path) -> None:
+    path = _csv(
+        tmp_path,
+        "t_s,observer,eid,rssi_dbm\n1700000000123,ap,aa,-50\n1700000001123,ap,aa,-51\n",
+    )
+    with pytest.raises(InputError, match=r"line 2, column t_s: .* epoch milliseconds"):
+        list(read_rssi_csv(path))
+    scans = list(read_rssi_csv(path, time_unit="ms"))
+    assert [s.t_ns for s in scans] == [1_700_000_000_123_000_000, 1_700_000_001_123_000_000]
+
+
+def test_epoch_nanosecond_stamps_convert_without_float_rounding(tmp_path: Path) -> None:
+    path = _csv(
+        tmp_path, "t_s,v_mps,omega_rps\n1700000000123456789,0.5,0\n1700000000133456789,0.5,0\n"
+    )
+    with pytest.raises(InputError, match="epoch milliseconds or finer"):
+        list(read_odometry_csv(path, "r"))
+    out = list(read_odometry_csv(path, "r", time_unit="ns"))
+    assert [o.t_ns for o in out] == [1_700_000_000_123_456_789, 1_700_000_000_133_456_789]
+
+
+def test_epoch_seconds_are_valid_seconds(tmp_path: Path) -> None:
+    path = _csv(tmp_path, "t_s,ax,ay,az\n1700000000.00,0,0,9.8\n1700000000.01,0,0,9.8\n")
+    samples = list(read_imu(path, "p"))
+    assert samples[1].t_ns - samples[0].t_ns == 10_000_000

@@ -23,8 +23,8 @@ def record(
         typer.Option(
             "--imu",
             metavar="NAME=FILE",
-            help="IMU CSV (t_s,ax,ay,az,gx,gy,gz[,qw,qx,qy,qz]) or Sensor Logger export folder/zip "
-            "-> /phone/NAME/imu.",
+            help="IMU CSV (t_s,ax,ay,az[,gx,gy,gz][,qw,qx,qy,qz]) or Sensor Logger export "
+            "folder/zip -> /phone/NAME/imu.",
         ),
     ] = None,
     rssi: Annotated[
@@ -63,6 +63,12 @@ def record(
         float | None,
         typer.Option(help="Frame rate of image folders (overrides a video's own rate)."),
     ] = None,
+    time_unit: Annotated[
+        str,
+        typer.Option(
+            help="Unit of the CSV files' t_s column: s, ms, us or ns (converted to the log's ns)."
+        ),
+    ] = "s",
     video_start: Annotated[
         float,
         typer.Option(help="Log time of the first video frame, seconds (align video with CSV t_s)."),
@@ -104,7 +110,10 @@ def record(
         calib=parse_named(calib or [], "--calib"),
         fps=fps,
         video_start_s=video_start,
+        time_unit=time_unit,
     )
+    if time_unit not in ("s", "ms", "us", "ns"):
+        raise InputError(f"--time-unit {time_unit!r}: expected s, ms, us or ns")
     if stdin and udp is not None:
         raise InputError("--stdin and --udp are exclusive; record one live source at a time")
     if cfg.empty and not stdin and udp is None:

@@ -44,6 +44,8 @@ class RecordConfig:
     fps: float | None = None
     video_start_s: float = 0.0
     jpeg_quality: int = 90
+    time_unit: str = "s"
+    """Unit of the CSV files' ``t_s`` column: s, ms, us or ns."""
 
     @property
     def empty(self) -> bool:
@@ -120,13 +122,15 @@ def record_files(
     streams: list[Iterator[Stamped]] = []
     order = 0
     for name, path in cfg.imu.items():
-        streams.append(_stamped(read_imu(path, name), topics.imu(name), order))
+        streams.append(_stamped(read_imu(path, name, cfg.time_unit), topics.imu(name), order))
         order += 1
     for path in cfg.rssi:
-        streams.append(_stamped(read_rssi_csv(path), topics.RSSI, order))
+        streams.append(_stamped(read_rssi_csv(path, cfg.time_unit), topics.RSSI, order))
         order += 1
     for name, path in cfg.odom.items():
-        streams.append(_stamped(read_odometry_csv(path, name), topics.odom(name), order))
+        streams.append(
+            _stamped(read_odometry_csv(path, name, cfg.time_unit), topics.odom(name), order)
+        )
         order += 1
     for name, path in cfg.video.items():
         streams.append(_frames(path, name, cfg, order))

@@ -3,7 +3,8 @@
 Column contract (header row required, extra columns ignored, ``t_s`` in seconds on the log's
 clock, non-decreasing):
 
-* IMU: ``t_s,ax,ay,az,gx,gy,gz`` (m/s^2 incl. gravity, rad/s) + optional ``qw,qx,qy,qz``;
+* IMU: ``t_s,ax,ay,az`` (m/s^2 incl. gravity) + optional ``gx,gy,gz`` (rad/s; many phone
+  datasets are accelerometer-only) + optional ``qw,qx,qy,qz``;
   or an Android/iOS "Sensor Logger" export (a folder or .zip holding ``TotalAcceleration.csv`` or
   ``Accelerometer.csv`` [+ ``Gravity.csv``], ``Gyroscope.csv`` and optionally ``Orientation.csv``,
   each with ``time`` in UTC nanoseconds and ``x,y,z`` / ``qx,qy,qz,qw`` columns);
@@ -12,14 +13,27 @@ clock, non-decreasing):
 
 Files are read in chunks, so memory does not grow with file length (Sensor Logger exports are
 merged in memory: they come as separate per-sensor files that must be aligned).
+
+Parsing is strict: every cell is read as text and converted explicitly. Ids (``observer``,
+``eid``) stay exactly as written (``007`` stays ``007``; a blank id is an error); a number column
+holding text or a boolean (``true``), NaN or infinity is an error naming file, line and column; a
+row with more fields than the header is an error naming the line.
+
+Time unit rule: ``t_s`` is in seconds unless ``time_unit`` says otherwise (``ms``, ``us``, ``ns``
+convert exactly, integers without a float round trip). A ``t_s`` above 1e11 (later than the year
+5138 in Unix seconds) is refused as "epoch milliseconds or finer", and IMU or odometry whose
+samples are a second or more apart with integer stamps is refused as "milliseconds"; both errors
+suggest ``--time-unit``.
 """
 
 from __future__ import annotations
 
 import io
-import math
+import re
+import warnings
 import zipfile
 from collections.abc import Iterator, Sequence
+from decimal import ROUND_HALF_EVEN, Decimal
 from pathlib import Path
 
 import numpy as np
@@ -34,17 +48,23 @@ __all__ = [
     "read_odometry_csv",
     "seconds_to_ns",
     "IMU_COLUMNS",
+    "IMU_GYRO_COLUMNS",
+    "TIME_UNITS",
     "RSSI_COLUMNS",
     "ODOM_TICK_COLUMNS",
     "ODOM_VEL_COLUMNS",
 ]
 
-IMU_COLUMNS = ("t_s", "ax", "ay", "az", "gx", "gy", "gz")
+IMU_COLUMNS = ("t_s", "ax", "ay", "az")
+IMU_GYRO_COLUMNS = ("gx", "gy", "gz")
 IMU_QUAT_COLUMNS = ("qw", "qx", "qy", "qz")
 RSSI_COLUMNS = ("t_s", "observer", "eid", "rssi_dbm")
 ODOM_TICK_COLUMNS = ("t_s", "left_ticks", "right_ticks")
 ODOM_VEL_COLUMNS = ("t_s", "v_mps", "omega_rps")
 CHUNK_ROWS = 50_000
+TIME_UNITS = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
+EPOCH_MS_THRESHOLD_S = 1e11
+_FIELDS = re.compile(r"Expected (\d+) fields in line (\d+), saw (\d+)")
 
 
 def seconds_to_ns(t_s: float) -> int:
@@ -53,16 +73,40 @@ def seconds_to_ns(t_s: float) -> int:
 
 
 def _open_csv(path: Path) -> Iterator[pd.DataFrame]:
+    """Chunks of the CSV as text cells (no type guessing, no NA guessing)."""
     if not path.exists():
         raise InputError(f"{path}: no such file")
     if not path.is_file():
         raise InputError(f"{path}: not a file")
     try:
-        yield from pd.read_csv(path, chunksize=CHUNK_ROWS, skipinitialspace=True)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", pd.errors.ParserWarning)
+            yield from pd.read_csv(
+                path,
+                chunksize=CHUNK_ROWS,
+                dtype=str,
+                keep_default_na=False,
+                na_filter=False,
+                skipinitialspace=True,
+                index_col=False,
+                encoding="utf-8",
+            )
     except pd.errors.EmptyDataError as err:
         raise InputError(f"{path}: empty file; a header row is required") from err
-    except (pd.errors.ParserError, UnicodeDecodeError) as err:
-        raise InputError(f"{path}: not a readable CSV file ({err})") from err
+    except pd.errors.ParserError as err:
+        found = _FIELDS.search(str(err))
+        if found:
+            expected, line, saw = found.groups()
+            raise InputError(
+                f"{path}: line {line}: {saw} fields, but the header has {expected}"
+            ) from None
+        raise InputError(f"{path}: not a readable CSV file ({err})") from None
+    except pd.errors.ParserWarning:
+        raise InputError(
+            f"{path}: line 2: more fields than the header (extra columns need a header name)"
+        ) from None
+    except UnicodeDecodeError as err:
+        raise InputError(f"{path}: not UTF-8 text (byte offset {err.start})") from None
 
 
 def _need(path: Path, df: pd.DataFrame, columns: Sequence[str], what: str) -> None:
@@ -75,14 +119,16 @@ def _need(path: Path, df: pd.DataFrame, columns: Sequence[str], what: str) -> No
 
 
 def _numeric(path: Path, df: pd.DataFrame, columns: Sequence[str], first_line: int) -> np.ndarray:
-    """The columns as a float array; error naming row and column for text, NaN or inf."""
+    """The columns as a float array; error naming line and column for text, booleans, NaN, inf."""
     out = np.empty((len(df), len(columns)), dtype=float)
     for j, col in enumerate(columns):
-        values = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
+        text = df[col].astype(str)
+        values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float)
+        # pandas reads "nan"/"inf" as numbers: refuse them with the rest
         bad = ~np.isfinite(values)
         if bad.any():
             i = int(np.argmax(bad))
-            raw = df[col].iloc[i]
+            raw = text.iloc[i]
             raise NonFiniteValueError(
                 f"{path}: line {first_line + i}, column {col}: {raw!r} is not a finite number"
             )
@@ -90,30 +136,87 @@ def _numeric(path: Path, df: pd.DataFrame, columns: Sequence[str], first_line: i
     return out
 
 
+def _ids(path: Path, df: pd.DataFrame, col: str, first_line: int) -> np.ndarray:
+    """An id column exactly as written; a blank cell is an error naming its line."""
+    values = df[col].astype(str).to_numpy()
+    blank = np.char.str_len(np.char.strip(values.astype(str))) == 0
+    if blank.any():
+        i = int(np.argmax(blank))
+        raise InputError(f"{path}: line {first_line + i}, column {col}: empty id")
+    return values
+
+
+def _times_ns(
+    path: Path, df: pd.DataFrame, first_line: int, unit: str, sensor_rate: bool
+) -> np.ndarray:
+    """``t_s`` in integer ns, exact for integer stamps in ms/us/ns; refuses likely unit mistakes.
+
+    Args:
+        sensor_rate: the stream is a sensor sampled faster than 1 Hz (IMU, odometry), so integer
+            stamps a second or more apart are taken as milliseconds given as seconds.
+    """
+    if unit not in TIME_UNITS:
+        raise InputError(f"--time-unit {unit!r}: expected one of {', '.join(TIME_UNITS)}")
+    seconds = _numeric(path, df, ("t_s",), first_line)[:, 0]
+    text = df["t_s"].astype(str)
+    integral = bool(text.str.fullmatch(r"\s*[+-]?\d+\s*").all())
+    hint = "pass --time-unit ms|us|ns (or s) to say what t_s holds"
+    if unit == "s":
+        if len(seconds) and float(np.max(np.abs(seconds))) > EPOCH_MS_THRESHOLD_S:
+            i = int(np.argmax(np.abs(seconds) > EPOCH_MS_THRESHOLD_S))
+            raise InputError(
+                f"{path}: line {first_line + i}, column t_s: {text.iloc[i]} looks like epoch "
+                f"milliseconds or finer, not seconds; {hint}"
+            )
+        if sensor_rate and integral and len(seconds) >= 3:
+            step = float(np.median(np.diff(seconds)))
+            if step >= 1.0:
+                raise InputError(
+                    f"{path}: line {first_line}, column t_s: integer stamps {step:g} apart look "
+                    f"like milliseconds (a sensor sampled slower than 1 Hz); {hint}"
+                )
+        # exact decimal conversion: "1700000000.01" is 10 ms after "1700000000.00", to the ns
+        return np.array([_decimal_ns(v, 10**9) for v in text], dtype=np.int64)
+    factor = TIME_UNITS[unit]
+    if integral:
+        ints = [int(v) * factor for v in text]
+        if any(not 0 <= v < 1 << 63 for v in ints):
+            raise InputError(f"{path}: column t_s: a stamp is outside 0..2^63 ns after conversion")
+        return np.array(ints, dtype=np.int64)
+    return np.array([_decimal_ns(v, factor) for v in text], dtype=np.int64)
+
+
+def _decimal_ns(text: str, factor: int) -> int:
+    """A decimal number as written times ``factor``, rounded to an integer (no float detour)."""
+    return int((Decimal(text.strip()) * factor).to_integral_value(ROUND_HALF_EVEN))
+
+
 class _TimeCheck:
-    """Non-decreasing time across chunks of one file."""
+    """Non-decreasing, non-negative time across chunks of one file (in ns)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.last = -math.inf
+        self.last: int | None = None
 
-    def __call__(self, t_s: np.ndarray, first_line: int) -> None:
-        if len(t_s) == 0:
+    def __call__(self, t_ns: np.ndarray, first_line: int) -> None:
+        if len(t_ns) == 0:
             return
-        prev = np.concatenate(([self.last], t_s[:-1]))
-        back = t_s < prev
+        if t_ns.min() < 0:
+            i = int(np.argmax(t_ns < 0))
+            raise InputError(f"{self.path}: line {first_line + i}, column t_s: negative time")
+        prev = np.concatenate(([t_ns[0] if self.last is None else self.last], t_ns[:-1]))
+        back = t_ns < prev
         if back.any():
             i = int(np.argmax(back))
             raise NonMonotonicTimeError(
-                f"{self.path}: line {first_line + i}, column t_s: {t_s[i]} is earlier than the "
-                f"previous row ({prev[i]}); timestamps must not decrease"
+                f"{self.path}: line {first_line + i}, column t_s: {t_ns[i] / 1e9:.9g} s is "
+                f"earlier than the previous row ({prev[i] / 1e9:.9g} s); timestamps must not "
+                "decrease"
             )
-        if t_s[0] < 0:
-            raise InputError(f"{self.path}: line {first_line}, column t_s: negative time {t_s[0]}")
-        self.last = float(t_s[-1])
+        self.last = int(t_ns[-1])
 
 
-def read_imu(path: str | Path, name: str) -> Iterator[Imu]:
+def read_imu(path: str | Path, name: str, time_unit: str = "s") -> Iterator[Imu]:
     """IMU samples from a trackctl CSV or a Sensor Logger export (folder or .zip)."""
     path = Path(path)
     if path.is_dir() or path.suffix.lower() == ".zip":
@@ -124,17 +227,24 @@ def read_imu(path: str | Path, name: str) -> Iterator[Imu]:
     frame = f"phone/{name}"
     for df in _open_csv(path):
         _need(path, df, IMU_COLUMNS, "IMU")
+        has_g = all(c in df.columns for c in IMU_GYRO_COLUMNS)
         has_q = all(c in df.columns for c in IMU_QUAT_COLUMNS)
-        cols = IMU_COLUMNS + (IMU_QUAT_COLUMNS if has_q else ())
+        t_ns = _times_ns(path, df, line, time_unit, sensor_rate=True)
+        check(t_ns, line)
+        cols = (
+            IMU_COLUMNS[1:]
+            + (IMU_GYRO_COLUMNS if has_g else ())
+            + (IMU_QUAT_COLUMNS if has_q else ())
+        )
         a = _numeric(path, df, cols, line)
-        check(a[:, 0], line)
-        for row in a:
+        q0 = 6 if has_g else 3
+        for t, row in zip(t_ns, a, strict=True):
             yield Imu(
-                t_ns=seconds_to_ns(row[0]),
+                t_ns=int(t),
                 frame_id=frame,
-                accel_mps2=Vec3(row[1], row[2], row[3]),
-                gyro_rps=Vec3(row[4], row[5], row[6]),
-                orientation=Quat(row[8], row[9], row[10], row[7]) if has_q else None,
+                accel_mps2=Vec3(row[0], row[1], row[2]),
+                gyro_rps=Vec3(row[3], row[4], row[5]) if has_g else None,
+                orientation=Quat(row[q0 + 1], row[q0 + 2], row[q0 + 3], row[q0]) if has_q else None,
             )
         line += len(df)
 
@@ -143,7 +253,10 @@ def _sensor_logger_table(files: dict[str, bytes], stem: str, where: Path) -> pd.
     data = files.get(stem.lower())
     if data is None:
         return None
-    df = pd.read_csv(io.BytesIO(data))
+    try:
+        df = pd.read_csv(io.BytesIO(data))
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as err:
+        raise InputError(f"{where}/{stem}.csv: not a readable CSV file ({err})") from None
     if "time" not in df.columns:
         raise InputError(f"{where}/{stem}.csv: Sensor Logger file lacks the 'time' column")
     return df.sort_values("time", kind="stable").reset_index(drop=True)
@@ -168,10 +281,10 @@ def _read_sensor_logger(path: Path, name: str) -> Iterator[Imu]:
     if acc is None:
         acc = _sensor_logger_table(files, "Accelerometer", path)
     gyro = _sensor_logger_table(files, "Gyroscope", path)
-    if acc is None or gyro is None:
+    if acc is None:
         raise InputError(
             f"{path}: not a Sensor Logger export: need TotalAcceleration.csv (or Accelerometer.csv "
-            f"+ Gravity.csv) and Gyroscope.csv; found {', '.join(sorted(files)) or 'no CSV files'}"
+            f"+ Gravity.csv) [+ Gyroscope.csv]; found {', '.join(sorted(files)) or 'no CSV files'}"
         )
     t = acc["time"].to_numpy(dtype=np.int64)
     accel = _numeric(path / "accelerometer.csv", acc, ("x", "y", "z"), 2)
@@ -187,9 +300,11 @@ def _read_sensor_logger(path: Path, name: str) -> Iterator[Imu]:
         g = _numeric(path / "Gravity.csv", grav, ("x", "y", "z"), 2)
         gt = grav["time"].to_numpy(dtype=np.int64)
         accel = accel + np.column_stack([np.interp(t, gt, g[:, k]) for k in range(3)])
-    gt = gyro["time"].to_numpy(dtype=np.int64)
-    g = _numeric(path / "Gyroscope.csv", gyro, ("x", "y", "z"), 2)
-    gyro_i = np.column_stack([np.interp(t, gt, g[:, k]) for k in range(3)])
+    gyro_i = None
+    if gyro is not None:
+        gt = gyro["time"].to_numpy(dtype=np.int64)
+        g = _numeric(path / "Gyroscope.csv", gyro, ("x", "y", "z"), 2)
+        gyro_i = np.column_stack([np.interp(t, gt, g[:, k]) for k in range(3)])
     ori = _sensor_logger_table(files, "Orientation", path)
     quat = None
     if ori is not None and all(c in ori.columns for c in ("qx", "qy", "qz", "qw")):
@@ -207,37 +322,38 @@ def _read_sensor_logger(path: Path, name: str) -> Iterator[Imu]:
             t_ns=int(t[i]),
             frame_id=frame,
             accel_mps2=Vec3(*map(float, accel[i])),
-            gyro_rps=Vec3(*map(float, gyro_i[i])),
+            gyro_rps=None if gyro_i is None else Vec3(*map(float, gyro_i[i])),
             orientation=None if quat is None else Quat(*map(float, quat[i])),
         )
 
 
-def read_rssi_csv(path: str | Path) -> Iterator[RssiScan]:
+def read_rssi_csv(path: str | Path, time_unit: str = "s") -> Iterator[RssiScan]:
     """RSSI scans: consecutive rows with equal ``t_s`` and ``observer`` make one scan."""
     path = Path(path)
     check = _TimeCheck(path)
     line = 2
-    pending: tuple[float, str] | None = None
+    pending: tuple[int, str] | None = None
     readings: list[RssiReading] = []
     for df in _open_csv(path):
         _need(path, df, RSSI_COLUMNS, "RSSI")
-        num = _numeric(path, df, ("t_s", "rssi_dbm"), line)
-        check(num[:, 0], line)
-        observers = df["observer"].astype(str).to_numpy()
-        eids = df["eid"].astype(str).to_numpy()
+        t_ns = _times_ns(path, df, line, time_unit, sensor_rate=False)
+        check(t_ns, line)
+        rssi = _numeric(path, df, ("rssi_dbm",), line)[:, 0]
+        observers = _ids(path, df, "observer", line)
+        eids = _ids(path, df, "eid", line)
         for i in range(len(df)):
-            key = (float(num[i, 0]), str(observers[i]))
+            key = (int(t_ns[i]), str(observers[i]))
             if pending is not None and key != pending:
-                yield RssiScan(seconds_to_ns(pending[0]), pending[1], tuple(readings))
+                yield RssiScan(pending[0], pending[1], tuple(readings))
                 readings = []
             pending = key
-            readings.append(RssiReading(str(eids[i]), float(num[i, 1])))
+            readings.append(RssiReading(str(eids[i]), float(rssi[i])))
         line += len(df)
     if pending is not None:
-        yield RssiScan(seconds_to_ns(pending[0]), pending[1], tuple(readings))
+        yield RssiScan(pending[0], pending[1], tuple(readings))
 
 
-def read_odometry_csv(path: str | Path, name: str) -> Iterator[WheelOdometry]:
+def read_odometry_csv(path: str | Path, name: str, time_unit: str = "s") -> Iterator[WheelOdometry]:
     """Wheel odometry from ticks (``left_ticks,right_ticks``) or ``v_mps,omega_rps``."""
     path = Path(path)
     check = _TimeCheck(path)
@@ -251,20 +367,17 @@ def read_odometry_csv(path: str | Path, name: str) -> Iterator[WheelOdometry]:
                 f"{path}: odometry CSV needs columns {','.join(ODOM_TICK_COLUMNS)} or "
                 f"{','.join(ODOM_VEL_COLUMNS)} (found {','.join(map(str, df.columns))})"
             )
-        cols = (
-            ("t_s",)
-            + (ODOM_TICK_COLUMNS[1:] if ticks else ())
-            + (ODOM_VEL_COLUMNS[1:] if vel else ())
-        )
+        t_ns = _times_ns(path, df, line, time_unit, sensor_rate=True)
+        check(t_ns, line)
+        cols = (ODOM_TICK_COLUMNS[1:] if ticks else ()) + (ODOM_VEL_COLUMNS[1:] if vel else ())
         a = _numeric(path, df, cols, line)
-        check(a[:, 0], line)
-        for row in a:
-            k = 1
+        for t, row in zip(t_ns, a, strict=True):
             left = right = v = w = None
+            k = 0
             if ticks:
-                left, right = int(row[1]), int(row[2])
-                k = 3
+                left, right = int(row[0]), int(row[1])
+                k = 2
             if vel:
                 v, w = float(row[k]), float(row[k + 1])
-            yield WheelOdometry(seconds_to_ns(row[0]), frame, left, right, v, w)
+            yield WheelOdometry(int(t), frame, left, right, v, w)
         line += len(df)

@@ -137,7 +137,7 @@ class Imu:
         frame_id: the sensor's frame (``phone/<id>``).
         accel_mps2: specific force in the device frame, m/s^2, *including* gravity (a phone lying
             still reads about +9.81 on z).
-        gyro_rps: angular rate in the device frame, rad/s.
+        gyro_rps: angular rate in the device frame, rad/s; None for accelerometer-only devices.
         orientation: optional device-to-world rotation (Android rotation vector), world z up.
     """
 
@@ -145,7 +145,7 @@ class Imu:
     t_ns: int
     frame_id: str
     accel_mps2: Vec3
-    gyro_rps: Vec3
+    gyro_rps: Vec3 | None = None
     orientation: Quat | None = None
 
     def to_json(self) -> dict[str, Any]:
@@ -153,7 +153,7 @@ class Imu:
             "timestamp": time_to_json(self.t_ns),
             "frame_id": self.frame_id,
             "accel_mps2": self.accel_mps2.to_json(),
-            "gyro_rps": self.gyro_rps.to_json(),
+            "gyro_rps": None if self.gyro_rps is None else self.gyro_rps.to_json(),
             "orientation": None if self.orientation is None else self.orientation.to_json(),
         }
 
@@ -163,14 +163,15 @@ class Imu:
             t_ns=time_from_json(obj["timestamp"]),
             frame_id=str(obj["frame_id"]),
             accel_mps2=Vec3.from_json(obj["accel_mps2"]),
-            gyro_rps=Vec3.from_json(obj["gyro_rps"]),
+            gyro_rps=_opt(obj, "gyro_rps", Vec3.from_json),
             orientation=_opt(obj, "orientation", Quat.from_json),
         )
 
     def finite_values(self) -> dict[str, float]:
         """Every float field by dotted name (for NaN/inf checks)."""
         out = {f"accel_mps2.{k}": v for k, v in self.accel_mps2._asdict().items()}
-        out.update({f"gyro_rps.{k}": v for k, v in self.gyro_rps._asdict().items()})
+        if self.gyro_rps is not None:
+            out.update({f"gyro_rps.{k}": v for k, v in self.gyro_rps._asdict().items()})
         if self.orientation is not None:
             out.update({f"orientation.{k}": v for k, v in self.orientation._asdict().items()})
         return out

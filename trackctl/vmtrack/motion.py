@@ -51,7 +51,7 @@ class PhoneMotion:
 
     def add(self, imu: Imu) -> None:
         """Add one sample (non-finite samples are skipped and counted)."""
-        vals = [*imu.accel_mps2, *imu.gyro_rps] + (list(imu.orientation) if imu.orientation else [])
+        vals = list(imu.finite_values().values())
         if not all(math.isfinite(v) for v in vals):
             self.bad_samples += 1
             return
@@ -70,7 +70,8 @@ class PhoneMotion:
         self._t.append(imu.t_ns)
         self._vert.append(vert)
         self._yaw.append(yaw)
-        self._gyro_z.append(imu.gyro_rps.z)
+        # no gyro and no orientation: the heading cannot be integrated (held constant)
+        self._gyro_z.append(0.0 if imu.gyro_rps is None else imu.gyro_rps.z)
 
     def finish(self) -> None:
         """Compute the velocity series once every sample is in."""
