@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 import warnings
 from collections.abc import Callable, Iterator, Sequence
@@ -18,6 +19,7 @@ from typer.core import TyperGroup
 
 from trackctl.errors import InputError, TrackctlError
 from trackctl.logs.messages import MetricReport
+from trackctl.logs.reader import LogReader
 from trackctl.metrics.report import failed_conditions, jsonable_metrics, parse_fail_if
 
 __all__ = [
@@ -28,6 +30,8 @@ __all__ = [
     "split_csv",
     "apply_fail_if",
     "check_fail_if",
+    "check_topics",
+    "check_window",
     "report_dict",
     "EXIT_BAD_INPUT",
     "EXIT_GATE",
@@ -137,6 +141,28 @@ def report_dict(report: MetricReport) -> dict[str, Any]:
         "metrics": jsonable_metrics(report.metrics),
         "params": jsonable_metrics(report.params),
     }
+
+
+def check_window(start: float | None, end: float | None) -> None:
+    """Raise InputError unless ``--start``/``--end`` are finite, >= 0 and in order."""
+    for name, value in (("--start", start), ("--end", end)):
+        if value is not None and (not math.isfinite(value) or value < 0):
+            raise InputError(f"{name} {value}: expected seconds >= 0 after the log's first message")
+    if start is not None and end is not None and end <= start:
+        raise InputError(f"--end {end} is not after --start {start}: the window would be empty")
+
+
+def check_topics(reader: LogReader, wanted: Sequence[str] | None) -> None:
+    """Raise InputError naming the first ``--topics`` entry the log does not hold."""
+    if not wanted:
+        return
+    present = reader.topics()
+    for topic in wanted:
+        if topic not in present:
+            raise InputError(
+                f"{reader.path}: no topic {topic}; the log has: "
+                + (", ".join(sorted(present)) or "no topics")
+            )
 
 
 def check_fail_if(expr: str | None) -> None:

@@ -182,7 +182,7 @@ def record(
     elif not quiet:
         stderr.print(
             f"wrote {summary['messages']} messages on {len(counts)} topics to {out}"
-            + f", rejected {rejected}"
+            + (f", rejected {rejected}" if stdin or udp is not None else "")
             + (" (stopped by interrupt)" if interrupted else "")
         )
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -14,7 +15,8 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from trackctl.cli.common import split_csv, stderr
+from trackctl.cli.common import check_topics, check_window, split_csv, stderr
+from trackctl.errors import InputError
 from trackctl.logs.reader import LogReader
 from trackctl.logs.replay import RateMeter, UdpSink, parse_host_port, replay_jsonl
 
@@ -63,12 +65,17 @@ def replay(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No notes on stderr.")] = False,
 ) -> None:
     """Play a log back in log-time order, paced or as fast as possible."""
+    check_window(start, end)
+    if not math.isfinite(speed) or speed < 0:
+        raise InputError(f"--speed {speed}: expected a number >= 0 (0 = as fast as possible)")
+    sink = UdpSink(*parse_host_port(udp)) if udp else None
     reader = LogReader(log)
+    wanted = split_csv(topics)
+    check_topics(reader, wanted)
     origin = reader.start_ns or 0
     start_ns = None if start is None else origin + int(round(start * 1e9))
     end_ns = None if end is None else origin + int(round(end * 1e9))
-    sink = UdpSink(*parse_host_port(udp)) if udp else None
-    stream = replay_jsonl(reader, split_csv(topics), start_ns, end_ns, speed)
+    stream = replay_jsonl(reader, wanted, start_ns, end_ns, speed)
     n = 0
     try:
         if fmt is Format.jsonl:
@@ -104,6 +111,11 @@ def replay(
     finally:
         if sink is not None:
             sink.close()
+    if sink is not None and sink.failed:
+        stderr.print(
+            f"[yellow]warning:[/] {sink.failed} datagrams to {udp} failed ({sink.last_error})",
+            markup=True,
+        )
     if sink is not None and sink.skipped and not quiet:
         stderr.print(
             f"[yellow]warning:[/] {sink.skipped} messages larger than a UDP datagram were not sent",

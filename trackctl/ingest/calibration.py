@@ -29,11 +29,28 @@ def camera_matrix(model: CameraModel) -> np.ndarray:
     return np.array([[model.fx_px, 0, model.cx_px], [0, model.fy_px, model.cy_px], [0, 0, 1.0]])
 
 
-def _world_from_camera(rvec: np.ndarray, tvec: np.ndarray) -> Transform:
-    r_cw = Rotation.from_rotvec(np.asarray(rvec, float).reshape(3))
+def _numbers(path: Path, name: str, value: Any, sizes: tuple[int, ...]) -> np.ndarray:
+    """``value`` as a flat float array of one of ``sizes``; an error naming the field otherwise."""
+    expected = " or ".join(str(n) for n in sizes)
+    try:
+        arr = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: field {name}: expected {expected} numbers") from None
+    if arr.size not in sizes:
+        raise InputError(f"{path}: field {name}: expected {expected} numbers, got {arr.size}")
+    if not np.isfinite(arr).all():
+        raise InputError(f"{path}: field {name}: holds a NaN or infinite value")
+    return arr
+
+
+def _world_from_camera(path: Path, rvec: Any, tvec: Any) -> Transform:
+    r_cw = Rotation.from_rotvec(_numbers(path, "rvec", rvec, (3,)))
     r_wc = r_cw.inv()
-    t_wc = -(r_wc.apply(np.asarray(tvec, float).reshape(3)))
+    t_wc = -(r_wc.apply(_numbers(path, "tvec", tvec, (3,))))
     return Transform(Vec3(*map(float, t_wc)), Quat(*map(float, r_wc.as_quat())))
+
+
+_D_SIZES = (0, 4, 5, 8, 12, 14)
 
 
 def _model(
@@ -46,11 +63,13 @@ def _model(
     dist_model: str,
     extr: Transform | None,
 ) -> CameraModel:
-    k = np.asarray(k, dtype=float).reshape(-1)
-    if k.size != 9:
-        raise InputError(f"{path}: camera matrix must have 9 values, got {k.size}")
+    k = _numbers(path, "camera_matrix", k, (9,))
+    d = _numbers(path, "distortion_coefficients", d, _D_SIZES)
     if width is None or height is None:
         raise InputError(f"{path}: image_width and image_height are required")
+    for name, value in (("image_width", width), ("image_height", height)):
+        if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 1:
+            raise InputError(f"{path}: field {name}: expected a positive integer, got {value!r}")
     try:
         return CameraModel(
             t_ns=0,
@@ -62,7 +81,7 @@ def _model(
             cx_px=float(k[2]),
             cy_px=float(k[5]),
             distortion_model=dist_model,
-            distortion=tuple(float(x) for x in np.asarray(d, dtype=float).reshape(-1)),
+            distortion=tuple(float(x) for x in d),
             world_from_camera=extr,
         )
     except ValueError as err:
@@ -74,7 +93,7 @@ def _read_ros(path: Path, camera: str, doc: dict[str, Any]) -> CameraModel:
         entry = doc.get(key)
         if not isinstance(entry, dict) or "data" not in entry:
             raise InputError(f"{path}: ROS camera_info field {key}.data is missing")
-        return np.asarray(entry["data"], dtype=float)
+        return entry["data"]
 
     return _model(
         path,
@@ -88,7 +107,37 @@ def _read_ros(path: Path, camera: str, doc: dict[str, Any]) -> CameraModel:
     )
 
 
+def _read_plain(path: Path, camera: str, doc: dict[str, Any]) -> CameraModel:
+    """A plain YAML mapping with list-valued matrices (``camera_matrix: [[fx,0,cx],...]``)."""
+
+    def first(keys: tuple[str, ...]) -> Any:
+        return next((doc[k] for k in keys if k in doc), None)
+
+    rvec, tvec = doc.get("rvec"), doc.get("tvec")
+    extr = _world_from_camera(path, rvec, tvec) if rvec is not None and tvec is not None else None
+    d = first(_D_KEYS)
+    return _model(
+        path,
+        camera,
+        first(_K_KEYS),
+        np.zeros(5) if d is None else d,
+        doc.get("image_width"),
+        doc.get("image_height"),
+        str(doc.get("distortion_model", "plumb_bob")),
+        extr,
+    )
+
+
 def _read_opencv(path: Path, camera: str) -> CameraModel:
+    # OpenCV reports a malformed file as cv2.error, or as SystemError from its Python binding
+    try:
+        return _read_opencv_storage(path, camera)
+    except (cv2.error, SystemError) as err:
+        reason = " ".join(str(err).split(") ")[-1].split())[:160]
+        raise InputError(f"{path}: OpenCV cannot parse this calibration file ({reason})") from None
+
+
+def _read_opencv_storage(path: Path, camera: str) -> CameraModel:
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
     try:
         if not fs.isOpened():
@@ -110,7 +159,9 @@ def _read_opencv(path: Path, camera: str) -> CameraModel:
             raise InputError(f"{path}: no camera matrix (looked for {', '.join(_K_KEYS)})")
         d = mat(_D_KEYS)
         rvec, tvec = mat(("rvec",)), mat(("tvec",))
-        extr = _world_from_camera(rvec, tvec) if rvec is not None and tvec is not None else None
+        extr = None
+        if rvec is not None and tvec is not None:
+            extr = _world_from_camera(path, rvec, tvec)
         return _model(
             path,
             camera,
@@ -134,15 +185,27 @@ def read_calibration(path: str | Path, camera: str) -> CameraModel:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such calibration file (camera {camera})")
-    text = path.read_text(errors="replace")
+    try:
+        text = path.read_text(errors="replace")
+    except OSError as err:
+        raise InputError(f"{path}: cannot read ({err.strerror})") from None
+    if not text.strip():
+        raise InputError(f"{path}: empty calibration file (camera {camera})")
+    if path.suffix.lower() == ".xml" and "<opencv_storage>" not in text:
+        raise InputError(f"{path}: not an OpenCV XML calibration (no <opencv_storage> element)")
     if text.lstrip().startswith("%YAML") or "!!opencv-matrix" in text or path.suffix == ".xml":
         return _read_opencv(path, camera)
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as err:
-        raise InputError(f"{path}: not valid YAML ({err})") from err
-    if isinstance(doc, dict) and "camera_matrix" in doc and isinstance(doc["camera_matrix"], dict):
+        reason = " ".join(str(err).split())[:160]
+        raise InputError(f"{path}: not valid YAML ({reason})") from None
+    if not isinstance(doc, dict):
+        raise InputError(f"{path}: expected a YAML mapping of calibration fields")
+    if isinstance(doc.get("camera_matrix"), dict):
         return _read_ros(path, camera, doc)
+    if any(isinstance(doc.get(k), list) for k in _K_KEYS):
+        return _read_plain(path, camera, doc)
     return _read_opencv(path, camera)
 
 

@@ -16,7 +16,7 @@ def log_info(reader: LogReader) -> dict[str, Any]:
     """
     topics = reader.topics()
     metadata = reader.metadata()
-    attachments = reader.attachments()
+    attachments = reader.attachment_sizes()
     start, end = reader.start_ns, reader.end_ns
     return {
         "path": str(reader.path),
@@ -37,7 +37,7 @@ def log_info(reader: LogReader) -> dict[str, Any]:
         "duration_s": 0.0 if start is None or end is None else (end - start) / 1e9,
         "metadata": metadata,
         "attachments": {
-            name: {"media_type": mt, "bytes": len(data)} for name, (mt, data) in attachments.items()
+            name: {"media_type": mt, "bytes": size} for name, (mt, size) in attachments.items()
         },
         "truncated": reader.truncated,
         "warnings": list(reader.warnings),

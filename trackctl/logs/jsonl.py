@@ -35,17 +35,23 @@ def _finite_float(text: str) -> float:
     return value
 
 
+# Payloads holding these are re-encoded (one line per message, strict JSON out).
+_NOT_PASSTHROUGH = (b"\n", b"NaN", b"Infinity")
+
+
 def to_jsonl(raw: RawMessage, codec: Codec) -> str:
     """One JSON line (without the newline) for a stored message."""
     head = (
         f'{{"topic":{json.dumps(raw.topic)},"log_time_ns":{raw.log_time_ns},'
         f'"schema":{json.dumps(raw.schema_name)},"message":'
     )
-    if raw.message_encoding == "json" and b"\n" not in raw.data:
+    data = raw.data
+    if raw.message_encoding == "json" and not any(t in data for t in _NOT_PASSTHROUGH):
         # JSON payloads pass through as they are stored: no decode/encode on the hot path.
-        return head + raw.data.decode("utf-8") + "}"
+        return head + data.decode("utf-8") + "}"
     payload = codec.to_jsonable(raw.data)
-    return head + json.dumps(payload, separators=(",", ":")) + "}"
+    # allow_nan=False: a foreign log's NaN must not produce a line that is not JSON
+    return head + json.dumps(payload, separators=(",", ":"), allow_nan=False) + "}"
 
 
 @dataclass(frozen=True, slots=True)

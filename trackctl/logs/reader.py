@@ -452,13 +452,17 @@ class LogReader:
             try:
                 decoded = codec.decode(raw.data)
             except Exception as err:  # noqa: BLE001 - foreign bytes may break any decoder
-                self.decode_errors += 1
-                self._warn(
-                    f"{self.path}: {raw.topic} at {raw.log_time_ns} ns: cannot decode "
-                    f"{raw.schema_name or 'the message'} ({one_line_reason(err)}); skipped"
-                )
+                self.skip_undecodable(raw, err)
                 continue
             yield LogMessage(raw.topic, raw.log_time_ns, raw.schema_name, decoded)
+
+    def skip_undecodable(self, raw: RawMessage, err: BaseException) -> None:
+        """Count and warn about a message that does not decode (it is skipped)."""
+        self.decode_errors += 1
+        self._warn(
+            f"{self.path}: {raw.topic} at {raw.log_time_ns} ns: cannot decode "
+            f"{raw.schema_name or 'the message'} ({one_line_reason(err)}); skipped"
+        )
 
     def messages(
         self,

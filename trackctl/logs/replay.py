@@ -47,14 +47,23 @@ def replay_jsonl(
     end_ns: int | None = None,
     speed: float = 0.0,
 ) -> Iterator[tuple[RawMessage, str]]:
-    """``(message, JSON line)`` pairs in log-time order, paced by ``speed``."""
+    """``(message, JSON line)`` pairs in log-time order, paced by ``speed``.
+
+    A message that cannot be turned into JSON (a foreign log's non-UTF-8 "JSON", a protobuf that
+    does not parse) is skipped with a warning on the reader, counted in ``reader.decode_errors``.
+    """
     codecs: dict[tuple[str, str, bytes], Codec] = {}
     for raw in paced(reader.raw(topics, start_ns, end_ns), speed):
         key = (raw.schema_name, raw.message_encoding, raw.schema_data)
         codec = codecs.get(key)
         if codec is None:
             codec = codecs[key] = reader.codec(raw)
-        yield raw, to_jsonl(raw, codec)
+        try:
+            line = to_jsonl(raw, codec)
+        except Exception as err:  # noqa: BLE001 - foreign bytes may break any decoder
+            reader.skip_undecodable(raw, err)
+            continue
+        yield raw, line
 
 
 @dataclass
@@ -112,17 +121,31 @@ class UdpSink:
     MAX_DATAGRAM = 65_507
 
     def __init__(self, host: str, port: int) -> None:
-        self.address = (host, port)
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            info = socket.getaddrinfo(host, port, socket.AF_UNSPEC, socket.SOCK_DGRAM)
+        except (socket.gaierror, UnicodeError, OverflowError) as err:
+            reason = getattr(err, "strerror", None) or str(err)
+            raise InputError(f"--udp {host}:{port}: cannot resolve the host ({reason})") from None
+        family, _, _, _, address = info[0]
+        self.address = address
+        self.sock = socket.socket(family, socket.SOCK_DGRAM)
         self.sent = 0
         self.skipped = 0
+        self.failed = 0
+        self.last_error = ""
 
     def send(self, line: str) -> bool:
+        """Send one line; False when it is too large or the network refuses it (counted)."""
         data = line.encode() + b"\n"
         if len(data) > self.MAX_DATAGRAM:
             self.skipped += 1
             return False
-        self.sock.sendto(data, self.address)
+        try:
+            self.sock.sendto(data, self.address)
+        except OSError as err:  # unreachable network, no route: the replay itself goes on
+            self.failed += 1
+            self.last_error = err.strerror or str(err)
+            return False
         self.sent += 1
         return True
 

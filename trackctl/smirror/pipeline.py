@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -250,6 +250,19 @@ def _stream(
         res.decode_failures += reader.decode_errors - start
 
 
+def _metadata_float(values: Mapping[str, str], key: str, default: float, where: str) -> float:
+    """A finite number from a metadata record, ``default`` when the key is absent."""
+    if key not in values:
+        return default
+    try:
+        value = float(values[key])
+    except ValueError:
+        raise InputError(f"{where}: {key}={values[key]!r} is not a number") from None
+    if not math.isfinite(value):
+        raise InputError(f"{where}: {key}={values[key]!r} is not finite")
+    return value
+
+
 def localize(
     reader: LogReader,
     cfg: SmirrorConfig,
@@ -273,14 +286,16 @@ def localize(
         )
     metadata = reader.metadata()
     rmd = metadata.get(f"robot/{robot}", {})
+    where = f"{reader.path}: metadata robot/{robot}"
+    led_default, drive_default = LedConfig(), DiffDrive()
     led = LedConfig(
-        led_height_m=float(rmd.get("led_height_m", LedConfig.led_height_m)),
-        led_front_m=float(rmd.get("led_front_m", LedConfig.led_front_m)),
-        led_back_m=float(rmd.get("led_back_m", LedConfig.led_back_m)),
+        led_height_m=_metadata_float(rmd, "led_height_m", led_default.led_height_m, where),
+        led_front_m=_metadata_float(rmd, "led_front_m", led_default.led_front_m, where),
+        led_back_m=_metadata_float(rmd, "led_back_m", led_default.led_back_m, where),
     )
     drive = DiffDrive(
-        float(rmd.get("ticks_per_m", DiffDrive.ticks_per_m)),
-        float(rmd.get("wheel_base_m", DiffDrive.wheel_base_m)),
+        _metadata_float(rmd, "ticks_per_m", drive_default.ticks_per_m, where),
+        _metadata_float(rmd, "wheel_base_m", drive_default.wheel_base_m, where),
     )
     n_req = cfg.requesters or int(metadata.get("smirror/requesters", {}).get("count", 1))
     plan = _floorplan(reader)
