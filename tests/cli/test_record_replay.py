@@ -230,3 +230,42 @@ def test_truncated_log_info_and_replay_warn_and_succeed(sample_log: Path, tmp_pa
     assert replay.returncode == 0
     assert b"warning:" in replay.stderr
     assert len(replay.stdout.splitlines()) == obj["message_count"]
+
+
+def _pipe(replay_args: list[str], out: Path) -> dict:
+    replay = subprocess.Popen([*trackctl_exe(), "replay", *replay_args], stdout=subprocess.PIPE)
+    rec = subprocess.run(
+        [*trackctl_exe(), "record", str(out), "--stdin", "--json", "-q"],
+        stdin=replay.stdout,
+        capture_output=True,
+        timeout=120,
+    )
+    replay.stdout.close()  # type: ignore[union-attr]
+    assert replay.wait(timeout=60) == 0
+    assert rec.returncode == 0, rec.stderr.decode()
+    return json.loads(rec.stdout)
+
+
+def test_replay_records_piped_into_record_keeps_metadata_and_attachments(
+    recorded: Path, tmp_path: Path
+) -> None:
+    copy = tmp_path / "r2.mcap"
+    summary = _pipe([str(recorded), "--speed", "0", "--records"], copy)
+    assert summary["attachments"] == 1 and summary["rejected"] == 0
+    a, b = LogReader(recorded), LogReader(copy)
+    assert a.attachments() == b.attachments()
+    assert a.metadata() == b.metadata()
+    assert [(m.topic, m.log_time_ns, m.data) for m in a.raw()] == [
+        (m.topic, m.log_time_ns, m.data) for m in b.raw()
+    ]
+
+
+def test_round_tripped_smirror_sample_is_accepted_by_smirror(tmp_path: Path) -> None:
+    sample = Path(__file__).resolve().parents[2] / "sample_logs" / "smirror.mcap"
+    copy = tmp_path / "sm.mcap"
+    summary = _pipe([str(sample), "--speed", "0", "--records"], copy)
+    assert summary["metadata"] == len(LogReader(sample).metadata()) > 0
+    original = run_cli("smirror", str(sample), "--json", "-q", check=True)
+    again = run_cli("smirror", str(copy), "--json", "-q", check=True)
+    a, b = json.loads(original.stdout), json.loads(again.stdout)
+    assert a["error_m_mean"] == b["error_m_mean"] and a["fixes"] == b["fixes"]

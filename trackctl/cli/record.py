@@ -128,6 +128,7 @@ def record(
     counts: Counter[str] = Counter()
     rejected = 0
     interrupted = False
+    live_stats = None
     source = None
     if udp is not None:
         source = UdpSource(udp)
@@ -165,6 +166,7 @@ def record(
                     stats = record_live(writer, StreamSource(sys.stdin.fileno()), reject)
                 counts.update(stats.counts)
                 rejected, interrupted = stats.rejected, stats.interrupted
+                live_stats = stats
     finally:
         signal.signal(signal.SIGTERM, previous)
         signal.signal(signal.SIGINT, previous_int)
@@ -175,6 +177,8 @@ def record(
         "topics": dict(sorted(counts.items())),
         "messages": sum(counts.values()),
         "rejected": rejected,
+        "metadata": live_stats.metadata if live_stats else 0,
+        "attachments": live_stats.attachments if live_stats else 0,
         "interrupted": interrupted,
     }
     if json_out:

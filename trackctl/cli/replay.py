@@ -17,6 +17,7 @@ from rich.table import Table
 
 from trackctl.cli.common import check_topics, check_window, split_csv, stderr
 from trackctl.errors import InputError
+from trackctl.logs.jsonl import attachment_line, metadata_line
 from trackctl.logs.reader import LogReader
 from trackctl.logs.replay import RateMeter, UdpSink, parse_host_port, replay_jsonl
 
@@ -62,6 +63,14 @@ def replay(
             "--udp", metavar="HOST:PORT", help="Also send each JSON line as a UDP datagram."
         ),
     ] = None,
+    records: Annotated[
+        bool,
+        typer.Option(
+            "--records",
+            help="jsonl: first emit the log's metadata and attachments as "
+            '{"type":"metadata"|"attachment",...} lines (record --stdin restores them).',
+        ),
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No notes on stderr.")] = False,
 ) -> None:
     """Play a log back in log-time order, paced or as fast as possible."""
@@ -80,6 +89,11 @@ def replay(
     try:
         if fmt is Format.jsonl:
             write = sys.stdout.write
+            if records:
+                for name, md in reader.metadata().items():
+                    write(metadata_line(name, md) + "\n")
+                for name, (media_type, data) in reader.attachments().items():
+                    write(attachment_line(name, media_type, data) + "\n")
             for _, line in stream:
                 write(line)
                 write("\n")

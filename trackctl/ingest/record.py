@@ -18,7 +18,7 @@ from trackctl.ingest.calibration import read_calibration, to_foxglove_calibratio
 from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv, seconds_to_ns
 from trackctl.ingest.video import read_frames
 from trackctl.logs import topics
-from trackctl.logs.jsonl import parse_jsonl
+from trackctl.logs.jsonl import AttachmentLine, JsonlRecord, MetadataLine, parse_line
 from trackctl.logs.writer import LogWriter
 
 __all__ = [
@@ -153,6 +153,8 @@ class LiveStats:
     counts: Counter[str] = field(default_factory=Counter)
     rejected: int = 0
     interrupted: bool = False
+    metadata: int = 0
+    attachments: int = 0
 
 
 Line = tuple[bytes | str, str, int]  # (line, where it came from, line number)
@@ -267,15 +269,23 @@ def record_live(
         if not line.strip():
             return
         try:
-            rec = parse_jsonl(line, where, lineno)
-            writer.check_log_time(rec.log_time_ns)
+            rec = parse_line(line, where, lineno)
+            if isinstance(rec, JsonlRecord):
+                writer.check_log_time(rec.log_time_ns)
         except TrackctlError as err:
             stats.rejected += 1
             if on_reject is not None:
                 on_reject(str(err))
             return
-        writer.write_encoded(rec.topic, rec.codec, rec.data, rec.log_time_ns)
-        stats.counts[rec.topic] += 1
+        if isinstance(rec, MetadataLine):
+            writer.add_metadata(rec.name, rec.metadata)
+            stats.metadata += 1
+        elif isinstance(rec, AttachmentLine):
+            writer.add_attachment(rec.name, rec.data, rec.media_type, rec.log_time_ns)
+            stats.attachments += 1
+        else:
+            writer.write_encoded(rec.topic, rec.codec, rec.data, rec.log_time_ns)
+            stats.counts[rec.topic] += 1
 
     try:
         for item in lines:

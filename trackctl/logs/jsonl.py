@@ -4,10 +4,19 @@ One object per message: ``{"topic": str, "log_time_ns": int, "schema": str, "mes
 ``message`` is the decoded payload: trackctl messages as their JSON schema says, Foxglove protobuf
 messages in the canonical proto3 JSON mapping (snake_case names, bytes as base64). Reading a line
 back re-encodes the payload with the schema's codec, so replay -> record reproduces the messages.
+
+Two more line types carry the log's other records (``replay --records`` emits them first;
+``record --stdin/--udp`` stores them), so ``replay --records | record --stdin`` keeps everything:
+
+* ``{"type": "metadata", "name": str, "metadata": {str: str}}``
+* ``{"type": "attachment", "name": str, "media_type": str, "log_time_ns": int,
+  "data_base64": str}``
 """
 
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 import time
 from dataclasses import dataclass
@@ -17,7 +26,16 @@ from trackctl.errors import InputError, SchemaError, UnknownSchemaError
 from trackctl.logs.codecs import Codec, codec_for, known_schemas
 from trackctl.logs.reader import RawMessage
 
-__all__ = ["to_jsonl", "parse_jsonl", "JsonlRecord"]
+__all__ = [
+    "to_jsonl",
+    "parse_jsonl",
+    "parse_line",
+    "metadata_line",
+    "attachment_line",
+    "JsonlRecord",
+    "MetadataLine",
+    "AttachmentLine",
+]
 
 
 class _NonFinite(ValueError):
@@ -65,8 +83,13 @@ class JsonlRecord:
 
 
 def parse_jsonl(
-    line: str | bytes, where: str = "<stdin>", lineno: int = 0, now_ns: int | None = None
-) -> JsonlRecord:
+    line: str | bytes,
+    where: str = "<stdin>",
+    lineno: int = 0,
+    now_ns: int | None = None,
+    *,
+    records: bool = False,
+) -> Any:
     """Parse and encode one JSON line; ``log_time_ns`` defaults to the arrival time.
 
     Raises:
@@ -92,6 +115,11 @@ def parse_jsonl(
         raise InputError(f"{at}: JSON nested too deeply") from None
     if not isinstance(obj, dict):
         raise InputError(f"{at}: expected a JSON object, got {type(obj).__name__}")
+    kind = obj.get("type", "message")
+    if kind in ("metadata", "attachment") and records:
+        return _parse_record_line(obj, at)
+    if kind != "message":
+        raise InputError(f"{at}: unknown line type {kind!r} (message, metadata or attachment)")
     for key in ("topic", "schema", "message"):
         if key not in obj:
             raise InputError(f"{at}: field {key!r} is missing (need topic, schema, message)")
@@ -122,3 +150,75 @@ def parse_jsonl(
         # a payload of the right JSON shape but wrong types deep inside (e.g. a list for a number)
         raise SchemaError(f"{at}: topic {topic}: message does not fit {schema}: {err}") from err
     return JsonlRecord(topic, int(t), codec, data)
+
+
+@dataclass(frozen=True, slots=True)
+class MetadataLine:
+    """A parsed metadata line."""
+
+    name: str
+    metadata: dict[str, str]
+
+
+@dataclass(frozen=True, slots=True)
+class AttachmentLine:
+    """A parsed attachment line."""
+
+    name: str
+    media_type: str
+    log_time_ns: int
+    data: bytes
+
+
+def metadata_line(name: str, metadata: dict[str, str]) -> str:
+    """The JSON line of one metadata record."""
+    return json.dumps(
+        {"type": "metadata", "name": name, "metadata": metadata}, separators=(",", ":")
+    )
+
+
+def attachment_line(name: str, media_type: str, data: bytes, log_time_ns: int = 0) -> str:
+    """The JSON line of one attachment (data as base64)."""
+    obj = {
+        "type": "attachment",
+        "name": name,
+        "media_type": media_type,
+        "log_time_ns": log_time_ns,
+        "data_base64": base64.b64encode(data).decode("ascii"),
+    }
+    return json.dumps(obj, separators=(",", ":"))
+
+
+def _parse_record_line(obj: dict[str, Any], at: str) -> MetadataLine | AttachmentLine:
+    kind, name = obj.get("type"), obj.get("name")
+    if not isinstance(name, str) or not name:
+        raise InputError(f"{at}: {kind} line: field 'name' must be a non-empty string")
+    if kind == "metadata":
+        md = obj.get("metadata")
+        if not isinstance(md, dict) or not all(
+            isinstance(k, str) and isinstance(v, str) for k, v in md.items()
+        ):
+            raise InputError(f"{at}: metadata {name}: field 'metadata' must map strings to strings")
+        return MetadataLine(name, dict(md))
+    t = obj.get("log_time_ns", 0)
+    if isinstance(t, bool) or not isinstance(t, int) or not 0 <= t < 1 << 64:
+        raise InputError(f"{at}: attachment {name}: field 'log_time_ns' must be in 0..2^64-1")
+    media_type = obj.get("media_type", "application/octet-stream")
+    if not isinstance(media_type, str):
+        raise InputError(f"{at}: attachment {name}: field 'media_type' must be a string")
+    try:
+        data = base64.b64decode(str(obj.get("data_base64", "")), validate=True)
+    except (binascii.Error, ValueError):
+        raise InputError(f"{at}: attachment {name}: field 'data_base64' is not base64") from None
+    return AttachmentLine(name, media_type, t, data)
+
+
+def parse_line(
+    line: str | bytes, where: str = "<stdin>", lineno: int = 0, now_ns: int | None = None
+) -> JsonlRecord | MetadataLine | AttachmentLine:
+    """Parse any JSON line: a message, or a ``metadata``/``attachment`` record line.
+
+    Raises:
+        InputError, SchemaError: as :func:`parse_jsonl`, or a malformed record line.
+    """
+    return parse_jsonl(line, where, lineno, now_ns, records=True)
