@@ -196,3 +196,23 @@ def test_fuzz_mutated_logs_never_crash_or_change_a_message(tmp_path: Path) -> No
     exits = ", ".join(f"{cmd} exit {code}: {n}" for (cmd, code), n in sorted(codes.items()))
     print(f"\nfuzz: {FUZZ_CASES} mutated logs ({dict(kinds)}), 0 tracebacks, 0 changed messages")
     print(f"fuzz: {exits}")
+
+
+def test_info_uses_the_summary_without_reading_any_chunk(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "a.mcap"
+    _build(path, n=3000)
+    assert len(LogReader(path)._summary.chunk_indexes) > 10  # type: ignore[union-attr]
+
+    def no_chunks(*args: object, **kwargs: object) -> None:
+        raise AssertionError("info must not decompress chunks")
+
+    monkeypatch.setattr("trackctl.logs.reader.decode_chunk", no_chunks)
+    from trackctl.logs.info import log_info
+
+    info = log_info(LogReader(path))
+    assert info["message_count"] == 3000
+    assert info["topics"]["/imu"]["first_ns"] == 0
+    assert info["topics"]["/imu"]["last_ns"] == 2999 * 10_000_000
+    assert info["topics"]["/imu"]["rate_hz"] == pytest.approx(100.0)
