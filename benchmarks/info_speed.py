@@ -89,9 +89,8 @@ def main() -> None:
         print("info on a large log (seconds, median of 5; baseline = mcap get_summary)")
         print(" messages   baseline   log_info  ratio  subprocess")
         print(f" {args.messages:8d}   {base:8.4f}   {lib:8.4f}  {ratio:5.2f}  {sub:10.3f}")
-        print(
-            f"target log_info within 3x of get_summary: {ratio:.2f}x {'PASS' if ratio <= 3 else 'FAIL'}"
-        )
+        verdict = "PASS" if ratio <= 3 else "FAIL"
+        print(f"target log_info within 3x of get_summary: {ratio:.2f}x {verdict}")
 
 
 if __name__ == "__main__":
