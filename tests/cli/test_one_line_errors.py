@@ -199,3 +199,25 @@ def test_errors_are_one_line_in_a_subprocess_too(tmp_path: Path) -> None:
     proc = run_cli("replay", str(tmp_path / "missing.mcap"))
     assert proc.returncode == 2
     assert proc.stderr.decode().count("\n") == 1 and b"no such file" in proc.stderr
+
+
+def test_output_directory_not_writable_in_process(
+    sample_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # root ignores directory permissions: simulate the EACCES a normal user gets
+    import trackctl.logs.writer as writer_module
+
+    real_open = os.open
+
+    def deny(path: object, flags: int, *args: object) -> int:
+        if str(path).endswith(".partial"):
+            raise PermissionError(13, "Permission denied")
+        return real_open(path, flags, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(writer_module.os, "open", deny)
+    out = tmp_path / "o.mcap"
+    _one_line_error(
+        ["process", str(sample_log), "--with", "check", "--out", str(out)],
+        "cannot create o.mcap.partial (Permission denied)",
+    )
+    assert not out.exists()

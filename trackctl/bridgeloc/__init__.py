@@ -47,7 +47,7 @@ class BridgeLocProcessor:
     def __init__(self, config: BridgeLocConfig | None = None) -> None:
         self.config = config or BridgeLocConfig()
 
-    def run(self, reader, writer, progress=None):  # type: ignore[no-untyped-def]
+    def run(self, reader, writer, progress=None):
         return run(reader, writer, self.config, progress)
 
 

@@ -266,6 +266,7 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
         ctr0 = q.mean(axis=0)
         if any(np.linalg.norm(d.center - ctr0) < max(3.0, sides.min() / 2) for d in out):
             continue  # the same tag found again (inner outline, or the other threshold)
+        refined: np.ndarray
         if not refine:
             refined = q  # a quiet-zone hole of a few pixels: no corner for sub-pixel refinement
         else:

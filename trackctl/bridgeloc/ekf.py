@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
@@ -44,7 +45,9 @@ class EkfConfig:
 class _Ekf(ExtendedKalmanFilter):
     """filterpy's EKF with the nonlinear diff-drive motion as its state prediction."""
 
-    def predict_x(self, u: np.ndarray = 0) -> None:  # type: ignore[override]
+    x: np.ndarray
+
+    def predict_x(self, u: Any = 0) -> None:
         ds, dyaw = float(u[0]), float(u[1])
         x, y, th = integrate_step(
             float(self.x[0, 0]), float(self.x[1, 0]), float(self.x[2, 0]), ds, dyaw

@@ -37,7 +37,7 @@ class EvMatchProcessor:
     def __init__(self, config: EvMatchConfig | None = None) -> None:
         self.config = config or EvMatchConfig()
 
-    def run(self, reader, writer, progress=None):  # type: ignore[no-untyped-def]
+    def run(self, reader, writer, progress=None):
         return run(reader, writer, self.config, progress)
 
 

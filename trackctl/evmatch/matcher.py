@@ -31,7 +31,7 @@ reads its own V-scenarios, so one read serves one EID.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -356,7 +356,7 @@ def _extend(
     evidence: dict[int, list[int]],
     inc: _Inclusive,
     p: MatchParams,
-    read: set[int] | dict[int, object] | None = None,
+    read: Collection[int] | None = None,
 ) -> bool:
     """Give the EID more evidence: every V-scenario already read where it is inclusive (no extra
     video to process), else the inclusive scenario farthest in time from its evidence (people
@@ -431,7 +431,9 @@ def match_edp(
                 inter = members[s] if current is None else current & members[s]
                 if best_set is None or len(inter) < len(best_set):
                     best, best_set = s, inter
-            if best is None or (current is not None and len(best_set) >= len(current)):
+            if best is None or best_set is None:
+                break
+            if current is not None and len(best_set) >= len(current):
                 break
             chosen.append(best)
             current = best_set

@@ -55,7 +55,7 @@ class PinholeCamera:
     @cached_property
     def world_R_cam(self) -> np.ndarray:  # noqa: N802
         q = self.model.world_from_camera.rotation  # type: ignore[union-attr]
-        return Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+        return np.asarray(Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(), float)
 
     @cached_property
     def position(self) -> np.ndarray:
@@ -70,7 +70,7 @@ class PinholeCamera:
 
     def to_camera(self, points_w: np.ndarray) -> np.ndarray:
         """World points (N, 3) in the camera optical frame."""
-        return (np.asarray(points_w, float) - self.position) @ self.world_R_cam
+        return np.asarray((np.asarray(points_w, float) - self.position) @ self.world_R_cam)
 
     def project(self, points_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (N, 2) of world points and a mask of those in front of the camera."""
@@ -107,4 +107,4 @@ class PinholeCamera:
         with np.errstate(divide="ignore", invalid="ignore"):
             s = (ground_z - origin[2]) / rays_w[:, 2]
         s = np.where(s > 0, s, np.nan)
-        return origin + rays_w * s[:, None]
+        return np.asarray(origin + rays_w * s[:, None])

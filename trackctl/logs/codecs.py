@@ -56,10 +56,18 @@ class Codec(Protocol):
     ``replay --format jsonl`` and ``record --stdin`` (bytes fields as base64).
     """
 
-    schema_name: str
-    schema_encoding: str
-    message_encoding: str
-    schema_data: bytes
+    # read-only members: frozen dataclasses and plain classes both satisfy them
+    @property
+    def schema_name(self) -> str: ...
+
+    @property
+    def schema_encoding(self) -> str: ...
+
+    @property
+    def message_encoding(self) -> str: ...
+
+    @property
+    def schema_data(self) -> bytes: ...
 
     def encode(self, message: Any) -> bytes: ...
 
@@ -160,7 +168,7 @@ class ProtobufCodec:
                 f"{self.schema_name}: expected a {self.message_class.__name__}, "
                 f"got {type(message).__name__}"
             )
-        return message.SerializeToString()
+        return bytes(message.SerializeToString())
 
     def decode(self, data: bytes) -> Any:
         msg = self.message_class()
@@ -179,7 +187,7 @@ class ProtobufCodec:
             json_format.ParseDict(value, msg)
         except json_format.ParseError as err:
             raise SchemaError(f"{self.schema_name}: {err}") from err
-        return msg.SerializeToString()
+        return bytes(msg.SerializeToString())
 
 
 def _proto_to_jsonable(msg: ProtoMessage) -> Any:
@@ -207,7 +215,7 @@ class DynamicProtobufCodec:
         self._message_class = type(self._decoder(b""))
 
     def encode(self, message: Any) -> bytes:
-        return message.SerializeToString()
+        return bytes(message.SerializeToString())
 
     def decode(self, data: bytes) -> Any:
         return self._decoder(data)
@@ -218,7 +226,7 @@ class DynamicProtobufCodec:
     def from_jsonable(self, value: Any) -> bytes:
         msg = self._message_class()
         json_format.ParseDict(value, msg)
-        return msg.SerializeToString()
+        return bytes(msg.SerializeToString())
 
 
 _REGISTRY: dict[tuple[str, str], Codec] = {}

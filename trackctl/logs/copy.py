@@ -49,8 +49,8 @@ def copy_log(
         if name not in skip_metadata:
             writer.add_metadata(name, data)
     if attachments:
-        for name, (media_type, data) in reader.attachments().items():
-            writer.add_attachment(name, data, media_type)
+        for name, (media_type, blob) in reader.attachments().items():
+            writer.add_attachment(name, blob, media_type)
     return n
 
 

@@ -221,4 +221,7 @@ def parse_line(
     Raises:
         InputError, SchemaError: as :func:`parse_jsonl`, or a malformed record line.
     """
-    return parse_jsonl(line, where, lineno, now_ns, records=True)
+    parsed: JsonlRecord | MetadataLine | AttachmentLine = parse_jsonl(
+        line, where, lineno, now_ns, records=True
+    )
+    return parsed

@@ -495,7 +495,7 @@ class LogReader:
                     return False
                 crc = zlib.crc32(block, crc)
                 left -= len(block)
-        return crc == expected
+        return bool(crc == expected)
 
     # -- summary ------------------------------------------------------------------------------
     def topics(self) -> dict[str, TopicInfo]:

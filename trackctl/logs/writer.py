@@ -343,7 +343,7 @@ class LogWriter:
         if self._closed:
             return
         try:
-            self._writer.flush()
+            self._writer.flush()  # type: ignore[no-untyped-call]
         except OSError as err:
             self._fail(err, "write")
 
@@ -363,7 +363,7 @@ class LogWriter:
         if self._closed:
             return self.path
         try:
-            self._writer.finish()
+            self._writer.finish()  # type: ignore[no-untyped-call]
             self._stream.flush()
             os.fsync(self._stream.fileno())
             os.replace(self.partial_path, self._target)  # still locked while renamed

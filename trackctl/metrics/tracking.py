@@ -68,7 +68,7 @@ class MotAccumulator:
         # keep last frame's correspondences that are still valid
         for gi, g in enumerate(g_ids):
             h = self._last.get(g)
-            if h in hyp and h not in matches.values():
+            if h is not None and h in hyp and h not in matches.values():
                 hi = h_ids.index(h)
                 if d[gi, hi] < self.threshold:
                     matches[g] = h

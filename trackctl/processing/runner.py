@@ -114,11 +114,11 @@ def run_processors(
             if last:
                 target = out_path
             else:
-                fd, tmp = tempfile.mkstemp(
+                fd, stage_name = tempfile.mkstemp(
                     prefix=f".{out_path.name}.stage{i}.", suffix=".mcap", dir=out_path.parent
                 )
                 os.close(fd)
-                target = Path(tmp)
+                target = Path(stage_name)
                 temps.append(target)
             reports.append(
                 _run_one(
@@ -134,6 +134,6 @@ def run_processors(
             )
             current = target
     finally:
-        for tmp in temps:
-            tmp.unlink(missing_ok=True)
+        for stage in temps:
+            stage.unlink(missing_ok=True)
     return reports

@@ -313,7 +313,7 @@ def _csv_waypoints(path: str) -> list[tuple[float, float, float | None, float]]:
             rows = [r for r in csv.reader(f) if r and not r[0].startswith("#")]
     except OSError as err:
         raise InputError(f"--path {path}: {err.strerror}") from err
-    out = []
+    out: list[tuple[float, float, float | None, float]] = []
     for i, r in enumerate(rows):
         try:
             out.append((float(r[0]), float(r[1]), None, 0.0))
@@ -447,12 +447,12 @@ def render_view(
         if lfront[0]:
             peak = 255.0 * min(1.0, (ir_range_m / d) ** 2)
             r = max(1.5, 0.03 * model.fx_px / d)
-            spot = np.zeros_like(img, np.float32)
+            spot: np.ndarray = np.zeros_like(img, np.float32)
             cv2.circle(
                 spot, tuple(int(round(v)) for v in lp[0]), int(round(r * 2)), 1.0, -1, cv2.LINE_AA
             )
-            spot = cv2.GaussianBlur(spot, (0, 0), r)
-            spot /= max(spot.max(), 1e-6)
+            spot = np.asarray(cv2.GaussianBlur(spot, (0, 0), r), np.float32)
+            spot /= max(float(spot.max()), 1e-6)
             img = np.maximum(img, (spot * peak).astype(np.uint8))
     return img
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -53,6 +54,11 @@ class DemoConfig:
     det_noise_m: float = 0.35
     width_px: int = 320
     height_px: int = 240
+
+
+def _ground(xy: Any) -> Vec3:
+    """A ground-plane point (z = 0) from an (x, y) pair."""
+    return Vec3(float(xy[0]), float(xy[1]), 0.0)
 
 
 def _walker_path(
@@ -250,14 +256,12 @@ def simulate_demo(out: str, cfg: DemoConfig | None = None) -> dict[str, int]:
             ents = (
                 GroundTruthEntity(
                     "p1",
-                    Vec3(*map(float, person(ts, 0)[0]), 0.0),
+                    _ground(person(ts, 0)[0]),
                     electronic_id=mac,
                     visual_id="v1",
                 ),
-                GroundTruthEntity("p2", Vec3(*map(float, person(ts, 1)[0]), 0.0), visual_id="v2"),
-                GroundTruthEntity(
-                    "r1", Vec3(*map(float, robot(ts)[0]), 0.0), yaw_rad=_heading(robot, tk)
-                ),
+                GroundTruthEntity("p2", _ground(person(ts, 1)[0]), visual_id="v2"),
+                GroundTruthEntity("r1", _ground(robot(ts)[0]), yaw_rad=_heading(robot, tk)),
             )
             events.append(
                 (

@@ -32,7 +32,9 @@ class PersonLook:
     def random(cls, rng: np.random.Generator) -> PersonLook:
         """Saturated shirt, dark trousers: people stand out from the grey floor."""
         hue = int(rng.integers(0, 180))
-        hsv = np.uint8([[[hue, int(rng.integers(120, 255)), int(rng.integers(90, 220))]]])
+        hsv = np.array(
+            [[[hue, int(rng.integers(120, 255)), int(rng.integers(90, 220))]]], dtype=np.uint8
+        )
         shirt = tuple(int(c) for c in cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)[0, 0])
         dark = int(rng.integers(20, 70))
         return cls(shirt, (dark, dark, dark + int(rng.integers(0, 30))))  # type: ignore[arg-type]

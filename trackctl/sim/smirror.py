@@ -233,7 +233,7 @@ def node_models(cfg: SmirrorScenario) -> list[CameraModel]:
     ]
 
 
-def _people(cfg: SmirrorScenario, plan: FloorPlan, duration_s: float, rng: np.random.Generator):  # type: ignore[no-untyped-def]
+def _people(cfg: SmirrorScenario, plan: FloorPlan, duration_s: float, rng: np.random.Generator):
     out = []
     for i in range(cfg.people):
         x0, y0, x1, y1 = plan.rooms[i % len(plan.rooms)]

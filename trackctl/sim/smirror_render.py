@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -55,7 +56,7 @@ class FloorPlan:
         }
 
     @classmethod
-    def from_json(cls, obj: dict) -> FloorPlan:  # type: ignore[type-arg]
+    def from_json(cls, obj: dict[str, Any]) -> FloorPlan:
         return cls(
             size_m=(float(obj["size_m"][0]), float(obj["size_m"][1])),
             walls=tuple(
@@ -254,8 +255,8 @@ class NodeRenderer:
         grain = cv2.GaussianBlur(rng.normal(0, 7, (th, tw)), (0, 0), 1.2)
         tex = np.clip(tex + grain[..., None], 0, 255).astype(np.uint8)
         # texture (u, v) <-> wall point a + (b - a) * u / tw at height hgt * (1 - v / th)
-        u, v = np.meshgrid(np.linspace(0, 1, 6), np.linspace(0, 1, 4))
-        u, v = u.ravel(), v.ravel()
+        grid_u, grid_v = np.meshgrid(np.linspace(0, 1, 6), np.linspace(0, 1, 4))
+        u, v = grid_u.ravel(), grid_v.ravel()
         pts = np.column_stack([a[0] + (b[0] - a[0]) * u, a[1] + (b[1] - a[1]) * u, hgt * (1 - v)])
         front = self.cam.to_camera(pts)[:, 2] > 0.3
         if front.sum() < 4:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import cv2
 import numpy as np
@@ -119,7 +120,7 @@ def _cameras(
     covers the field with small overlaps (lobby: full coverage, about a third seen twice)."""
     nx, ny = grid
     tw, th = size[0] / nx, size[1] / ny
-    out = []
+    out: list[Any] = []
     for j in range(ny):
         for i in range(nx):
             cx, cy = (i + 0.5) * tw, (j + 0.5) * th
@@ -310,15 +311,15 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
                     seen.append((box[1], p, xy, box[0]))
             seen.sort()
             dets = []
-            for k, (_, _p, xy, box) in enumerate(seen):
-                if any(_overlap(box, seen[j][3]) > 0.5 for j in range(k)):
+            for k, (_, _p, xy, seen_box) in enumerate(seen):
+                if any(_overlap(seen_box, seen[j][3]) > 0.5 for j in range(k)):
                     continue  # occluded by a nearer person
                 if rng.random() < cfg.miss_rate:
                     continue
                 err = rng.normal(0, sigma, 2)
                 dets.append(
                     Detection(
-                        box,
+                        seen_box,
                         round(float(rng.uniform(0.5, 1.0)), 3),
                         "person",
                         Vec3(float(xy[0] + err[0]), float(xy[1] + err[1]), 0.0),

@@ -51,7 +51,7 @@ class SmirrorProcessor:
         self.last_result: SmirrorResult | None = None
         """Per-sample figures of the last run (for plots)."""
 
-    def run(self, reader, writer, progress=None):  # type: ignore[no-untyped-def]
+    def run(self, reader, writer, progress=None):
         report, self.last_result = run_detailed(reader, writer, self.config, progress)
         return report
 

@@ -406,8 +406,8 @@ def localize(
                 filt = PoseFilter(x, y, yaw, t_ns, cfg.filter)
             else:
                 while pending and pending[0][0] <= t_ns:
-                    _, fix, sp, sy = pending.pop(0)
-                    res.fixes_used += filt.apply_fix(fix, sp, sy)
+                    _, ready, sp, sy = pending.pop(0)
+                    res.fixes_used += filt.apply_fix(ready, sp, sy)
                 assert last_odo is not None
                 if odo.left_ticks is not None and last_odo.left_ticks is not None:
                     ds, dyaw = drive.motion_from_ticks(

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -117,7 +118,9 @@ def fix_from_leds(
 class _DiffDriveEKF(ExtendedKalmanFilter):
     """filterpy's EKF with the unicycle motion model as its (non-linear) state prediction."""
 
-    def predict_x(self, u: np.ndarray = 0) -> None:  # type: ignore[override, assignment]
+    x: np.ndarray
+
+    def predict_x(self, u: Any = 0) -> None:
         ds, dyaw = float(u[0]), float(u[1])
         mid = float(self.x[2, 0]) + dyaw / 2
         self.x = self.x + np.array([[ds * math.cos(mid)], [ds * math.sin(mid)], [dyaw]])

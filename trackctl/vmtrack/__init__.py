@@ -36,7 +36,7 @@ class VmTrackProcessor:
     def __init__(self, config: VmTrackConfig | None = None) -> None:
         self.config = config or VmTrackConfig()
 
-    def run(self, reader, writer, progress=None):  # type: ignore[no-untyped-def]
+    def run(self, reader, writer, progress=None):
         return run(reader, writer, self.config, progress)
 
 

@@ -10,6 +10,7 @@ import math
 import time
 import warnings
 from collections import defaultdict
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -135,7 +136,7 @@ _RSSI_WEIGHT = 0.05
 @dataclass
 class _FrameOut:
     t_ns: int
-    rows: list[tuple[GroundTrack, str | None, TrackState, int]]  # track, MID now, state, index
+    rows: Sequence[tuple[GroundTrack, str | None, TrackState, int]]  # track, MID now, state, k
 
 
 def _detection_points(reader: LogReader, det_topics: list[str]) -> dict[str, PinholeCamera]:
@@ -694,7 +695,7 @@ def _track_message(
 def _write_and_score(
     writer: LogWriter,
     frames: list[_FrameOut],
-    positions: dict[tuple[int, int], np.ndarray],
+    positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
     truth: dict[int, GroundTruth],
     raw_points: dict[int, np.ndarray],
     phones: dict[str, PhoneMotion],
