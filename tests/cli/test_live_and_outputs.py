@@ -256,3 +256,12 @@ def test_report_only_and_outputs_only(sample_log: Path, tmp_path: Path) -> None:
     assert set(topics) == {"/metrics/check"}
     assert set(LogReader(out).metadata()) == {"metrics/check"}
     assert out.stat().st_size < sample_log.stat().st_size / 50
+
+
+def test_info_on_the_finished_name_points_to_the_partial_file(tmp_path: Path) -> None:
+    out = tmp_path / "live.mcap"
+    (tmp_path / "live.mcap.partial").write_bytes(b"\x89MCAP0\r\n")
+    proc = run_cli("info", str(out))
+    assert proc.returncode == 2
+    assert b"no such file (an unfinished recording is in live.mcap.partial" in proc.stderr
+    assert b"trackctl recover" in proc.stderr

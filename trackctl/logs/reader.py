@@ -216,7 +216,14 @@ class LogReader:
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
         if not self.path.exists():
-            raise NotAFileError(f"{self.path}: no such file")
+            partial = self.path.with_name(self.path.name + ".partial")
+            hint = (
+                f" (an unfinished recording is in {partial.name}: read it as it is, or finish it "
+                f"with `trackctl recover {partial}`)"
+                if partial.is_file()
+                else ""
+            )
+            raise NotAFileError(f"{self.path}: no such file{hint}")
         if not self.path.is_file():
             raise NotAFileError(f"{self.path}: not a regular file")
         try:
