@@ -15,6 +15,7 @@ from trackctl.bridgeloc.tags import (
 )
 
 __all__ = [
+    "PROCESSOR",
     "BORDER_RATIO",
     "Mount",
     "Placement",
@@ -34,7 +35,10 @@ from trackctl.bridgeloc.pipeline import (  # noqa: E402
     PoseMethod,
     run,
 )
-from trackctl.processing.base import ProcessorInfo, register_processor  # noqa: E402
+from trackctl.logs.messages import MetricReport
+from trackctl.logs.reader import LogReader
+from trackctl.logs.writer import LogWriter
+from trackctl.processing.base import ProcessorInfo, Progress  # noqa: E402
 
 __all__ += ["POSE_TOPIC", "BridgeLocConfig", "BridgeLocProcessor", "Mode", "PoseMethod", "run"]
 
@@ -47,14 +51,15 @@ class BridgeLocProcessor:
     def __init__(self, config: BridgeLocConfig | None = None) -> None:
         self.config = config or BridgeLocConfig()
 
-    def run(self, reader, writer, progress=None):
+    def run(
+        self, reader: LogReader, writer: LogWriter, progress: Progress | None = None
+    ) -> MetricReport:
         return run(reader, writer, self.config, progress)
 
 
-register_processor(
-    ProcessorInfo(
-        name="bridgeloc",
-        description="BridgeLoc: robot poses from tag bridging + EKF over odometry (§4.2)",
-        factory=BridgeLocProcessor,
-    )
+PROCESSOR = ProcessorInfo(
+    name="bridgeloc",
+    description="BridgeLoc: robot poses from tag bridging + EKF over odometry (§4.2)",
+    factory=BridgeLocProcessor,
 )
+"""Registry entry (entry point ``trackctl.processors``)."""

@@ -6,9 +6,13 @@ from trackctl.evmatch.data import EData, VStore, load_e, load_ground_truth
 from trackctl.evmatch.engines import LocalEngine, SparkEngine, make_engine
 from trackctl.evmatch.matcher import MatchOutcome, MatchParams, match_edp, match_ss
 from trackctl.evmatch.pipeline import MATCHES_TOPIC, Algorithm, EvMatchConfig, match_log, run
-from trackctl.processing.base import ProcessorInfo, register_processor
+from trackctl.logs.messages import MetricReport
+from trackctl.logs.reader import LogReader
+from trackctl.logs.writer import LogWriter
+from trackctl.processing.base import ProcessorInfo, Progress
 
 __all__ = [
+    "PROCESSOR",
     "MATCHES_TOPIC",
     "Algorithm",
     "EData",
@@ -37,14 +41,15 @@ class EvMatchProcessor:
     def __init__(self, config: EvMatchConfig | None = None) -> None:
         self.config = config or EvMatchConfig()
 
-    def run(self, reader, writer, progress=None):
+    def run(
+        self, reader: LogReader, writer: LogWriter, progress: Progress | None = None
+    ) -> MetricReport:
         return run(reader, writer, self.config, progress)
 
 
-register_processor(
-    ProcessorInfo(
-        name="ev-match",
-        description="EV-Matching: EIDs matched to VIDs by EID set splitting (§3.2)",
-        factory=EvMatchProcessor,
-    )
+PROCESSOR = ProcessorInfo(
+    name="ev-match",
+    description="EV-Matching: EIDs matched to VIDs by EID set splitting (§3.2)",
+    factory=EvMatchProcessor,
 )
+"""Registry entry (entry point ``trackctl.processors``)."""

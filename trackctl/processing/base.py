@@ -8,8 +8,10 @@ registry with their own configuration options.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
+from importlib.metadata import entry_points
 from typing import Protocol
 
 from trackctl.errors import UnknownProcessorError
@@ -24,6 +26,8 @@ __all__ = [
     "get_processor",
     "processors",
     "Progress",
+    "ENTRY_POINT_GROUP",
+    "PluginWarning",
 ]
 
 Progress = Callable[[int, int | None], None]
@@ -52,17 +56,59 @@ class ProcessorInfo:
     requires: tuple[str, ...] = ()
 
 
+class PluginWarning(UserWarning):
+    """A processor plug-in could not be loaded."""
+
+
 _REGISTRY: dict[str, ProcessorInfo] = {}
 
 
 def register_processor(info: ProcessorInfo) -> None:
-    """Add (or replace) a processor in the registry."""
+    """Add (or replace) a processor in the registry (programmatic registration; packages use
+    the entry point group instead)."""
     _REGISTRY[info.name] = info
+
+
+ENTRY_POINT_GROUP = "trackctl.processors"
+"""Packages register processors as entry points of this group, each naming a ProcessorInfo::
+
+    [project.entry-points."trackctl.processors"]
+    hello = "trackctl_hello:PROCESSOR"
+
+trackctl's own processors are registered the same way (see its pyproject.toml)."""
+
+_loaded = False
+
+
+def _load_entry_points() -> None:
+    """Register every processor published under :data:`ENTRY_POINT_GROUP` (once)."""
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        try:
+            info = ep.load()
+        except Exception as err:  # noqa: BLE001 - a broken plug-in must not break the CLI
+            warnings.warn(
+                f"processor plug-in {ep.name} ({ep.value}) failed to load: {err}",
+                PluginWarning,
+                stacklevel=2,
+            )
+            continue
+        if not isinstance(info, ProcessorInfo):
+            warnings.warn(
+                f"processor plug-in {ep.name} ({ep.value}) is not a ProcessorInfo; ignored",
+                PluginWarning,
+                stacklevel=2,
+            )
+            continue
+        _REGISTRY.setdefault(info.name, info)
 
 
 def processors() -> list[ProcessorInfo]:
     """Every registered processor, by name."""
-    _load_builtin()
+    _load_entry_points()
     return [_REGISTRY[k] for k in sorted(_REGISTRY)]
 
 
@@ -72,19 +118,10 @@ def get_processor(name: str) -> ProcessorInfo:
     Raises:
         UnknownProcessorError: nothing is registered under that name.
     """
-    _load_builtin()
+    _load_entry_points()
     try:
         return _REGISTRY[name]
     except KeyError:
         raise UnknownProcessorError(
             f"unknown processor {name!r}; available: {', '.join(sorted(_REGISTRY)) or 'none'}"
         ) from None
-
-
-def _load_builtin() -> None:
-    # Imported lazily: system packages import this module to register themselves.
-    import trackctl.bridgeloc  # noqa: F401
-    import trackctl.evmatch  # noqa: F401
-    import trackctl.processing.builtin  # noqa: F401
-    import trackctl.smirror  # noqa: F401
-    import trackctl.vmtrack  # noqa: F401

@@ -12,9 +12,16 @@ from trackctl.logs.foxglove import pose_in_frame
 from trackctl.logs.messages import MetricReport, WheelOdometry
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
-from trackctl.processing.base import ProcessorInfo, Progress, register_processor
+from trackctl.processing.base import ProcessorInfo, Progress
 
-__all__ = ["CheckProcessor", "CheckConfig", "DeadReckoningProcessor", "DeadReckoningConfig"]
+__all__ = [
+    "CHECK_PROCESSOR",
+    "DEAD_RECKONING_PROCESSOR",
+    "CheckProcessor",
+    "CheckConfig",
+    "DeadReckoningProcessor",
+    "DeadReckoningConfig",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -135,13 +142,12 @@ class CheckProcessor:
         )
 
 
-register_processor(
-    ProcessorInfo(
-        name="check",
-        description="Log health: non-monotonic stamps, NaN/inf values, gaps, undecodable messages",
-        factory=CheckProcessor,
-    )
+CHECK_PROCESSOR = ProcessorInfo(
+    name="check",
+    description="Log health: non-monotonic stamps, NaN/inf values, gaps, undecodable messages",
+    factory=CheckProcessor,
 )
+"""Registry entry (entry point ``trackctl.processors``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -315,10 +321,9 @@ class _ErrorStats:
         return None if self.n == 0 else round(self.total / self.n, 4)
 
 
-register_processor(
-    ProcessorInfo(
-        name="dead-reckoning",
-        description="Wheel dead reckoning of each robot -> /robot/NAME/dead_reckoning poses",
-        factory=DeadReckoningProcessor,
-    )
+DEAD_RECKONING_PROCESSOR = ProcessorInfo(
+    name="dead-reckoning",
+    description="Wheel dead reckoning of each robot -> /robot/NAME/dead_reckoning poses",
+    factory=DeadReckoningProcessor,
 )
+"""Registry entry (entry point ``trackctl.processors``)."""

@@ -1,7 +1,10 @@
 """S-Mirror (dissertation §4.1): camera nodes mirror foreground views to robots on request; the
 robot localizes itself from its LEDs in them and dead-reckons in between."""
 
-from trackctl.processing.base import ProcessorInfo, register_processor
+from trackctl.logs.messages import MetricReport
+from trackctl.logs.reader import LogReader
+from trackctl.logs.writer import LogWriter
+from trackctl.processing.base import ProcessorInfo, Progress
 from trackctl.smirror.node import CastMode, MirrorNode, NodeConfig, decide_cast
 from trackctl.smirror.pipeline import (
     Mode,
@@ -18,6 +21,7 @@ from trackctl.smirror.pipeline import (
 from trackctl.smirror.robot import FilterConfig, LedConfig, PoseFilter, detect_leds, fix_from_leds
 
 __all__ = [
+    "PROCESSOR",
     "CastMode",
     "FilterConfig",
     "LedConfig",
@@ -51,15 +55,16 @@ class SmirrorProcessor:
         self.last_result: SmirrorResult | None = None
         """Per-sample figures of the last run (for plots)."""
 
-    def run(self, reader, writer, progress=None):
+    def run(
+        self, reader: LogReader, writer: LogWriter, progress: Progress | None = None
+    ) -> MetricReport:
         report, self.last_result = run_detailed(reader, writer, self.config, progress)
         return report
 
 
-register_processor(
-    ProcessorInfo(
-        name="smirror",
-        description="S-Mirror: robot localization from node images (LEDs) + wheel odometry (§4.1)",
-        factory=SmirrorProcessor,
-    )
+PROCESSOR = ProcessorInfo(
+    name="smirror",
+    description="S-Mirror: robot localization from node images (LEDs) + wheel odometry (§4.1)",
+    factory=SmirrorProcessor,
 )
+"""Registry entry (entry point ``trackctl.processors``)."""

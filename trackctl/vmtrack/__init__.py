@@ -1,7 +1,10 @@
 """VM-Tracking (dissertation §3.1): people identified by fusing camera detections with their
 phones' motion sensors."""
 
-from trackctl.processing.base import ProcessorInfo, register_processor
+from trackctl.logs.messages import MetricReport
+from trackctl.logs.reader import LogReader
+from trackctl.logs.writer import LogWriter
+from trackctl.processing.base import ProcessorInfo, Progress
 from trackctl.vmtrack.detect import BackgroundModel, DetectorConfig, detect_people, predict_region
 from trackctl.vmtrack.frames import FrameConfig, FrameDetector
 from trackctl.vmtrack.motion import MotionConfig, PhoneMotion
@@ -9,6 +12,7 @@ from trackctl.vmtrack.pipeline import TRACKS_TOPIC, Mode, Source, VmTrackConfig,
 from trackctl.vmtrack.tracker import TrackerConfig, fused_probability
 
 __all__ = [
+    "PROCESSOR",
     "TRACKS_TOPIC",
     "BackgroundModel",
     "DetectorConfig",
@@ -36,14 +40,15 @@ class VmTrackProcessor:
     def __init__(self, config: VmTrackConfig | None = None) -> None:
         self.config = config or VmTrackConfig()
 
-    def run(self, reader, writer, progress=None):
+    def run(
+        self, reader: LogReader, writer: LogWriter, progress: Progress | None = None
+    ) -> MetricReport:
         return run(reader, writer, self.config, progress)
 
 
-register_processor(
-    ProcessorInfo(
-        name="vm-track",
-        description="VM-Tracking: identified people tracks from detections + phone IMU (§3.1)",
-        factory=VmTrackProcessor,
-    )
+PROCESSOR = ProcessorInfo(
+    name="vm-track",
+    description="VM-Tracking: identified people tracks from detections + phone IMU (§3.1)",
+    factory=VmTrackProcessor,
 )
+"""Registry entry (entry point ``trackctl.processors``)."""
