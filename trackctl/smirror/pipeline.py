@@ -20,6 +20,7 @@ import numpy as np
 
 from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
+from trackctl.geometry.floorplan import FloorPlan, line_of_sight
 from trackctl.geometry.odometry import DiffDrive
 from trackctl.logs import topics
 from trackctl.logs.foxglove import pose_in_frame
@@ -28,7 +29,6 @@ from trackctl.logs.reader import LogMessage, LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import Progress
 from trackctl.processing.builtin import DeadReckoningProcessor
-from trackctl.sim.smirror_render import FloorPlan, line_of_sight
 from trackctl.smirror.node import CastMode, MirrorNode, NodeConfig, beacon_bytes, decide_cast
 from trackctl.smirror.robot import (
     FilterConfig,
