@@ -5,10 +5,11 @@ from trackctl.logs.messages import MetricReport
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import ProcessorInfo, Progress
+from trackctl.vmtrack.config import Mode, Source, VmTrackConfig
 from trackctl.vmtrack.detect import BackgroundModel, DetectorConfig, detect_people, predict_region
 from trackctl.vmtrack.frames import FrameConfig, FrameDetector
 from trackctl.vmtrack.motion import MotionConfig, PhoneMotion
-from trackctl.vmtrack.pipeline import TRACKS_TOPIC, Mode, Source, VmTrackConfig, run
+from trackctl.vmtrack.pipeline import TRACKS_TOPIC, run
 from trackctl.vmtrack.tracker import TrackerConfig, fused_probability
 
 __all__ = [

@@ -1,0 +1,68 @@
+"""Configuration of a VM-Tracking run."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+from trackctl.vmtrack.frames import FrameConfig
+from trackctl.vmtrack.motion import MotionConfig
+from trackctl.vmtrack.tracker import TrackerConfig
+
+__all__ = ["Mode", "Source", "VmTrackConfig"]
+
+
+class Mode(StrEnum):
+    """``vm``: visual + motion sensors; ``v-af``: the paper's appearance-free visual baseline."""
+
+    VM = "vm"
+    V_AF = "v-af"
+
+
+class Source(StrEnum):
+    """Where person detections come from."""
+
+    AUTO = "auto"
+    FRAMES = "frames"
+    DETECTIONS = "detections"
+
+
+@dataclass(frozen=True, slots=True)
+class VmTrackConfig:
+    """Configuration of a VM-Tracking run."""
+
+    mode: Mode = Mode.VM
+    smooth: bool = True
+    tracker: TrackerConfig = field(default_factory=TrackerConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    merge_m: float = 1.0
+    """Detections of one instant from different cameras closer than this are one person."""
+    spawn_m: float = 1.0
+    """An unmatched detection closer than this to a track does not start a new track."""
+    duplicate_m: float = 0.45
+    """Two tracks closer than this are one person (the younger, unbound one is dropped)."""
+    bind_frames: int = 9
+    """Frames of consistent motion before a phone is bound to a visual track (Theorem 1)."""
+    reject_mps: float = 0.45
+    """A candidate whose mean velocity disagreement exceeds this is filtered away."""
+    converge_hits: int = 6
+    """Detections a track needs before its velocity is compared with phones."""
+    ratio: float = 3.0
+    """Bind early when the best candidate's disagreement is this many times below the next."""
+    offline_reject_mps: float = 0.6
+    """Offline pass: a never-bound phone takes its clear best track if it disagrees less."""
+    checkpoint_dbm: float = -40.0
+    """RSSI of a phone held within ~1 m of a check-point AP (the paper: "less than 1 meter")."""
+    checkpoint_radius_m: float = 1.5
+    """A check-point binds only the one track within this distance of the AP."""
+    rssi_at_1m_dbm: float = -40.0
+    """Check-point AP path-loss model: RSSI at 1 m, exponent, shadowing std (calibrate per site)."""
+    path_loss_exponent: float = 2.5
+    shadowing_db: float = 3.0
+    rssi_evidence_m: float = 4.0
+    """Tracks within this distance of an AP compare their distance with a phone's RSSI there."""
+    eval_threshold_m: float = 1.0
+    """Metrics: a track within this distance of a person matches them."""
+    source: Source = Source.AUTO
+    """Detections from camera frames or from detections topics (auto: frames when present)."""
+    frames: FrameConfig = field(default_factory=FrameConfig)

@@ -1,0 +1,178 @@
+"""Association stage of VM-Tracking: ground-plane detections of one instant -> visual tracks.
+
+:class:`OnlineTracker` runs frame by frame, as the paper's real-time system did: merge the
+cameras' detections, associate them with the tracks (motion-sensor prediction for tracks with a
+phone), retire lost tracks, start new ones, drop duplicates, then hand the frame to the identity
+stage. Every frame's output rows are kept for the offline passes (smoothing, back-dated
+identities) that follow.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from trackctl.logs.messages import TrackState
+from trackctl.vmtrack.config import Mode, VmTrackConfig
+from trackctl.vmtrack.identity import IdentityBinder
+from trackctl.vmtrack.tracker import GroundTrack, associate, merge_detections
+
+__all__ = ["FrameOut", "OnlineTracker", "Prediction"]
+
+Prediction = tuple[np.ndarray, float, bool]
+"""Where a track can be: ground xy, search radius (m), undetected in the last frame."""
+
+
+@dataclass
+class FrameOut:
+    """One frame's tracks: (track, MID bound now, state, index into the track's history)."""
+
+    t_ns: int
+    rows: Sequence[tuple[GroundTrack, str | None, TrackState, int]]
+
+
+class OnlineTracker:
+    """Frame-by-frame association and track management, with the identity stage plugged in.
+
+    Args:
+        cfg: the run's configuration.
+        identity: the identity stage (its phones give tracks with a phone their prediction).
+        mode: ``vm`` runs the identity stage every frame; ``v-af`` only tracks.
+    """
+
+    def __init__(self, cfg: VmTrackConfig, identity: IdentityBinder, mode: Mode) -> None:
+        self.cfg = cfg
+        self.tcfg = cfg.tracker
+        self.identity = identity
+        self.mode = mode
+        self.tracks: list[GroundTrack] = []
+        self.frames: list[FrameOut] = []
+        self.raw_points: dict[int, np.ndarray] = {}
+        self.frame_count = 0
+        self.frame_index = 0
+        self.seconds = 0.0
+        self._next_vid = 0
+        self._pending_new: list[np.ndarray] = []  # unmatched detections of the current frame
+
+    def _new_vid(self) -> str:
+        self._next_vid += 1
+        return f"v{self._next_vid}"
+
+    def process_frame(self, t_ns: int, points: list[tuple[str, np.ndarray]]) -> None:
+        """Update the tracks with one instant's ground points (camera, xy)."""
+        t0 = time.perf_counter()
+        self.frame_count += 1
+        dets = merge_detections(points, self.cfg.merge_m)
+        self.raw_points[t_ns] = np.array([xy for _, xy in points]).reshape(-1, 2)
+        self._associate(t_ns, dets)
+        self._retire(t_ns)
+        self._prune_duplicates()
+        if self.mode is Mode.VM:
+            self.identity.step(t_ns, self.tracks)
+        self._snapshot(t_ns)
+        self.seconds += time.perf_counter() - t0
+
+    def _associate(self, t_ns: int, dets: np.ndarray) -> None:
+        tcfg, tracks = self.tcfg, self.tracks
+        v_m = [self.identity.velocity(self.identity.owner(trk), t_ns) for trk in tracks]
+        dts = [(t_ns - trk.t_ns) / 1e9 for trk in tracks]
+        pairs, lost_idx, new_idx = associate(tracks, dets, dts, v_m, tcfg)
+        for i, trk in enumerate(tracks):
+            trk.history.append((trk.t_ns, trk.kf.x.copy(), trk.kf.P.copy(), False))
+            trk.advance(t_ns, tcfg, v_m[i])
+        for i, j, _ in pairs:
+            trk = tracks[i]
+            trk.correct(dets[j])
+            trk.hits += 1
+            trk.last_hit_ns = t_ns
+            if trk.hits >= tcfg.confirm_hits:
+                trk.state = TrackState.TRACKED
+        for i in lost_idx:
+            if tracks[i].state is not TrackState.TENTATIVE:
+                tracks[i].state = TrackState.PREDICTED
+        self._pending_new = [dets[j] for j in new_idx]
+
+    def _retire(self, t_ns: int) -> None:
+        """Drop tentative tracks that missed, and tracks unseen for too long; then start tracks
+        on unmatched detections that are not a duplicate view (overlapping cameras) of a track."""
+        tcfg = self.tcfg
+        keep = []
+        for trk in self.tracks:
+            age = (t_ns - trk.last_hit_ns) / 1e9
+            mid = self.identity.owner(trk)
+            limit = tcfg.lose_bound_after_s if mid else tcfg.drop_unbound_after_s
+            if trk.state is TrackState.TENTATIVE and trk.last_hit_ns != t_ns:
+                continue
+            if age > limit:
+                if mid:
+                    self.identity.release(mid)
+                continue
+            keep.append(trk)
+        self.tracks[:] = keep
+        for det in self._pending_new:
+            if all(np.linalg.norm(trk.xy - det) > self.cfg.spawn_m for trk in self.tracks):
+                self.tracks.append(GroundTrack.start(self._new_vid(), det, t_ns, tcfg))
+
+    def _prune_duplicates(self) -> None:
+        """Two tracks on one person: keep the bound one, else the older one."""
+        tracks = self.tracks
+        owner = self.identity.owners()
+        doomed: set[int] = set()
+        for a in range(len(tracks)):
+            for b in range(a + 1, len(tracks)):
+                ta, tb = tracks[a], tracks[b]
+                if id(ta) in doomed or id(tb) in doomed:
+                    continue
+                if np.linalg.norm(ta.xy - tb.xy) >= self.cfg.duplicate_m:
+                    continue
+                if id(ta) in owner and id(tb) in owner:
+                    continue  # two phones side by side: both stay
+                loser = (
+                    tb if (id(ta) in owner or (id(tb) not in owner and ta.hits >= tb.hits)) else ta
+                )
+                doomed.add(id(loser))
+        if doomed:
+            tracks[:] = [tr for tr in tracks if id(tr) not in doomed]
+
+    def _snapshot(self, t_ns: int) -> None:
+        rows = [
+            (trk, self.identity.owner(trk), trk.state, len(trk.history))
+            for trk in self.tracks
+            if trk.state is not TrackState.TENTATIVE
+        ]
+        self.frames.append(FrameOut(t_ns, rows))
+
+    def close(self) -> None:
+        """The log ended: snapshot every live track's final state into its history."""
+        for trk in self.tracks:
+            trk.history.append((trk.t_ns, trk.kf.x.copy(), trk.kf.P.copy(), True))
+
+    # -- search planning for camera frames --------------------------------------------------------
+    def predictions(self, t_ns: int) -> list[Prediction]:
+        """Where each live track can be at ``t_ns`` (ground xy, radius m, undetected in the last
+        frame): motion sensors for tracks with a phone, the visual velocity otherwise."""
+        fcfg = self.cfg.frames
+        owner = self.identity.owners()
+        out = []
+        for trk in self.tracks:
+            dt = max(0.0, (t_ns - trk.t_ns) / 1e9)
+            v = self.identity.velocity(owner.get(id(trk)), t_ns)
+            sigma = self.tcfg.pdr_sigma_mps if v is not None else fcfg.visual_speed_sigma_mps
+            v = trk.v if v is None else v
+            var = float(np.trace(trk.kf.P[:2, :2]) / 2) + (sigma * dt) ** 2
+            missed = trk.state is not TrackState.TENTATIVE and trk.last_hit_ns != trk.t_ns
+            out.append((trk.xy + v * dt, fcfg.region_m + 2.0 * math.sqrt(var), missed))
+        return out
+
+    def plan_search(self) -> bool:
+        """True for a full search of the next frame: to initialize, and periodically for people
+        entering the views; in between only predicted regions. A track that went undetected keeps
+        being predicted; its region grows with its uncertainty and is searched at more pyramid
+        levels (recovery)."""
+        if not self.cfg.frames.predicted or not self.tracks:
+            return True
+        return self.frame_index % max(1, self.cfg.frames.full_search_every) == 0
