@@ -25,7 +25,8 @@ import numpy as np
 from trackctl.logs import LogReader
 from trackctl.sim.smirror import SmirrorScenario, simulate_smirror
 from trackctl.smirror import MirrorNode, Mode, NodeConfig, SmirrorConfig, localize, report_metrics
-from trackctl.smirror.pipeline import SmirrorResult, _camera_models, error_by_range
+from trackctl.smirror.pipeline import SmirrorResult, error_by_range
+from trackctl.smirror.site import camera_models as _camera_models
 
 PAPER_ERR_RANGE = "0.01 -> 0.5 m from 2 to 11 m (both approaches)"
 PAPER_TABLE_42 = {1: 174, 5: 874, 10: 1551, 15: 113, 20: 113}
