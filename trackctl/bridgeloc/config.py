@@ -1,0 +1,53 @@
+"""Configuration of a BridgeLoc run and its output topics."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+
+from trackctl.bridgeloc.ekf import EkfConfig
+
+__all__ = ["POSE_TOPIC", "BridgeLocConfig", "Mode", "PoseMethod", "annotations_topic"]
+
+POSE_TOPIC = "/bridgeloc/pose"
+
+
+def annotations_topic(camera: str) -> str:
+    """Tag detections of a camera: ``/NAME/tag_annotations`` (foxglove.ImageAnnotations)."""
+    return f"/{camera}/tag_annotations"
+
+
+class Mode(StrEnum):
+    """``full``: EKF with odometry; ``basic``: I-Cam + bridging only; ``icam``: I-Cam only."""
+
+    FULL = "full"
+    BASIC = "basic"
+    ICAM = "icam"
+
+
+class PoseMethod(StrEnum):
+    """Robot pose from the bridged corners: Eq. 4.9 least squares, or one solvePnP."""
+
+    LSTSQ = "lstsq"
+    PNP = "pnp"
+
+
+@dataclass(frozen=True, slots=True)
+class BridgeLocConfig:
+    """Configuration of a BridgeLoc run (``None`` = take it from the log's ``bridgeloc``
+    metadata, else the default)."""
+
+    mode: Mode = Mode.FULL
+    pose: PoseMethod = PoseMethod.LSTSQ
+    robot: str | None = None
+    robot_camera: str | None = None
+    tag_n: int | None = None
+    tag_size_m: float | None = None
+    ir_height_m: float | None = None
+    max_sigma_m: float = 0.5
+    """Full mode: a position counts as localized while the EKF's position std is below this."""
+    max_range_m: float = 4.5
+    """Tags seen by the robot farther than this are not used (the paper's 4 m detection limit)."""
+    ir_threshold: int = 235
+    ir_min_area_px: int = 2
+    ekf: EkfConfig = field(default_factory=EkfConfig)
