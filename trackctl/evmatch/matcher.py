@@ -139,52 +139,10 @@ def _set_split(
         useful = np.unique(lw_cell[pending[lw_eid]])
         keep = np.isin(lw_cell, useful)
         listing = pd.DataFrame({"eid": lw_eid[keep], "cell": lw_cell[keep]})
-        out = engine.split(node, eid, listing)
-        o_node = out["node"].to_numpy(np.int64)
-        o_cell = out["cell"].to_numpy(np.int64)
-        o_eid = out["eid"].to_numpy(np.int64)
-        if not len(o_eid):
+        split = _split_sets(engine.split(node, eid, listing), node, paths, int(w), data.n_cells)
+        if split is None:
             break
-        start = np.r_[True, (o_node[1:] != o_node[:-1]) | (o_cell[1:] != o_cell[:-1])]
-        gid = np.cumsum(start) - 1
-        gsize = np.bincount(gid)
-        parent_size = np.bincount(node)
-        g_first = np.flatnonzero(start)
-        g_parent = o_node[g_first]
-        g_cell = o_cell[g_first]
-        changed = gsize != parent_size[g_parent]
-        new_paths: dict[int, tuple[int, ...]] = {}
-        for g in range(len(gsize)):
-            p = paths[int(g_parent[g])]
-            if changed[g] and g_cell[g] >= 0:
-                p = (*p, int(w) * data.n_cells + int(g_cell[g]))
-            new_paths[g] = p
-        node, eid, paths = gid, o_eid, new_paths
-        # distinguished: alone in a set; dropping them may leave others alone, so repeat
-        while True:
-            alone = (np.bincount(node)[node] == 1) & pending[eid] if len(node) else node > 0
-            if alone.any():
-                for g, e in zip(node[alone].tolist(), eid[alone].tolist(), strict=True):
-                    ev = [s for s in paths[g] if inc.has(s, e)]
-                    prev = best_copy.get(e)
-                    if prev is None or len(ev) > len(prev):
-                        best_copy[e] = ev
-                done = np.unique(eid[alone])
-                for e in done.tolist():
-                    evidence[e] = best_copy.pop(e)
-                    distinguished.add(e)
-                pending[done] = False
-                keep_rows = ~np.isin(eid, done)
-                node, eid = node[keep_rows], eid[keep_rows]
-            if len(node):
-                # drop sets with no EID left to distinguish; renumber densely (order kept)
-                has_pending = np.bincount(node, weights=pending[eid].astype(float)) > 0
-                keep_rows = has_pending[node]
-                node, eid = node[keep_rows], eid[keep_rows]
-                uniq, node = np.unique(node, return_inverse=True)
-                paths = {i: paths[int(g)] for i, g in enumerate(uniq)}
-            if not alone.any() or not len(node):
-                break
+        node, eid, paths = _settle(*split, pending, inc, evidence, distinguished, best_copy)
         if progress is not None:
             progress(int((~pending[targets]).sum()), len(targets))
     # targets never alone: their best copy's evidence (refining may still resolve them)
@@ -195,6 +153,72 @@ def _set_split(
             if prev is None or len(ev) > len(prev):
                 evidence[e] = ev
     return evidence, distinguished, iterations
+
+
+def _split_sets(
+    out: pd.DataFrame, node: np.ndarray, paths: dict[int, tuple[int, ...]], w: int, n_cells: int
+) -> tuple[np.ndarray, np.ndarray, dict[int, tuple[int, ...]]] | None:
+    """The engine's split as dense set ids, EIDs and each set's path of splitting scenarios
+    (a set that did not change keeps its parent's path); None when nothing is left."""
+    o_node = out["node"].to_numpy(np.int64)
+    o_cell = out["cell"].to_numpy(np.int64)
+    o_eid = out["eid"].to_numpy(np.int64)
+    if not len(o_eid):
+        return None
+    start = np.r_[True, (o_node[1:] != o_node[:-1]) | (o_cell[1:] != o_cell[:-1])]
+    gid = np.cumsum(start) - 1
+    gsize = np.bincount(gid)
+    parent_size = np.bincount(node)
+    g_first = np.flatnonzero(start)
+    g_parent = o_node[g_first]
+    g_cell = o_cell[g_first]
+    changed = gsize != parent_size[g_parent]
+    new_paths: dict[int, tuple[int, ...]] = {}
+    for g in range(len(gsize)):
+        p = paths[int(g_parent[g])]
+        if changed[g] and g_cell[g] >= 0:
+            p = (*p, w * n_cells + int(g_cell[g]))
+        new_paths[g] = p
+    return gid, o_eid, new_paths
+
+
+def _settle(
+    node: np.ndarray,
+    eid: np.ndarray,
+    paths: dict[int, tuple[int, ...]],
+    pending: np.ndarray,
+    inc: _Inclusive,
+    evidence: dict[int, list[int]],
+    distinguished: set[int],
+    best_copy: dict[int, list[int]],
+) -> tuple[np.ndarray, np.ndarray, dict[int, tuple[int, ...]]]:
+    """Take out the targets alone in a set (distinguished, with their path's inclusive
+    scenarios as evidence); dropping them may leave others alone, so repeat."""
+    while True:
+        alone = (np.bincount(node)[node] == 1) & pending[eid] if len(node) else node > 0
+        if alone.any():
+            for g, e in zip(node[alone].tolist(), eid[alone].tolist(), strict=True):
+                ev = [s for s in paths[g] if inc.has(s, e)]
+                prev = best_copy.get(e)
+                if prev is None or len(ev) > len(prev):
+                    best_copy[e] = ev
+            done = np.unique(eid[alone])
+            for e in done.tolist():
+                evidence[e] = best_copy.pop(e)
+                distinguished.add(e)
+            pending[done] = False
+            keep_rows = ~np.isin(eid, done)
+            node, eid = node[keep_rows], eid[keep_rows]
+        if len(node):
+            # drop sets with no EID left to distinguish; renumber densely (order kept)
+            has_pending = np.bincount(node, weights=pending[eid].astype(float)) > 0
+            keep_rows = has_pending[node]
+            node, eid = node[keep_rows], eid[keep_rows]
+            uniq, node = np.unique(node, return_inverse=True)
+            paths = {i: paths[int(g)] for i, g in enumerate(uniq)}
+        if not alone.any() or not len(node):
+            break
+    return node, eid, paths
 
 
 _Verdict = tuple[str | None, int, int, str]

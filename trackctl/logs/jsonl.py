@@ -92,12 +92,26 @@ def parse_jsonl(
 ) -> Any:
     """Parse and encode one JSON line; ``log_time_ns`` defaults to the arrival time.
 
+    Args:
+        records: also accept ``metadata`` and ``attachment`` lines (see :func:`parse_line`).
+
     Raises:
         InputError: the line is not a JSON object with ``topic``, ``schema`` and ``message``.
         UnknownSchemaError: no codec for ``schema``.
         SchemaError: ``message`` does not fit the schema.
     """
     at = f"{where}:{lineno}" if lineno else where
+    obj = _json_object(line, at)
+    kind = obj.get("type", "message")
+    if kind in ("metadata", "attachment") and records:
+        return _parse_record_line(obj, at)
+    if kind != "message":
+        raise InputError(f"{at}: unknown line type {kind!r} (message, metadata or attachment)")
+    return _message_line(obj, at, now_ns)
+
+
+def _json_object(line: str | bytes, at: str) -> dict[str, Any]:
+    """Strict JSON (UTF-8, no NaN or infinity) holding an object."""
     if isinstance(line, bytes):
         try:
             line = line.decode("utf-8")
@@ -115,11 +129,10 @@ def parse_jsonl(
         raise InputError(f"{at}: JSON nested too deeply") from None
     if not isinstance(obj, dict):
         raise InputError(f"{at}: expected a JSON object, got {type(obj).__name__}")
-    kind = obj.get("type", "message")
-    if kind in ("metadata", "attachment") and records:
-        return _parse_record_line(obj, at)
-    if kind != "message":
-        raise InputError(f"{at}: unknown line type {kind!r} (message, metadata or attachment)")
+    return obj
+
+
+def _message_line(obj: dict[str, Any], at: str, now_ns: int | None) -> JsonlRecord:
     for key in ("topic", "schema", "message"):
         if key not in obj:
             raise InputError(f"{at}: field {key!r} is missing (need topic, schema, message)")
@@ -133,15 +146,7 @@ def parse_jsonl(
         raise InputError(
             f"{at}: topic {topic}: field 'log_time_ns' must be an integer in 0..2^64-1 (got {t!r})"
         )
-    encoding = "protobuf" if str(schema).startswith("foxglove.") else "json"
-    try:
-        codec = codec_for(str(schema), encoding)
-    except UnknownSchemaError as err:
-        raise UnknownSchemaError(f"{at}: topic {topic}: {err}") from err
-    if not codec.schema_data and schema not in known_schemas():
-        raise UnknownSchemaError(
-            f"{at}: topic {topic}: unknown schema {schema!r} (known: {', '.join(known_schemas())})"
-        )
+    codec = _codec(str(schema), at, topic)
     try:
         data = codec.from_jsonable(obj["message"])
     except SchemaError as err:
@@ -150,6 +155,19 @@ def parse_jsonl(
         # a payload of the right JSON shape but wrong types deep inside (e.g. a list for a number)
         raise SchemaError(f"{at}: topic {topic}: message does not fit {schema}: {err}") from err
     return JsonlRecord(topic, int(t), codec, data)
+
+
+def _codec(schema: str, at: str, topic: str) -> Codec:
+    encoding = "protobuf" if schema.startswith("foxglove.") else "json"
+    try:
+        codec = codec_for(schema, encoding)
+    except UnknownSchemaError as err:
+        raise UnknownSchemaError(f"{at}: topic {topic}: {err}") from err
+    if not codec.schema_data and schema not in known_schemas():
+        raise UnknownSchemaError(
+            f"{at}: topic {topic}: unknown schema {schema!r} (known: {', '.join(known_schemas())})"
+        )
+    return codec
 
 
 @dataclass(frozen=True, slots=True)

@@ -271,6 +271,27 @@ def _top_level(opcode: int, head: bytes, body: bytes) -> Any:
     return record if isinstance(record, Metadata | Attachment) else None
 
 
+def _cut_chunk(body: bytes, end: ScanEnd) -> Iterator[Any]:
+    """The complete records of a chunk the log ends inside (counted in ``end``)."""
+    try:
+        records = decode_chunk(body, lenient=True)
+    except ChunkError:
+        records = []
+    for record in records:
+        if isinstance(record, Message):
+            end.partial_chunk_messages += 1
+        yield record
+
+
+def _count_lost(lost: Damage, index_body: bytes) -> Damage:
+    """Add the messages a damaged chunk's message index lists to its loss."""
+    try:
+        counted = len(parse_message_index(index_body).records)
+    except ChunkError:
+        return lost
+    return Damage(lost.offset, lost.what, (lost.lost_messages or 0) + counted, lost.kind)
+
+
 def scan_damaged(f: IO[bytes], end: ScanEnd) -> Iterator[Any]:
     """Yield Schema, Channel, Message, Metadata and Attachment records in file order.
 
@@ -291,25 +312,11 @@ def scan_damaged(f: IO[bytes], end: ScanEnd) -> Iterator[Any]:
         if length > size - start - _HEAD.size:
             end.offset, end.reason = start, f"inside a {_NAMES.get(opcode, hex(opcode))} record"
             if opcode == Opcode.CHUNK:
-                body = f.read(size - start - _HEAD.size)
-                try:
-                    records = decode_chunk(body, lenient=True)
-                except ChunkError:
-                    records = []
-                for record in records:
-                    if isinstance(record, Message):
-                        end.partial_chunk_messages += 1
-                    yield record
+                yield from _cut_chunk(f.read(size - start - _HEAD.size), end)
             break
         body = f.read(length)
         if opcode == Opcode.MESSAGE_INDEX and lost_chunk is not None:
-            try:
-                counted = len(parse_message_index(body).records)
-                lost_chunk = Damage(
-                    lost_chunk.offset, lost_chunk.what, (lost_chunk.lost_messages or 0) + counted
-                )
-            except ChunkError:
-                pass
+            lost_chunk = _count_lost(lost_chunk, body)
             continue
         if lost_chunk is not None:
             end.damage.append(lost_chunk)

@@ -64,8 +64,34 @@ class MotAccumulator:
             if len(g_ids) and len(h_ids)
             else np.zeros((len(g_ids), len(h_ids)))
         )
+        matches = self._match(g_ids, h_ids, hyp, d)
+        for g, h in matches.items():
+            if g in self._last and self._last[g] != h:
+                self.switches += 1
+            self._last[g] = h
+            self.dist_sum += float(d[g_ids.index(g), h_ids.index(h)])
+        ignored_h = self._ignored(gt, hyp, h_ids, set(matches.values()), ignore)
+        self.gt += len(g_ids)
+        self.matches += len(matches)
+        self.misses += len(g_ids) - len(matches)
+        self.fp += len(h_ids) - len(matches) - len(ignored_h)
+        # identity counts: any pair within the threshold counts towards IDTP candidates
+        for gi, g in enumerate(g_ids):
+            self._gt_count[g] += 1
+            for hi, h in enumerate(h_ids):
+                if d[gi, hi] < self.threshold:
+                    self._co[(g, h)] += 1
+        for h in h_ids:
+            if h not in ignored_h:
+                self._hyp_count[h] += 1
+        return matches
+
+    def _match(
+        self, g_ids: list[str], h_ids: list[str], hyp: Frame, d: np.ndarray
+    ) -> dict[str, str]:
+        """CLEAR-MOT matching: last frame's still-valid correspondences first, then a global
+        assignment (scipy's linear_sum_assignment) of the rest within the threshold."""
         matches: dict[str, str] = {}
-        # keep last frame's correspondences that are still valid
         for gi, g in enumerate(g_ids):
             h = self._last.get(g)
             if h is not None and h in hyp and h not in matches.values():
@@ -82,36 +108,24 @@ class MotAccumulator:
             for r, c in zip(rows, cols, strict=True):
                 if cost[r, c] < 1e6:
                     matches[g_ids[free_g[r]]] = h_ids[free_h[c]]
-        for g, h in matches.items():
-            if g in self._last and self._last[g] != h:
-                self.switches += 1
-            self._last[g] = h
-            self.dist_sum += float(d[g_ids.index(g), h_ids.index(h)])
-        matched_h = set(matches.values())
-        ignored_h = set()
-        if ignore:
-            for h in h_ids:
-                if h in matched_h:
-                    continue
-                hx = np.array(hyp[h])
-                if any(
-                    np.linalg.norm(hx - np.array(gt[g])) < self.threshold for g in ignore if g in gt
-                ):
-                    ignored_h.add(h)
-        self.gt += len(g_ids)
-        self.matches += len(matches)
-        self.misses += len(g_ids) - len(matches)
-        self.fp += len(h_ids) - len(matches) - len(ignored_h)
-        # identity counts: any pair within the threshold counts towards IDTP candidates
-        for gi, g in enumerate(g_ids):
-            self._gt_count[g] += 1
-            for hi, h in enumerate(h_ids):
-                if d[gi, hi] < self.threshold:
-                    self._co[(g, h)] += 1
-        for h in h_ids:
-            if h not in ignored_h:
-                self._hyp_count[h] += 1
         return matches
+
+    def _ignored(
+        self, gt: Frame, hyp: Frame, h_ids: list[str], matched_h: set[str], ignore: set[str]
+    ) -> set[str]:
+        """Unmatched hypotheses on a don't-care person (not false positives)."""
+        ignored_h: set[str] = set()
+        if not ignore:
+            return ignored_h
+        for h in h_ids:
+            if h in matched_h:
+                continue
+            hx = np.array(hyp[h])
+            if any(
+                np.linalg.norm(hx - np.array(gt[g])) < self.threshold for g in ignore if g in gt
+            ):
+                ignored_h.add(h)
+        return ignored_h
 
     def summary(self) -> MotSummary:
         """The metrics over every frame so far."""
