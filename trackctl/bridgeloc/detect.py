@@ -225,9 +225,25 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
     cfg = cfg or DetectorConfig()
     if gray.ndim != 2:
         gray = cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
-    h, w = gray.shape
+    quads = _border_quads(gray, cfg)
+    hole_quads, fit_starts = _quiet_zone_quads(gray, cfg)
+    quads.extend((area, quad, False) for area, quad in hole_quads)
+    quads.sort(key=lambda aq: -aq[0])  # outer borders first: a tag's inner outline is a dup
+    out: list[TagDetection] = []
+    for _, quad, refine in quads:
+        det = _read_quad(gray, quad, refine, out, cfg)
+        if det is not None:
+            out.append(det)
+    if cfg.fit is not None:
+        out.extend(_fit_far_tags(gray, fit_starts, out, cfg))
+    return out
+
+
+def _border_quads(gray: np.ndarray, cfg: DetectorConfig) -> list[tuple[float, np.ndarray, bool]]:
+    """Convex quadrilateral contours of the thresholded image: candidate tag borders (area,
+    quad, refine corners)."""
     min_area = cfg.min_side_px**2
-    quads = []
+    quads: list[tuple[float, np.ndarray, bool]] = []
     # two window sizes, as ArUco does: a small one separates tiny far tags from the background,
     # a large one keeps the thick border of near tags in one piece
     for block, c in ((cfg.block_size, cfg.threshold_c), (cfg.large_block_size, 7.0)):
@@ -248,48 +264,61 @@ def detect_tags(gray: np.ndarray, cfg: DetectorConfig | None = None) -> list[Tag
             quad = cv2.approxPolyDP(cnt, 0.06 * peri, True)
             if len(quad) == 4 and cv2.isContourConvex(quad):
                 quads.append((area, quad, True))
+    return quads
 
-    hole_quads, fit_starts = _quiet_zone_quads(gray, cfg)
-    quads.extend((area, quad, False) for area, quad in hole_quads)
-    quads.sort(key=lambda aq: -aq[0])  # outer borders first: a tag's inner outline is a dup
+
+def _read_quad(
+    gray: np.ndarray,
+    quad: np.ndarray,
+    refine: bool,
+    found: list[TagDetection],
+    cfg: DetectorConfig,
+) -> TagDetection | None:
+    """A tag read from one candidate quad (sub-pixel corners unless it is a tiny hole), or None:
+    too small, cut by the border, a duplicate of one ``found``, or not decodable."""
+    h, w = gray.shape
+    q = quad.reshape(4, 2).astype(np.float32)
+    sides = np.linalg.norm(q - np.roll(q, 1, axis=0), axis=1)
+    if sides.min() < cfg.min_side_px:
+        return None
+    if _cut_by_edge(q, w, h, cfg.edge_margin_px):
+        return None  # cut by the image border: corners would be wrong
+    # keep the window inside the black border: the code cells' edges would pull the corner
+    border_px = sides.min() / (cfg.border_ratio + 2)
+    win = int(np.clip(border_px * 0.6, 2, 5))
+    ctr0 = q.mean(axis=0)
+    if any(np.linalg.norm(d.center - ctr0) < max(3.0, sides.min() / 2) for d in found):
+        return None  # the same tag found again (inner outline, or the other threshold)
+    refined: np.ndarray
+    if not refine:
+        refined = q  # a quiet-zone hole of a few pixels: no corner for sub-pixel refinement
+    else:
+        refined = cv2.cornerSubPix(
+            gray,
+            q.reshape(-1, 1, 2).copy(),
+            (win, win),
+            (-1, -1),
+            (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.01),
+        )
+    corners, placement = order_corners(refined.reshape(4, 2), cfg.vertical_tol_deg)
+    dec = _decode(gray, corners, cfg)
+    if dec is None:
+        return None
+    code, contrast = dec
+    return TagDetection(code, placement, corners, contrast)
+
+
+def _fit_far_tags(
+    gray: np.ndarray, fit_starts: list[np.ndarray], found: list[TagDetection], cfg: DetectorConfig
+) -> list[TagDetection]:
+    """Far, tiny tags located by the blurred-model fit from quiet-zone holes no quad read."""
+    h, w = gray.shape
     out: list[TagDetection] = []
-    for _, quad, refine in quads:
-        q = quad.reshape(4, 2).astype(np.float32)
-        sides = np.linalg.norm(q - np.roll(q, 1, axis=0), axis=1)
-        if sides.min() < cfg.min_side_px:
-            continue
-        if _cut_by_edge(q, w, h, cfg.edge_margin_px):
-            continue  # cut by the image border: corners would be wrong
-        # keep the window inside the black border: the code cells' edges would pull the corner
-        border_px = sides.min() / (cfg.border_ratio + 2)
-        win = int(np.clip(border_px * 0.6, 2, 5))
-        ctr0 = q.mean(axis=0)
-        if any(np.linalg.norm(d.center - ctr0) < max(3.0, sides.min() / 2) for d in out):
-            continue  # the same tag found again (inner outline, or the other threshold)
-        refined: np.ndarray
-        if not refine:
-            refined = q  # a quiet-zone hole of a few pixels: no corner for sub-pixel refinement
-        else:
-            refined = cv2.cornerSubPix(
-                gray,
-                q.reshape(-1, 1, 2).copy(),
-                (win, win),
-                (-1, -1),
-                (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.01),
-            )
-        corners, placement = order_corners(refined.reshape(4, 2), cfg.vertical_tol_deg)
-        dec = _decode(gray, corners, cfg)
-        if dec is None:
-            continue
-        code, contrast = dec
-        out.append(TagDetection(code, placement, corners, contrast))
-    if cfg.fit is None:
-        return out
     tried: list[np.ndarray] = []
     for box in fit_starts:
         ctr0 = box.mean(axis=0)
         side = float(np.linalg.norm(box[1] - box[0]))
-        if any(np.linalg.norm(d.center - ctr0) < max(3.0, side) for d in out):
+        if any(np.linalg.norm(d.center - ctr0) < max(3.0, side) for d in [*found, *out]):
             continue  # inside a tag already read (a white cell's hole) or the tag itself
         if any(np.linalg.norm(c - ctr0) < 1.5 for c in tried):
             continue  # the same hole at another size: the fit already failed there
