@@ -248,9 +248,23 @@ def _entries(trajs: list[Trajectory], size: tuple[float, float], k: int = 2) -> 
     return [np.clip(c, 0.3, np.array(size) - 0.3) for c in cent]
 
 
-def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
-    """Write a VM-Tracking scenario log to ``out``; returns message counts per topic."""
-    rng = np.random.default_rng(cfg.seed)
+Event = tuple[int, int, str, object]  # (t_ns, order among equal times, topic, message)
+
+
+@dataclass
+class _Site:
+    """Field size, camera grid, people, phones, cameras and check-point APs of a scenario."""
+
+    size: tuple[float, float]
+    trajs: list[Trajectory]
+    phones: dict[str, str]
+    duration: float
+    models: list[CameraModel]
+    cams: list[PinholeCamera]
+    aps: list[tuple[str, np.ndarray]]
+
+
+def _site(cfg: VmScenario, rng: np.random.Generator) -> _Site:
     size, grid = FIELDS[cfg.field]
     if cfg.size_m is not None:
         size = cfg.size_m
@@ -262,12 +276,11 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
         lo, hi = allxy.min(axis=0) - 1.0, allxy.max(axis=0) + 1.0
         offset = -lo
         trajs = [replace(t, xy=t.xy + offset) for t in trajs]
-        size = tuple(float(v) for v in (hi - lo))  # type: ignore[assignment]
+        size = (float(hi[0] - lo[0]), float(hi[1] - lo[1]))
         grid = (max(1, round(size[0] / 7)), 2 if size[1] > 8 else 1)
     t_end = max(t.t0_s + t.dt_s * (len(t.xy) - 1) for t in trajs)
     duration = min(cfg.duration_s, t_end) if cfg.trajectories else cfg.duration_s
     models = _cameras(size, grid, *_MOUNT[cfg.field])
-    cams = [PinholeCamera(m) for m in models]
     aps = [
         ("ap-entry-0", np.array([0.3, size[1] / 2])),
         ("ap-entry-1", np.array([size[0] - 0.3, size[1] / 2])),
@@ -276,98 +289,112 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
         aps = aps[:1]
     if cfg.trajectories:
         aps = [(f"ap-entry-{k}", xy) for k, xy in enumerate(_entries(trajs, size))]
-    counts: dict[str, int] = {}
-    events: list[tuple[int, int, str, object]] = []
-    frame_times = np.arange(0.0, duration, 1.0 / cfg.fps)
-    sigma = cfg.det_noise_m / math.sqrt(math.pi / 2)
-    for t in frame_times:
-        t_ns = int(round(t * S))
-        pos = {tr.person: tr.at(t)[0] for tr in trajs}
-        present = {p: xy for p, xy in pos.items() if not np.isnan(xy).any()}
-        events.append(
-            (
-                t_ns,
-                9,
-                topics.GROUND_TRUTH,
-                GroundTruth(
-                    t_ns,
-                    tuple(
-                        GroundTruthEntity(
-                            p,
-                            Vec3(float(xy[0]), float(xy[1]), 0.0),
-                            electronic_id=phones.get(p),
-                            visual_id=p,
-                        )
-                        for p, xy in sorted(present.items())
-                    ),
-                ),
+    cams = [PinholeCamera(m) for m in models]
+    return _Site(size, trajs, phones, duration, models, cams, aps)
+
+
+def _truth_event(t_ns: int, present: dict[str, np.ndarray], phones: dict[str, str]) -> Event:
+    entities = tuple(
+        GroundTruthEntity(
+            p, Vec3(float(xy[0]), float(xy[1]), 0.0), electronic_id=phones.get(p), visual_id=p
+        )
+        for p, xy in sorted(present.items())
+    )
+    return (t_ns, 9, topics.GROUND_TRUTH, GroundTruth(t_ns, entities))
+
+
+def _camera_detections(
+    cam: PinholeCamera,
+    present: dict[str, np.ndarray],
+    rng: np.random.Generator,
+    cfg: VmScenario,
+    sigma: float,
+) -> list[Detection]:
+    """What a person detector reports in one camera: visible, unoccluded people (some missed)
+    with ground-point noise, and now and then a false positive."""
+    seen = []
+    for p, xy in present.items():
+        box = _person_box(cam, xy)
+        if box is not None:
+            seen.append((box[1], p, xy, box[0]))
+    seen.sort()
+    dets = []
+    for k, (_, _p, xy, seen_box) in enumerate(seen):
+        if any(_overlap(seen_box, seen[j][3]) > 0.5 for j in range(k)):
+            continue  # occluded by a nearer person
+        if rng.random() < cfg.miss_rate:
+            continue
+        err = rng.normal(0, sigma, 2)
+        dets.append(
+            Detection(
+                seen_box,
+                round(float(rng.uniform(0.5, 1.0)), 3),
+                "person",
+                Vec3(float(xy[0] + err[0]), float(xy[1] + err[1]), 0.0),
             )
         )
-        for cam in cams:
-            seen = []
-            for p, xy in present.items():
-                box = _person_box(cam, xy)
-                if box is not None:
-                    seen.append((box[1], p, xy, box[0]))
-            seen.sort()
-            dets = []
-            for k, (_, _p, xy, seen_box) in enumerate(seen):
-                if any(_overlap(seen_box, seen[j][3]) > 0.5 for j in range(k)):
-                    continue  # occluded by a nearer person
-                if rng.random() < cfg.miss_rate:
-                    continue
-                err = rng.normal(0, sigma, 2)
-                dets.append(
-                    Detection(
-                        seen_box,
-                        round(float(rng.uniform(0.5, 1.0)), 3),
-                        "person",
-                        Vec3(float(xy[0] + err[0]), float(xy[1] + err[1]), 0.0),
-                    )
+    if rng.random() < cfg.fp_rate:
+        fx, fy = (
+            rng.uniform(0.1, 0.9) * cam.model.width_px,
+            rng.uniform(0.5, 0.95) * cam.model.height_px,
+        )
+        g = cam.ground_point(np.array([[fx, fy]]))[0]
+        if not np.isnan(g).any():
+            dets.append(
+                Detection(
+                    BBox(float(fx) - 10, float(fy) - 60, 20.0, 60.0),
+                    round(float(rng.uniform(0.3, 0.6)), 3),
+                    "person",
+                    Vec3(float(g[0]), float(g[1]), 0.0),
                 )
-            if rng.random() < cfg.fp_rate:
-                fx, fy = (
-                    rng.uniform(0.1, 0.9) * cam.model.width_px,
-                    rng.uniform(0.5, 0.95) * cam.model.height_px,
-                )
-                g = cam.ground_point(np.array([[fx, fy]]))[0]
-                if not np.isnan(g).any():
-                    dets.append(
-                        Detection(
-                            BBox(float(fx) - 10, float(fy) - 60, 20.0, 60.0),
-                            round(float(rng.uniform(0.3, 0.6)), 3),
-                            "person",
-                            Vec3(float(g[0]), float(g[1]), 0.0),
-                        )
-                    )
+            )
+    return dets
+
+
+def _camera_events(site: _Site, cfg: VmScenario, rng: np.random.Generator) -> list[Event]:
+    """Ground truth and every camera's detections (or frames to render) at each instant."""
+    events: list[Event] = []
+    sigma = cfg.det_noise_m / math.sqrt(math.pi / 2)
+    for t in np.arange(0.0, site.duration, 1.0 / cfg.fps):
+        t_ns = int(round(t * S))
+        pos = {tr.person: tr.at(t)[0] for tr in site.trajs}
+        present = {p: xy for p, xy in pos.items() if not np.isnan(xy).any()}
+        events.append(_truth_event(t_ns, present, site.phones))
+        for cam in site.cams:
+            dets = _camera_detections(cam, present, rng, cfg, sigma)
             if cfg.frames:
                 # the detector finds people in the pixels; the simulated detections above only
                 # keep the random stream (and so every other topic) identical to a --no-frames log
                 events.append((t_ns, 5, topics.image(cam.model.camera), _Frame(cam, t)))
                 continue
-            events.append(
-                (
-                    t_ns,
-                    5,
-                    topics.detections(cam.model.camera),
-                    Detections(t_ns, cam.model.camera, tuple(dets)),
-                )
-            )
-    for tr in trajs:
-        mac = phones.get(tr.person)
+            detections = Detections(t_ns, cam.model.camera, tuple(dets))
+            events.append((t_ns, 5, topics.detections(cam.model.camera), detections))
+    return events
+
+
+def _imu_events(site: _Site, cfg: VmScenario, rng: np.random.Generator) -> list[Event]:
+    events: list[Event] = []
+    for tr in site.trajs:
+        mac = site.phones.get(tr.person)
         if mac is None:
             continue
         t0 = max(tr.t0_s, 0.0)
-        t1 = min(tr.t0_s + tr.dt_s * (len(tr.xy) - 1), duration)
+        t1 = min(tr.t0_s + tr.dt_s * (len(tr.xy) - 1), site.duration)
         grid_t = np.arange(math.ceil(t0 * cfg.imu_hz) / cfg.imu_hz, t1, 1.0 / cfg.imu_hz)
         for imu in _imu_samples(tr, mac, grid_t, rng, cfg):
             events.append((imu.t_ns, 1, topics.imu(mac.replace(":", "")), imu))
-    for t in np.arange(0.0, duration, 1.0):
+    return events
+
+
+def _rssi_events(site: _Site, rng: np.random.Generator) -> list[Event]:
+    """Each AP's scan once a second: log-distance path loss (exponent 2.5) + 3 dB shadowing."""
+    events: list[Event] = []
+    for t in np.arange(0.0, site.duration, 1.0):
         t_ns = int(round(t * S))
-        for ap, ap_xy in aps:
+        for ap, ap_xy in site.aps:
             readings = []
-            for tr in trajs:
-                mac = phones.get(tr.person)
+            for tr in site.trajs:
+                mac = site.phones.get(tr.person)
                 xy = tr.at(t)[0]
                 if mac is None or np.isnan(xy).any():
                     continue
@@ -375,63 +402,76 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
                 rssi = -40.0 - 25.0 * math.log10(d) + rng.normal(0, 3.0)
                 if rssi > -90:
                     readings.append(RssiReading(mac, round(rssi, 1)))
-            events.append(
-                (
-                    t_ns,
-                    2,
-                    topics.RSSI,
-                    RssiScan(
-                        t_ns, ap, tuple(readings), Vec3(float(ap_xy[0]), float(ap_xy[1]), 2.0)
-                    ),
-                )
-            )
-    events.sort(key=lambda e: (e[0], e[1], e[2]))
-    draw_rng = np.random.default_rng([cfg.seed, 1])
-    looks = {tr.person: PersonLook.random(draw_rng) for tr in trajs}
-    floors = {id(cam): floor_image(cam, draw_rng) for cam in cams} if cfg.frames else {}
+            observer_m = Vec3(float(ap_xy[0]), float(ap_xy[1]), 2.0)
+            events.append((t_ns, 2, topics.RSSI, RssiScan(t_ns, ap, tuple(readings), observer_m)))
+    return events
 
-    def render(frame: _Frame) -> object:
+
+class _Renderer:
+    """Renders a camera frame when it is written (frames never pile up in memory)."""
+
+    def __init__(self, site: _Site, cfg: VmScenario) -> None:
+        self.site, self.cfg = site, cfg
+        self.rng = np.random.default_rng([cfg.seed, 1])
+        self.looks = {tr.person: PersonLook.random(self.rng) for tr in site.trajs}
+        self.floors = (
+            {id(cam): floor_image(cam, self.rng) for cam in site.cams} if cfg.frames else {}
+        )
+
+    def __call__(self, frame: _Frame) -> object:
         people = []
-        for tr in trajs:
+        for tr in self.site.trajs:
             xy = tr.at(frame.t_s)[0]
             if not np.isnan(xy).any():
-                people.append((xy, looks[tr.person]))
-        img = render_frame(frame.cam, floors[id(frame.cam)], people, draw_rng)
-        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, cfg.jpeg_quality])
+                people.append((xy, self.looks[tr.person]))
+        img = render_frame(frame.cam, self.floors[id(frame.cam)], people, self.rng)
+        quality = [cv2.IMWRITE_JPEG_QUALITY, self.cfg.jpeg_quality]
+        ok, buf = cv2.imencode(".jpg", img, quality)
         if not ok:  # pragma: no cover - OpenCV always encodes a uint8 BGR image
             raise RuntimeError("JPEG encoding failed")
         t_ns = int(round(frame.t_s * S))
         return make_compressed_image(t_ns, frame.cam.model.camera, buf.tobytes(), "jpeg")
 
+
+def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
+    """Write a VM-Tracking scenario log to ``out``; returns message counts per topic."""
+    rng = np.random.default_rng(cfg.seed)
+    site = _site(cfg, rng)
+    events = _camera_events(site, cfg, rng) + _imu_events(site, cfg, rng)
+    events += _rssi_events(site, rng)
+    events.sort(key=lambda e: (e[0], e[1], e[2]))
+    render = _Renderer(site, cfg)
+    counts: dict[str, int] = {}
     with LogWriter(out) as w:
-        w.add_metadata(
-            "scenario",
-            {
-                "generator": "trackctl simulate vm",
-                "field": cfg.field,
-                "seed": cfg.seed,
-                "users": len(phones),
-                "people": len(trajs),
-                "duration_s": float(duration),
-                "size_m": f"{size[0]:.2f}x{size[1]:.2f}",
-                "det_noise_m": cfg.det_noise_m,
-                "miss_rate": cfg.miss_rate,
-                "fp_rate": cfg.fp_rate,
-                "fps": cfg.fps,
-                "imu_hz": cfg.imu_hz,
-                "trajectories": cfg.trajectories or "random-waypoint",
-                "frames": cfg.frames,
-            },
-        )
-        w.add_metadata("phones", {mac: person for person, mac in phones.items()})
-        for m in models:
+        w.add_metadata("scenario", _scenario_metadata(site, cfg))
+        w.add_metadata("phones", {mac: person for person, mac in site.phones.items()})
+        for m in site.models:
             w.write(topics.calibration(m.camera), to_foxglove_calibration(m), 0)
             w.write(topics.camera_model(m.camera), m)
             counts[topics.calibration(m.camera)] = 1
             counts[topics.camera_model(m.camera)] = 1
         for t_ns, _, topic, msg in events:
             if isinstance(msg, _Frame):
-                msg = render(msg)  # rendered while writing: frames never pile up in memory
+                msg = render(msg)
             w.write(topic, msg, t_ns)
             counts[topic] = counts.get(topic, 0) + 1
     return counts
+
+
+def _scenario_metadata(site: _Site, cfg: VmScenario) -> dict[str, object]:
+    return {
+        "generator": "trackctl simulate vm",
+        "field": cfg.field,
+        "seed": cfg.seed,
+        "users": len(site.phones),
+        "people": len(site.trajs),
+        "duration_s": float(site.duration),
+        "size_m": f"{site.size[0]:.2f}x{site.size[1]:.2f}",
+        "det_noise_m": cfg.det_noise_m,
+        "miss_rate": cfg.miss_rate,
+        "fp_rate": cfg.fp_rate,
+        "fps": cfg.fps,
+        "imu_hz": cfg.imu_hz,
+        "trajectories": cfg.trajectories or "random-waypoint",
+        "frames": cfg.frames,
+    }
