@@ -85,7 +85,18 @@ def test_vm_compare_runs_end_to_end(capsys: pytest.CaptureFixture[str]) -> None:
     )
     out = capsys.readouterr().out
     assert rc == 0
-    assert "MOTA" in out and "\nVM " in out and "\nV-AF " in out
+    header = next(line.split() for line in out.splitlines() if line.startswith("tracker"))
+    assert header[1:4] == ["MOTA", "IDF1", "IDsw"]
+    rows = {
+        line.split()[0]: dict(zip(header[1:4], map(float, line.split()[1:4]), strict=True))
+        for line in out.splitlines()
+        if line.split()[:1] in (["VM"], ["V-AF"])
+    }
+    assert set(rows) == {"VM", "V-AF"}
+    for row in rows.values():
+        assert 0.0 <= row["MOTA"] <= 1.0 and 0.0 <= row["IDF1"] <= 1.0 and row["IDsw"] >= 0
+    # the phones keep identities the visual-only baseline swaps
+    assert rows["VM"]["IDF1"] > rows["V-AF"]["IDF1"] and rows["VM"]["IDsw"] <= rows["V-AF"]["IDsw"]
 
 
 def test_a_phone_name_on_a_non_user_is_a_false_positive() -> None:

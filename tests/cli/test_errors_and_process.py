@@ -4,6 +4,8 @@ of every command on the shipped sample log, in-process (Typer runner) and as a s
 from __future__ import annotations
 
 import json
+import re
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -11,7 +13,7 @@ from typer.testing import CliRunner
 
 from tests.conftest import run_cli
 from trackctl.cli.main import app
-from trackctl.logs import Imu, Vec3
+from trackctl.logs import Imu, LogReader, Vec3
 
 runner = CliRunner()
 
@@ -219,23 +221,83 @@ def test_report_on_a_log_without_reports(sample_log: Path) -> None:
 
 
 # -- smoke: every command on the sample log, in-process through Typer's runner -------------
+
+
+def _check_info(out: str, tmp: Path) -> None:
+    assert out.splitlines()[0].split()[1:4] == ["1242", "messages,", "19.960"]
+    assert "/phone/p1/imu" in out and "metadata robot/r1" in out
+
+
+def _check_info_json(out: str, tmp: Path) -> None:
+    info = json.loads(out)
+    assert info["message_count"] == 1242 and len(info["topics"]) == 8
+    assert info["topics"]["/rssi"]["count"] == 20 and info["topics"]["/rssi"]["rate_hz"] == 1.0
+
+
+def _check_replay(out: str, tmp: Path) -> None:
+    lines = [json.loads(line) for line in out.splitlines()]
+    assert len(lines) == 20 and {line["topic"] for line in lines} == {"/rssi"}
+    times = [line["log_time_ns"] for line in lines]
+    assert times == sorted(times) and times[0] == 0 and times[-1] == 19_000_000_000
+
+
+def _check_table(out: str, tmp: Path) -> None:
+    row = next(line for line in out.splitlines() if line.strip().startswith("/rssi"))
+    cells = [c.strip() for c in row.split("│")]
+    assert cells[1] == "trackctl.RssiScan" and cells[2] == "20"
+
+
+def _check_list(out: str, tmp: Path) -> None:
+    names = [line.split()[0] for line in out.splitlines()]
+    assert names == ["bridgeloc", "check", "dead-reckoning", "ev-match", "smirror", "vm-track"]
+
+
+def _check_process(out: str, tmp: Path) -> None:
+    reader = LogReader(tmp / "o.mcap")
+    assert reader.topics()["/metrics/check"].count == 1
+    assert reader.message_count == 1243  # the input's 1242 messages + the report
+    assert re.search(r"messages\s+│\s+1242", out) and re.search(r"crc_errors\s+│\s+0", out)
+
+
+def _check_simulate(out: str, tmp: Path) -> None:
+    reader = LogReader(tmp / "d.mcap")
+    assert reader.topics()["/phone/p1/imu"].count == 40  # 20 Hz for 2 s
+    assert reader.end_ns is not None and reader.end_ns < 2_000_000_000
+
+
+def _check_version(out: str, tmp: Path) -> None:
+    from trackctl import __version__
+
+    assert out.strip() == f"trackctl {__version__}"
+
+
 @pytest.mark.parametrize(
-    "args",
+    "args, check",
     [
-        ["info", "{log}"],
-        ["info", "{log}", "--json"],
-        ["replay", "{log}", "--speed", "0", "--topics", "/rssi"],
-        ["replay", "{log}", "--speed", "0", "--format", "table", "--topics", "/rssi"],
-        ["process", "--list"],
-        ["process", "{log}", "--with", "check", "--out", "{tmp}/o.mcap", "--quiet"],
-        ["simulate", "demo", "--out", "{tmp}/d.mcap", "--duration", "2"],
-        ["--version"],
+        (["info", "{log}"], _check_info),
+        (["info", "{log}", "--json"], _check_info_json),
+        (["replay", "{log}", "--speed", "0", "--topics", "/rssi"], _check_replay),
+        (
+            ["replay", "{log}", "--speed", "0", "--format", "table", "--topics", "/rssi"],
+            _check_table,
+        ),
+        (["process", "--list"], _check_list),
+        (
+            ["process", "{log}", "--with", "check", "--out", "{tmp}/o.mcap", "--quiet"],
+            _check_process,
+        ),
+        (["simulate", "demo", "--out", "{tmp}/d.mcap", "--duration", "2"], _check_simulate),
+        (["--version"], _check_version),
     ],
+    ids=["info", "info-json", "replay", "replay-table", "list", "process", "simulate", "version"],
 )
-def test_commands_in_process(args: list[str], sample_log: Path, tmp_path: Path) -> None:
+def test_commands_in_process(
+    args: list[str], check: Callable[[str, Path], None], sample_log: Path, tmp_path: Path
+) -> None:
     argv = [a.format(log=sample_log, tmp=tmp_path) for a in args]
     result = runner.invoke(app, argv)
     assert result.exit_code == 0, result.output
+    check(result.stdout, tmp_path)
 
 
 def test_json_options_print_exactly_one_object(sample_log: Path, tmp_path: Path) -> None:
