@@ -1,6 +1,8 @@
 """BridgeLoc (dissertation §4.2): robot localization by bridging infrastructure and robot camera
 views through simple rotation-symmetric tags, with an EKF over odometry for blind spots."""
 
+from trackctl.bridgeloc.config import POSE_TOPIC, BridgeLocConfig, Mode, PoseMethod
+from trackctl.bridgeloc.pipeline import run
 from trackctl.bridgeloc.tags import (
     BORDER_RATIO,
     Mount,
@@ -13,34 +15,30 @@ from trackctl.bridgeloc.tags import (
     theorem5,
     theorem6,
 )
+from trackctl.logs.messages import MetricReport
+from trackctl.logs.reader import LogReader
+from trackctl.logs.writer import LogWriter
+from trackctl.processing.base import ProcessorInfo, Progress
 
 __all__ = [
     "PROCESSOR",
     "BORDER_RATIO",
+    "POSE_TOPIC",
+    "BridgeLocConfig",
+    "BridgeLocProcessor",
+    "Mode",
     "Mount",
     "Placement",
+    "PoseMethod",
     "PracticalTag",
     "count_practical",
     "count_universal",
     "enumerate_practical",
     "enumerate_universal",
+    "run",
     "theorem5",
     "theorem6",
 ]
-
-from trackctl.bridgeloc.pipeline import (  # noqa: E402
-    POSE_TOPIC,
-    BridgeLocConfig,
-    Mode,
-    PoseMethod,
-    run,
-)
-from trackctl.logs.messages import MetricReport
-from trackctl.logs.reader import LogReader
-from trackctl.logs.writer import LogWriter
-from trackctl.processing.base import ProcessorInfo, Progress  # noqa: E402
-
-__all__ += ["POSE_TOPIC", "BridgeLocConfig", "BridgeLocProcessor", "Mode", "PoseMethod", "run"]
 
 
 class BridgeLocProcessor:

@@ -40,6 +40,10 @@ __all__ = [
     "MetricValue",
     "MetricReport",
     "MESSAGE_TYPES",
+    "EObservations",
+    "VScenario",
+    "EvMatch",
+    "EvMatches",
     "MirrorTransmission",
     "time_to_json",
     "time_from_json",
@@ -630,18 +634,6 @@ class MetricReport:
         )
 
 
-MESSAGE_TYPES: tuple[type, ...] = (
-    Imu,
-    RssiScan,
-    WheelOdometry,
-    Detections,
-    Tracks,
-    GroundTruth,
-    CameraModel,
-    MetricReport,
-)
-
-
 # -- EV-Matching (dissertation §3.2) -------------------------------------------------------------
 
 
@@ -817,10 +809,6 @@ class EvMatches:
         )
 
 
-MESSAGE_TYPES = (*MESSAGE_TYPES, EObservations, VScenario, EvMatches)
-__all__ += ["EObservations", "VScenario", "EvMatch", "EvMatches"]
-
-
 @dataclass(frozen=True, slots=True)
 class MirrorTransmission:
     """What one S-Mirror node sent at one instant (an image answer or an E-beacon).
@@ -893,4 +881,18 @@ class MirrorTransmission:
         )
 
 
-MESSAGE_TYPES = (*MESSAGE_TYPES, MirrorTransmission)
+MESSAGE_TYPES: tuple[type, ...] = (
+    Imu,
+    RssiScan,
+    WheelOdometry,
+    Detections,
+    Tracks,
+    GroundTruth,
+    CameraModel,
+    MetricReport,
+    EObservations,
+    VScenario,
+    EvMatches,
+    MirrorTransmission,
+)
+"""Every message type with a schema in ``formats/`` (one registration each, in codecs)."""

@@ -62,7 +62,15 @@ def one_line_reason(err: BaseException) -> str:
     return text[:200] if text else type(err).__name__
 
 
-__all__ = ["LogReader", "RawMessage", "LogMessage", "TopicInfo", "MCAP_MAGIC"]
+__all__ = [
+    "LogReader",
+    "RawMessage",
+    "LogMessage",
+    "TopicInfo",
+    "IndexedWindowReader",
+    "MCAP_MAGIC",
+    "one_line_reason",
+]
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
@@ -786,6 +794,3 @@ class IndexedWindowReader:
                 out.append(RawMessage.from_records(schema, channel, message))
         out.sort(key=lambda r: r.log_time_ns)
         return out
-
-
-__all__ += ["IndexedWindowReader"]

@@ -12,6 +12,11 @@ __all__ = [
     "camera_model",
     "detections",
     "metrics",
+    "EV_E",
+    "EV_GROUND_TRUTH",
+    "EV_MATCHES",
+    "EV_V_PREFIX",
+    "ev_v",
 ]
 
 RSSI = "/rssi"
@@ -66,6 +71,3 @@ EV_V_PREFIX = "/ev/cell/"
 def ev_v(cell: str) -> str:
     """V-scenarios of one camera cell: ``/ev/cell/<i>_<j>/v`` (trackctl.VScenario per window)."""
     return f"{EV_V_PREFIX}{cell}/v"
-
-
-__all__ += ["EV_E", "EV_GROUND_TRUTH", "EV_MATCHES", "EV_V_PREFIX", "ev_v"]
