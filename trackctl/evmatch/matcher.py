@@ -275,6 +275,15 @@ def _confidence(c1: int, c2: int, n: int) -> float:
     return round(max(0.0, min(1.0, (c1 - c2) / n)), 4) if n else 0.0
 
 
+def _targets_and_order(
+    data: EData, requested: Sequence[str], seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The requested EIDs' codes (unique, sorted; EIDs the log never saw are answered apart)
+    and the seeded order in which both algorithms visit the time windows."""
+    codes, _ = data.eid_codes(requested)
+    return np.unique(codes), window_order(len(data.windows_ns), seed)
+
+
 def match_ss(
     data: EData,
     vstore: VStore,
@@ -286,10 +295,8 @@ def match_ss(
 ) -> MatchOutcome:
     """EID set splitting + VID filtering + matching refining (see the module docstring)."""
     t0 = time.perf_counter()
-    codes, missing = data.eid_codes(requested)
-    order = window_order(len(data.windows_ns), seed)
+    targets, order = _targets_and_order(data, requested, seed)
     inc = _Inclusive(data, order)
-    targets = np.unique(codes)
     evidence, distinguished, iterations = _set_split(data, targets, order, engine, inc, progress)
     t1 = time.perf_counter()
     result: dict[int, EvMatch] = {}
@@ -352,7 +359,6 @@ def match_ss(
             progress(len(result), len(targets))
     t2 = time.perf_counter()
     matches = _in_request_order(data, requested, result)
-    del missing
     return MatchOutcome(
         matches=matches,
         v_scenarios_read=vstore.reads,
@@ -420,9 +426,7 @@ def match_edp(
 ) -> MatchOutcome:
     """The EDP baseline: per-EID greedy E-filtering then one V-identification vote."""
     t0 = time.perf_counter()
-    codes, _ = data.eid_codes(requested)
-    targets = np.unique(codes)
-    order = window_order(len(data.windows_ns), seed)
+    targets, order = _targets_and_order(data, requested, seed)
     rank = np.empty(len(order), np.int64)
     rank[order] = np.arange(len(order))
     rows = data.rows
