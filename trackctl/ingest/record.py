@@ -185,11 +185,12 @@ class UdpSource:
         self._n = 0
 
     def _lines(self, datagram: bytes, sender: Any) -> Iterator[Line]:
-        where = f"{self.where} from {sender[0]}:{sender[1]}" if sender else self.where
+        origin = f" from {sender[0]}:{sender[1]}" if sender else ""
         for line in datagram.splitlines():
             if line.strip():
                 self._n += 1
-                yield line, where, self._n
+                # "udp:9870 line 4 from 127.0.0.1:50123": the sender's port is not a line number
+                yield line, f"{self.where} line {self._n}{origin}", 0
 
     def __iter__(self) -> Iterator[Line | None]:
         while True:
