@@ -1,5 +1,5 @@
 # Convenience targets; each is one documented command.
-.PHONY: sample-logs test bench lock
+.PHONY: sample-logs test bench lock formats
 
 sample-logs:  ## regenerate the shipped sample logs (deterministic: same bytes every time)
 	trackctl simulate demo --out sample_logs/demo.mcap --seed 0 --duration 20
@@ -22,3 +22,6 @@ lock:  ## re-resolve every dependency (today's newest allowed by pyproject.toml)
 	  echo "# Regenerate with 'make lock' (a fresh venv, today's resolver, then pip freeze); see docs/install.md."; \
 	  .venv-lock/bin/pip freeze --exclude-editable ) > constraints.txt
 	rm -rf .venv-lock
+
+formats:  ## regenerate formats/*.json from the message classes (trackctl/logs/messages.py)
+	python -c "from trackctl.logs.jsonmap import write_schemas; write_schemas('formats')"

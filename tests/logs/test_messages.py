@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from tests.conftest import ROOT
 from trackctl.logs import codecs
 from trackctl.logs import messages as m
 
@@ -213,3 +214,22 @@ def test_track_covariance_needs_nine_values() -> None:
 def test_camera_model_rejects_nonpositive_focal_length() -> None:
     with pytest.raises(ValueError, match="focal lengths must be positive"):
         m.CameraModel(0, "cam0", 640, 480, 0.0, 500.0, 320, 240)
+
+
+@pytest.mark.parametrize("cls", m.MESSAGE_TYPES, ids=lambda c: c.SCHEMA)
+def test_committed_schema_is_generated_from_the_class(cls: type) -> None:
+    from trackctl.logs.jsonmap import schema_text
+
+    committed = (ROOT / "formats" / f"{cls.SCHEMA}.json").read_text()  # type: ignore[attr-defined]
+    assert committed == schema_text(cls), (
+        f"formats/{cls.SCHEMA}.json is stale: regenerate with `make formats`"  # type: ignore[attr-defined]
+    )
+
+
+def test_a_message_type_is_one_class() -> None:
+    # no hand-written JSON methods left: every message maps through trackctl.logs.jsonmap
+    from trackctl.logs.jsonmap import JsonMessage
+
+    for cls in m.MESSAGE_TYPES:
+        assert issubclass(cls, JsonMessage)
+        assert "to_json" not in vars(cls) and "from_json" not in vars(cls)

@@ -31,8 +31,8 @@ import numpy as np
 
 from trackctl.errors import InputError
 from trackctl.logs import topics
+from trackctl.logs.jsonmap import NS_PER_S
 from trackctl.logs.messages import (
-    NS_PER_S,
     EObservations,
     GroundTruth,
     GroundTruthEntity,
