@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from functools import partial
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from trackctl.cli.common import parse_choice, print_json, stderr
-from trackctl.cli.process import run_system
+from trackctl.cli.process import figures_from_output, run_system
 
 bridgeloc_app = typer.Typer(
     help="BridgeLoc (§4.2): rotation-symmetric tags, view bridging, EKF robot localization.",
@@ -99,20 +98,13 @@ def eval_(
 ) -> None:
     """BridgeLoc: localize the robot by bridging infrastructure and robot camera views."""
     from trackctl.bridgeloc import BridgeLocConfig, BridgeLocProcessor, Mode, PoseMethod
-    from trackctl.errors import InputError
 
     mode_value = parse_choice(Mode, mode, "--mode")
     pose_value = parse_choice(PoseMethod, pose, "--pose")
     proc = BridgeLocProcessor(
         BridgeLocConfig(mode=mode_value, pose=pose_value, max_sigma_m=max_sigma)
     )
-    draw = None
-    if plot is not None:
-        from trackctl.plots.bridgeloc import plot_run
-
-        if out is None:
-            raise InputError("--plot draws from the output log: give --out too")
-        draw = partial(plot_run, out, plot)
+    draw = figures_from_output(out, plot, "bridgeloc")
     run_system(
         "bridgeloc",
         log,

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from functools import partial
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from trackctl.cli.common import parse_choice, print_json, stderr
-from trackctl.cli.process import run_system
+from trackctl.cli.process import figures_from_output, run_system
 
 
 def _read_eids(path: Path) -> tuple[str, ...]:
@@ -93,13 +92,7 @@ def ev_match(
         seed=seed,
         params=MatchParams(margin=margin, max_evidence=max_evidence),
     )
-    draw = None
-    if plot is not None:
-        from trackctl.plots.evmatch import plot_run
-
-        if out is None:
-            raise InputError("--plot draws from the output log: give --out too")
-        draw = partial(plot_run, out, plot)
+    draw = figures_from_output(out, plot, "evmatch")
     run_system(
         "ev-match",
         log,

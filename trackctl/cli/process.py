@@ -114,6 +114,28 @@ def report(
     apply_fail_if(fail_if, reports)
 
 
+def figures_from_output(
+    out: Path | None, folder: Path | None, module: str
+) -> Callable[[], object] | None:
+    """The ``--plot FOLDER`` callback of a system whose figures are drawn from its output log
+    (``trackctl.plots.<module>.plot_run(out, folder)``); matplotlib is checked before the run.
+
+    Raises:
+        InputError: ``--plot`` without ``--out``, or matplotlib is missing.
+    """
+    if folder is None:
+        return None
+    if out is None:
+        raise InputError("--plot draws from the output log: give --out too")
+    import importlib
+
+    from trackctl.plots import pyplot
+
+    pyplot()  # fail before the run when matplotlib is missing
+    plot_run = importlib.import_module(f"trackctl.plots.{module}").plot_run
+    return lambda: plot_run(out, folder)
+
+
 def run_system(
     name: str,
     log: Path,

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from functools import partial
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from trackctl.cli.common import parse_choice, print_json, stderr
-from trackctl.cli.process import run_system
+from trackctl.cli.process import figures_from_output, run_system
 
 
 def vm_track(
@@ -64,15 +63,7 @@ def vm_track(
             frames=FrameConfig(predicted=search == "predicted"),
         )
     )
-    draw = None
-    if plot is not None:
-        from trackctl.plots import pyplot
-        from trackctl.plots.vmtrack import plot_vmtrack
-
-        pyplot()  # fail before the run when matplotlib is missing
-        if out is None:
-            raise InputError("--plot draws from the output log: give --out too")
-        draw = partial(plot_vmtrack, out, plot)
+    draw = figures_from_output(out, plot, "vmtrack")
     run_system(
         "vm-track",
         log,

@@ -3,6 +3,7 @@ z forward)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -12,7 +13,38 @@ from scipy.spatial.transform import Rotation
 
 from trackctl.logs.messages import CameraModel, Quat, Transform, Vec3
 
-__all__ = ["PinholeCamera", "look_at"]
+__all__ = ["PinholeCamera", "ideal_camera", "look_at"]
+
+
+def ideal_camera(
+    name: str,
+    width_px: int,
+    height_px: int,
+    pose: Transform,
+    *,
+    hfov_deg: float | None = None,
+    f_px: float | None = None,
+    distortion: tuple[float, ...] = (0.0,) * 5,
+) -> CameraModel:
+    """A pinhole camera with square pixels and a centred principal point, its focal length from
+    the horizontal field of view or given (simulated cameras)."""
+    if f_px is None:
+        if hfov_deg is None:
+            raise ValueError("ideal_camera: give hfov_deg or f_px")
+        f_px = width_px / (2 * math.tan(math.radians(hfov_deg) / 2))
+    return CameraModel(
+        t_ns=0,
+        camera=name,
+        width_px=width_px,
+        height_px=height_px,
+        fx_px=f_px,
+        fy_px=f_px,
+        cx_px=width_px / 2,
+        cy_px=height_px / 2,
+        distortion_model="plumb_bob",
+        distortion=distortion,
+        world_from_camera=pose,
+    )
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray | None = None) -> Transform:

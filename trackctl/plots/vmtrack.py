@@ -17,7 +17,7 @@ from trackctl.metrics.tracking import InitialIdentity
 from trackctl.plots import pyplot
 from trackctl.vmtrack.pipeline import TRACKS_TOPIC
 
-__all__ = ["user_errors", "tracking_segments", "plot_vmtrack"]
+__all__ = ["user_errors", "tracking_segments", "plot_vmtrack", "plot_run"]
 
 
 def user_errors(
@@ -117,3 +117,7 @@ def plot_vmtrack(log: str | os.PathLike[str], folder: str | os.PathLike[str]) ->
     fig.savefig(second, dpi=110)
     plt.close(fig)
     return [first, second]
+
+
+plot_run = plot_vmtrack
+"""The uniform name every system's figure module exports (``cli.process.figures_from_output``)."""

@@ -26,7 +26,7 @@ import numpy as np
 
 from trackctl.bridgeloc.tags import Code, Mount, Placement, enumerate_practical, tag_texture
 from trackctl.errors import InputError
-from trackctl.geometry.camera import PinholeCamera, look_at
+from trackctl.geometry.camera import PinholeCamera, ideal_camera, look_at
 from trackctl.ingest.video import make_compressed_image
 from trackctl.logs import topics
 from trackctl.logs.messages import (
@@ -138,9 +138,7 @@ def tag_corners(tag: WallTag, scale: float = 1.0) -> np.ndarray:
 
 
 def _model(name: str, pose: Transform, aov_deg: float, dist: tuple[float, ...]) -> CameraModel:
-    w, h = 640, 480
-    f = w / (2 * math.tan(math.radians(aov_deg) / 2))
-    return CameraModel(0, name, w, h, f, f, w / 2, h / 2, "plumb_bob", dist, pose)
+    return ideal_camera(name, 640, 480, pose, hfov_deg=aov_deg, distortion=dist)
 
 
 def robot_camera_model(height_m: float = 0.5) -> CameraModel:

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from trackctl.geometry.camera import PinholeCamera, look_at
+from trackctl.geometry.camera import PinholeCamera, ideal_camera, look_at
 from trackctl.ingest.calibration import to_foxglove_calibration
 from trackctl.ingest.video import make_compressed_image
 from trackctl.logs import topics
@@ -74,20 +74,7 @@ def _walker_path(
 
 def _camera(cfg: DemoConfig) -> CameraModel:
     pose = look_at(np.array([0.2, 0.2, 2.8]), np.array([3.2, 2.6, 0.0]))
-    f = cfg.width_px / (2 * math.tan(math.radians(80) / 2))
-    return CameraModel(
-        t_ns=0,
-        camera="cam0",
-        width_px=cfg.width_px,
-        height_px=cfg.height_px,
-        fx_px=f,
-        fy_px=f,
-        cx_px=cfg.width_px / 2,
-        cy_px=cfg.height_px / 2,
-        distortion_model="plumb_bob",
-        distortion=(0.0,) * 5,
-        world_from_camera=pose,
-    )
+    return ideal_camera("cam0", cfg.width_px, cfg.height_px, pose, hfov_deg=80)
 
 
 def _render(

@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from trackctl.geometry.camera import PinholeCamera, look_at
+from trackctl.geometry.camera import PinholeCamera, ideal_camera, look_at
 from trackctl.ingest.calibration import to_foxglove_calibration
 from trackctl.ingest.video import make_compressed_image
 from trackctl.logs import topics
@@ -214,20 +214,13 @@ def _calibrated(true: CameraModel, rng: np.random.Generator, cfg: SmirrorScenari
 
 def node_models(cfg: SmirrorScenario) -> list[CameraModel]:
     """True camera models of the three nodes."""
-    f = cfg.width_px / (2 * math.tan(math.radians(cfg.hfov_deg) / 2))
     return [
-        CameraModel(
-            t_ns=0,
-            camera=name,
-            width_px=cfg.width_px,
-            height_px=cfg.height_px,
-            fx_px=f,
-            fy_px=f,
-            cx_px=cfg.width_px / 2,
-            cy_px=cfg.height_px / 2,
-            distortion_model="plumb_bob",
-            distortion=(0.0,) * 5,
-            world_from_camera=look_at(np.array(eye), np.array(target)),
+        ideal_camera(
+            name,
+            cfg.width_px,
+            cfg.height_px,
+            look_at(np.array(eye), np.array(target)),
+            hfov_deg=cfg.hfov_deg,
         )
         for name, eye, target in NODES
     ]

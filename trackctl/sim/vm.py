@@ -27,7 +27,7 @@ from scipy.cluster.vq import kmeans2
 from scipy.spatial.transform import Rotation
 
 from trackctl.errors import InputError
-from trackctl.geometry.camera import PinholeCamera, look_at
+from trackctl.geometry.camera import PinholeCamera, ideal_camera, look_at
 from trackctl.ingest.calibration import to_foxglove_calibration
 from trackctl.ingest.video import make_compressed_image
 from trackctl.logs import topics
@@ -129,21 +129,7 @@ def _cameras(
             target = np.array([cx, cy, 0.0])
             depth = float(np.linalg.norm(target - eye))
             f = 0.5 * width * depth / (0.5 * max(tw, 0.9 * th) * zoom_out)
-            out.append(
-                CameraModel(
-                    0,
-                    f"cam{len(out)}",
-                    width,
-                    height,
-                    f,
-                    f,
-                    width / 2,
-                    height / 2,
-                    "plumb_bob",
-                    (0.0,) * 5,
-                    look_at(eye, target),
-                )
-            )
+            out.append(ideal_camera(f"cam{len(out)}", width, height, look_at(eye, target), f_px=f))
     return out
 
 
