@@ -12,6 +12,7 @@ __all__ = [
     "NotAFileError",
     "NotAnMcapError",
     "TruncatedLogWarning",
+    "IncompleteInputWarning",
     "SchemaError",
     "UnknownSchemaError",
     "InputError",
@@ -42,6 +43,11 @@ class NotAnMcapError(LogError):
 
 class TruncatedLogWarning(UserWarning):
     """A log ends early (unfinished recording, cut copy); it is read as far as it goes."""
+
+
+class IncompleteInputWarning(UserWarning):
+    """The input lacks data a processor uses (a camera's topic, an empty log); it works with what
+    exists and says what was missing."""
 
 
 class SchemaError(TrackctlError):

@@ -84,7 +84,8 @@ def test_vague_scenarios_are_never_evidence(small_log: Path) -> None:
     assert used and not any(pair in vague for pair in used)
 
 
-def test_missing_v_topic_is_an_error_naming_it(tmp_path: Path) -> None:
+def test_missing_v_topic_is_vid_missing_evidence(tmp_path: Path) -> None:
+    # cell B's camera is down: e2's own scenario has no video, so refining takes another one
     log = write_ev_log(
         tmp_path / "l.mcap",
         [
@@ -93,8 +94,15 @@ def test_missing_v_topic_is_an_error_naming_it(tmp_path: Path) -> None:
         ],
         skip_v=("B",),
     )
-    with pytest.raises(MissingTopicError, match="topic /ev/cell/B/v is missing"):
-        _ss(log, ["e2"])
+    reader = LogReader(log)
+    data = load_e(reader)
+    store = VStore(reader, data)
+    out = match_ss(data, store, ["e1", "e2"], LocalEngine(), LOOSE, seed=0)
+    got = {m.eid: m for m in out.matches}
+    assert got["e1"].vid == "v1"
+    assert got["e2"].vid == "v2" and got["e2"].scenarios == ("A@0",)
+    assert store.missing == {data.n_cells + data.cells.index("B")}
+    assert store.missing_topics() == ["/ev/cell/B/v"]
 
 
 def test_ss_beats_edp_and_reads_less_video(small_log: Path) -> None:

@@ -118,8 +118,23 @@ def simulate_ev(
         float, typer.Option(help="Chance a VID is missing from a V-scenario.")
     ] = 0.02,
     drift_m: Annotated[
-        float, typer.Option(help="E-locations within this distance of a border may drift, m.")
+        float,
+        typer.Option(
+            help="E-locations within this distance of a border may drift across it, m "
+            "(> cell: beyond the adjacent cell)."
+        ),
     ] = 15.0,
+    hear_interval: Annotated[
+        float | None,
+        typer.Option(help="Mean seconds between a phone's network contacts (default: always)."),
+    ] = None,
+    reid_error: Annotated[
+        float,
+        typer.Option(help="Chance per person and window that video labels them with another VID."),
+    ] = 0.0,
+    shared_eids: Annotated[
+        int, typer.Option(help="Pairs of people that carry one EID (cloned MAC, shared phone).")
+    ] = 0,
     seed: Annotated[int, typer.Option(help="Random seed (same seed, same log).")] = 0,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
@@ -137,6 +152,9 @@ def simulate_ev(
         eid_miss=eid_miss,
         vid_miss=vid_miss,
         drift_m=drift_m,
+        hear_s=hear_interval,
+        reid_error=reid_error,
+        shared_eids=shared_eids,
         seed=seed,
     )
     counts = simulate(str(out), cfg)

@@ -157,6 +157,7 @@ class VStore:
     sizes: dict[int, int] = field(default_factory=dict)
     _indexed: IndexedWindowReader | None = None
     _codecs: dict[tuple[str, str, bytes], Codec] = field(default_factory=dict)
+    missing: set[int] = field(default_factory=set)
     reads: int = 0
     bytes_read: int = 0
 
@@ -189,43 +190,50 @@ class VStore:
         return list(self.reader.raw([topic], start, end))
 
     def fetch(self, scenarios: Iterable[int]) -> dict[int, tuple[str, ...]]:
-        """VIDs of each scenario id (read from the log the first time, cached after).
+        """VIDs of each scenario id that has a V-scenario (read the first time, cached after).
 
-        Raises:
-            MissingTopicError: a cell's V topic is absent.
-            InputError: the topic has no V-scenario for the window.
+        A scenario whose cell has no V topic, or whose topic has nothing in the window (a camera
+        down, a gap in the log, a cut log), is left out of the result and added to
+        :attr:`missing`: to the matcher it is VID-missing evidence, as in the dissertation.
         """
         scenarios = [int(s) for s in scenarios]
-        wanted = sorted(set(scenarios) - self.cache.keys())
+        wanted = sorted(set(scenarios) - self.cache.keys() - self.missing)
         n_cells = self.data.n_cells
         present = self.reader.topics()
         for s in wanted:
             w, c = divmod(s, n_cells)
-            cell = self.data.cells[c]
-            name = topics.ev_v(cell)
+            name = topics.ev_v(self.data.cells[c])
             start = int(self.data.windows_ns[w])
-            if name not in present:
-                # not reader.require: its list of every topic is 10 000 long in a city-size log
-                raise MissingTopicError(
-                    f"{self.reader.path}: topic {name} is missing; ev-match needs the V-scenario "
-                    f"of cell {cell} in the window starting at {start} ns"
-                )
-            raws = self._read(name, start, start + max(self.data.window_ns, 1))
+            raws = (
+                self._read(name, start, start + max(self.data.window_ns, 1))
+                if name in present
+                else []
+            )
             if not raws:
-                raise InputError(
-                    f"{self.reader.path}: {name} has no V-scenario in the window starting at "
-                    f"{start} ns (cell {cell} listed EIDs then)"
-                )
+                self.missing.add(s)
+                continue
             vids: set[str] = set()
             for raw in raws:
                 key = (raw.schema_name, raw.message_encoding, raw.schema_data)
                 codec = self._codecs.get(key)
                 if codec is None:
                     codec = self._codecs[key] = self.reader.codec(raw)
-                scen: VScenario = codec.decode(raw.data)
+                try:
+                    scen: VScenario = codec.decode(raw.data)
+                except Exception as err:  # noqa: BLE001 - foreign bytes may break any decoder
+                    self.reader.skip_undecodable(raw, err)
+                    continue
                 vids.update(scen.vids)
                 self.reads += 1
                 self.bytes_read += len(raw.data)
                 self.sizes[s] = self.sizes.get(s, 0) + len(raw.data)
-            self.cache[s] = tuple(sorted(vids))
-        return {s: self.cache[s] for s in scenarios}
+            if s in self.sizes:
+                self.cache[s] = tuple(sorted(vids))
+            else:
+                self.missing.add(s)
+        return {s: self.cache[s] for s in scenarios if s in self.cache}
+
+    def missing_topics(self) -> list[str]:
+        """V topics of cells listed in the E-observations that the log does not have."""
+        present = self.reader.topics()
+        return [name for name in (topics.ev_v(c) for c in self.data.cells) if name not in present]

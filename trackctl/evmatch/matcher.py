@@ -33,6 +33,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -41,8 +42,17 @@ from trackctl.evmatch.data import EData, VStore
 from trackctl.evmatch.engines import Engine
 from trackctl.logs.messages import EvMatch
 
-__all__ = ["MatchParams", "MatchOutcome", "match_ss", "match_edp", "window_order"]
+__all__ = [
+    "MatchParams",
+    "MatchOutcome",
+    "match_ss",
+    "match_edp",
+    "window_order",
+    "AMBIGUOUS",
+    "multi_located",
+]
 
+AMBIGUOUS = "ambiguous"
 REASON_UNKNOWN = "EID never appears in the E-observations"
 REASON_NO_INCLUSIVE = "never in an inclusive zone: only vague E-observations, no usable evidence"
 
@@ -221,42 +231,45 @@ def _settle(
     return node, eid, paths
 
 
-_Verdict = tuple[str | None, int, int, str]
+class _Verdict(NamedTuple):
+    """VID filtering's judgement of one EID: best free VID and count, runner-up and count, and
+    why the result is not acceptable ('' when it is)."""
+
+    vid: str | None
+    count: int
+    second: str | None
+    second_count: int
+    why: str
 
 
 def _judge_all(
     counts: pd.DataFrame,
-    evidence: dict[int, list[int]],
+    usable: dict[int, int],
     pending: Sequence[int],
     taken: set[str],
     params: MatchParams,
 ) -> dict[int, _Verdict]:
-    """Per pending EID: best free VID, its count, the runner-up's count and why the result is not
-    acceptable ('' when it is). ``counts`` is sorted by eid, count desc, vid."""
+    """Judge every pending EID. ``counts`` is sorted by eid, count desc, vid; ``usable`` is the
+    number of each EID's evidence scenarios that have a V-scenario (missing ones do not vote)."""
     if taken and len(counts):
         counts = counts[~counts["vid"].isin(taken)]
-    top = counts.groupby("eid", sort=False).head(2)
-    e_arr = top["eid"].to_numpy()
-    best: dict[int, list[tuple[str, int]]] = {}
-    for e, v, c in zip(e_arr.tolist(), top["vid"].tolist(), top["count"].tolist(), strict=True):
-        best.setdefault(int(e), []).append((str(v), int(c)))
+    best = _ranked(counts)
     out: dict[int, _Verdict] = {}
     for e in pending:
-        n = len(evidence[e])
+        n = usable[e]
         free = best.get(e, [])
         if not free:
-            out[e] = (None, 0, 0, f"no free VID in its {n} V-scenarios")
+            out[e] = _Verdict(None, 0, None, 0, f"no free VID in its {n} V-scenarios")
             continue
-        (v1, c1), c2 = free[0], (free[1][1] if len(free) > 1 else 0)
+        (v1, c1), (v2, c2) = free[0], (free[1] if len(free) > 1 else (None, 0))
         why = ""
         if n < params.min_evidence:
-            why = f"only {n} evidence scenario(s) (need {params.min_evidence})"
+            why = f"only {n} evidence scenario(s) with video (need {params.min_evidence})"
         elif c1 - c2 < params.margin:
-            second = free[1][0] if len(free) > 1 else "-"
-            why = f"ambiguous after {n} scenarios: {v1} in {c1}, {second} in {c2}"
+            why = f"{AMBIGUOUS} after {n} scenarios: {v1} in {c1}, {v2 or '-'} in {c2}"
         elif c1 < params.support * n:
             why = f"weak: best VID {v1} in only {c1} of {n} scenarios"
-        out[e] = (v1, c1, c2, why)
+        out[e] = _Verdict(v1, c1, v2, c2, why)
     return out
 
 
@@ -284,6 +297,27 @@ def _targets_and_order(
     return np.unique(codes), window_order(len(data.windows_ns), seed)
 
 
+def multi_located(data: EData, min_windows: int = 2, min_share: float = 0.25) -> dict[int, str]:
+    """EIDs inclusive in two or more cells in the same window, often: more than one device.
+
+    One phone cannot spend most of a window in each of two cells (an inclusive zone means "most
+    of the window here"), so an EID that does so in >= ``min_windows`` windows and in
+    >= ``min_share`` of the windows it is inclusive in is carried by several devices (a cloned or
+    colliding MAC, an IMSI shared by two people). Returns EID code -> the reason.
+    """
+    rows = data.rows[~data.rows["vague"].to_numpy()]
+    if rows.empty:
+        return {}
+    per = rows.groupby(["eid", "w"], sort=False).size()
+    multi = (per >= 2).groupby(level="eid").agg(["sum", "size"])
+    hits = multi[(multi["sum"] >= min_windows) & (multi["sum"] >= min_share * multi["size"])]
+    return {
+        int(e): f"inclusive in 2+ cells at once in {int(r['sum'])} of its {int(r['size'])} "
+        "windows: more than one device carries this EID"
+        for e, r in hits.iterrows()
+    }
+
+
 def match_ss(
     data: EData,
     vstore: VStore,
@@ -300,61 +334,23 @@ def match_ss(
     evidence, distinguished, iterations = _set_split(data, targets, order, engine, inc, progress)
     t1 = time.perf_counter()
     result: dict[int, EvMatch] = {}
+    shared = multi_located(data)
     pending: list[int] = []
     for e in targets.tolist():
         ev = evidence.get(e, [])
         evidence[e] = ev
         if not ev and not len(inc.scenarios_of(e)):
-            result[e] = EvMatch(str(data.eids[e]), None, 0.0, (), REASON_NO_INCLUSIVE)
+            result[e] = _unresolved(data, e, (), REASON_NO_INCLUSIVE)
+        elif e in shared:
+            evidence[e] = inc.scenarios_of(e)[: params.max_evidence].tolist()
         else:
             pending.append(e)
-    taken: set[str] = set()
+    result.update(_judge_shared(data, vstore, engine, evidence, shared, targets))
     rounds = 0
+    taken: set[str] = set()
     while pending:
         rounds += 1
-        # add one scenario to EIDs short of evidence before filtering (free of a V read if shared)
-        for e in pending:
-            if len(evidence[e]) < params.min_evidence:
-                _extend(e, evidence, inc, params, vstore.cache)
-        ev_e = np.array([e for e in pending for _ in evidence[e]], np.int64)
-        ev_s = np.array([s for e in pending for s in evidence[e]], np.int64)
-        vids = vstore.fetch(ev_s.tolist())
-        verdicts = _judge_all(engine.vote(ev_e, ev_s, vids), evidence, pending, taken, params)
-        ok = sorted(
-            (e for e in pending if not verdicts[e][3]),
-            key=lambda e: (-(verdicts[e][1] - verdicts[e][2]), -verdicts[e][1], e),
-        )
-        still: list[int] = []
-        claimed: set[str] = set()
-        for e in ok:
-            v, c1, c2, _ = verdicts[e]
-            if v in claimed:
-                still.append(e)  # the VID went to a stronger claim this round; re-judge next round
-                continue
-            claimed.add(v)  # type: ignore[arg-type]
-            n = len(evidence[e])
-            result[e] = EvMatch(
-                str(data.eids[e]),
-                v,
-                _confidence(c1, c2, n),
-                tuple(data.scenario_name(s) for s in evidence[e]),
-            )
-        taken |= claimed
-        for e in pending:
-            if e in result or e in still:
-                continue
-            if not _extend(e, evidence, inc, params, vstore.cache):
-                v, c1, c2, why = verdicts[e]
-                result[e] = EvMatch(
-                    str(data.eids[e]),
-                    None,
-                    0.0,
-                    tuple(data.scenario_name(s) for s in evidence[e]),
-                    why,
-                )
-            else:
-                still.append(e)
-        pending = sorted(still)
+        pending = _refine_round(data, vstore, engine, inc, params, evidence, pending, taken, result)
         if progress is not None:
             progress(len(result), len(targets))
     t2 = time.perf_counter()
@@ -371,14 +367,112 @@ def match_ss(
     )
 
 
+def _names(data: EData, scenarios: Sequence[int], vstore: VStore) -> tuple[str, ...]:
+    """Evidence scenarios that had video, by name."""
+    return tuple(data.scenario_name(s) for s in scenarios if s not in vstore.missing)
+
+
+def _unresolved(
+    data: EData, e: int, names: tuple[str, ...], why: str, candidates: tuple[str, ...] = ()
+) -> EvMatch:
+    status = AMBIGUOUS if why.startswith(AMBIGUOUS) else "unresolved"
+    return EvMatch(str(data.eids[e]), None, 0.0, names, why, status, candidates)
+
+
+def _judge_shared(
+    data: EData,
+    vstore: VStore,
+    engine: Engine,
+    evidence: dict[int, list[int]],
+    shared: dict[int, str],
+    targets: np.ndarray,
+) -> dict[int, EvMatch]:
+    """EIDs carried by several devices: ``ambiguous``, with the VIDs their evidence shows most."""
+    mine = [e for e in targets.tolist() if e in shared]
+    if not mine:
+        return {}
+    ev_e = np.array([e for e in mine for _ in evidence[e]], np.int64)
+    ev_s = np.array([s for e in mine for s in evidence[e]], np.int64)
+    ranked = _ranked(engine.vote(ev_e, ev_s, vstore.fetch(ev_s.tolist())))
+    out = {}
+    for e in mine:
+        top = ranked.get(e, [])
+        shown = ", ".join(f"{v} in {c}" for v, c in top)
+        why = f"{AMBIGUOUS}: {shared[e]}" + (f"; candidates {shown}" if shown else "")
+        out[e] = _unresolved(
+            data, e, _names(data, evidence[e], vstore), why, tuple(v for v, _ in top)
+        )
+    return out
+
+
+def _refine_round(
+    data: EData,
+    vstore: VStore,
+    engine: Engine,
+    inc: _Inclusive,
+    params: MatchParams,
+    evidence: dict[int, list[int]],
+    pending: list[int],
+    taken: set[str],
+    result: dict[int, EvMatch],
+) -> list[int]:
+    """One round of VID filtering and matching refining; returns the EIDs still pending."""
+    missing = vstore.missing
+    # add one scenario to EIDs short of evidence before filtering (free of a V read if shared)
+    for e in pending:
+        if _usable(evidence[e], missing) < params.min_evidence:
+            _extend(e, evidence, inc, params, vstore.cache, missing)
+    ev_e = np.array([e for e in pending for _ in evidence[e]], np.int64)
+    ev_s = np.array([s for e in pending for s in evidence[e]], np.int64)
+    vids = vstore.fetch(ev_s.tolist())
+    usable = {e: _usable(evidence[e], missing) for e in pending}
+    verdicts = _judge_all(engine.vote(ev_e, ev_s, vids), usable, pending, taken, params)
+    ok = sorted(
+        (e for e in pending if not verdicts[e].why),
+        key=lambda e: (-(verdicts[e].count - verdicts[e].second_count), -verdicts[e].count, e),
+    )
+    still: list[int] = []
+    claimed: set[str] = set()
+    for e in ok:
+        v = verdicts[e]
+        if v.vid in claimed or v.vid is None:
+            still.append(e)  # the VID went to a stronger claim this round; re-judge next round
+            continue
+        claimed.add(v.vid)
+        result[e] = EvMatch(
+            str(data.eids[e]),
+            v.vid,
+            _confidence(v.count, v.second_count, usable[e]),
+            _names(data, evidence[e], vstore),
+            "",
+            "matched",
+            (v.vid,) if v.second is None else (v.vid, v.second),
+        )
+    taken |= claimed
+    for e in pending:
+        if e in result or e in still:
+            continue
+        if _extend(e, evidence, inc, params, vstore.cache, missing):
+            still.append(e)
+            continue
+        v = verdicts[e]
+        cands = tuple(x for x in (v.vid, v.second) if x is not None)
+        result[e] = _unresolved(data, e, _names(data, evidence[e], vstore), v.why, cands)
+    return sorted(still)
+
+
 def _in_request_order(
     data: EData, requested: Sequence[str], result: dict[int, EvMatch]
 ) -> list[EvMatch]:
     idx = pd.Index(data.eids).get_indexer(list(requested)) if len(requested) else []
     return [
-        result[int(i)] if i >= 0 else EvMatch(name, None, 0.0, (), REASON_UNKNOWN)
+        result[int(i)] if i >= 0 else EvMatch(name, None, 0.0, (), REASON_UNKNOWN, "unresolved")
         for name, i in zip(requested, idx, strict=True)
     ]
+
+
+def _usable(scenarios: Sequence[int], missing: Collection[int]) -> int:
+    return sum(1 for s in scenarios if s not in missing)
 
 
 def _extend(
@@ -387,23 +481,25 @@ def _extend(
     inc: _Inclusive,
     p: MatchParams,
     read: Collection[int] | None = None,
+    missing: Collection[int] = (),
 ) -> bool:
     """Give the EID more evidence: every V-scenario already read where it is inclusive (no extra
     video to process), else the inclusive scenario farthest in time from its evidence (people
     who share a cell now likely share it a minute later, so a near window rarely tells them
-    apart); ties go to the earlier window in the random order."""
-    if len(evidence[e]) >= p.max_evidence:
+    apart); ties go to the earlier window in the random order. Scenarios without video do not
+    count toward ``max_evidence``."""
+    if _usable(evidence[e], missing) >= p.max_evidence:
         return False
     mine = inc.scenarios_of(e)
     have = set(evidence[e])
-    fresh = np.array([int(s) not in have for s in mine.tolist()], bool)
+    fresh = np.array([int(s) not in have and int(s) not in missing for s in mine.tolist()], bool)
     if not fresh.any():
         return False
     cand = mine[fresh]
     if read:
         free = [s for s in cand.tolist() if s in read]
         if free:
-            evidence[e].extend(free[: p.max_evidence - len(evidence[e])])
+            evidence[e].extend(free[: p.max_evidence - _usable(evidence[e], missing)])
             return True
     if evidence[e]:
         used_w = np.array(evidence[e], np.int64) // inc.n_cells
@@ -481,19 +577,23 @@ def match_edp(
     for e, ch in zip(targets.tolist(), chosen_all, strict=True):
         # each EID task reads its own V-scenarios (no sharing across EIDs)
         reads += len(ch)
-        nbytes += sum(vstore.sizes[s] for s in ch)
-        names = tuple(data.scenario_name(s) for s in ch)
+        nbytes += sum(vstore.sizes.get(s, 0) for s in ch)
+        names = _names(data, ch, vstore)
         r = ranked.get(e, [])
         if not ch:
-            result[e] = EvMatch(str(data.eids[e]), None, 0.0, (), "no E-scenario lists it")
+            result[e] = _unresolved(data, e, (), "no E-scenario lists it")
         elif not r:
-            result[e] = EvMatch(
-                str(data.eids[e]), None, 0.0, names, f"no VID in its {len(ch)} V-scenarios"
-            )
+            result[e] = _unresolved(data, e, names, f"no VID in its {len(names)} V-scenarios")
         else:
             c2 = r[1][1] if len(r) > 1 else 0
             result[e] = EvMatch(
-                str(data.eids[e]), r[0][0], _confidence(r[0][1], c2, len(ch)), names
+                str(data.eids[e]),
+                r[0][0],
+                _confidence(r[0][1], c2, len(names)),
+                names,
+                "",
+                "matched",
+                tuple(v for v, _ in r),
             )
     if progress is not None:
         progress(len(targets), len(targets))

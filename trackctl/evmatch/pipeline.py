@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import enum
 import time
+import warnings
 from dataclasses import dataclass, field
 
-from trackctl.errors import InputError
+from trackctl.errors import IncompleteInputWarning, InputError
 from trackctl.evmatch.data import EData, VStore, load_e, load_ground_truth
 from trackctl.evmatch.engines import make_engine
-from trackctl.evmatch.matcher import MatchOutcome, MatchParams, match_edp, match_ss
+from trackctl.evmatch.matcher import AMBIGUOUS, MatchOutcome, MatchParams, match_edp, match_ss
 from trackctl.logs import topics
 from trackctl.logs.messages import EvMatches, MetricReport
 from trackctl.logs.reader import LogReader
@@ -71,6 +72,32 @@ def match_log(
     return outcome, data, vstore, stages
 
 
+def _warn_incomplete(reader: LogReader, data: EData, vstore: VStore, outcome: MatchOutcome) -> None:
+    """Say what the run had to do without: no EIDs at all, V-scenarios that were not there."""
+    if not len(data.eids):
+        warnings.warn(
+            f"{reader.path}: {topics.EV_E} lists no EID: nothing to match",
+            IncompleteInputWarning,
+            stacklevel=3,
+        )
+    elif not outcome.matches:
+        warnings.warn("no EID requested: nothing to match", IncompleteInputWarning, stacklevel=3)
+    if vstore.missing:
+        gone = vstore.missing_topics()
+        where = (
+            f"; no V topic at all for {len(gone)} cell(s): {', '.join(gone[:5])}"
+            + (", ..." if len(gone) > 5 else "")
+            if gone
+            else ""
+        )
+        warnings.warn(
+            f"{reader.path}: {len(vstore.missing)} of the V-scenarios needed have no video "
+            f"(camera down, gap or cut log){where}; matched with the rest, as missed detections",
+            IncompleteInputWarning,
+            stacklevel=3,
+        )
+
+
 def run(
     reader: LogReader,
     writer: LogWriter,
@@ -82,7 +109,9 @@ def run(
     started = time.perf_counter()
     outcome, data, vstore, stages = match_log(reader, config, progress)
     truth = load_ground_truth(reader)
+    _warn_incomplete(reader, data, vstore, outcome)
     matched = sum(m.vid is not None for m in outcome.matches)
+    ambiguous = sum(m.status == AMBIGUOUS for m in outcome.matches)
     correct = sum(m.vid is not None and truth.get(m.eid) == m.vid for m in outcome.matches)
     requested = len(outcome.matches)
     end_ns = int(data.windows_ns[-1]) + data.window_ns if len(data.windows_ns) else 0
@@ -99,11 +128,14 @@ def run(
         "matched": matched,
         "correct": correct if truth else None,
         "accuracy": round(correct / requested, 4) if truth and requested else None,
-        "unresolved": requested - matched,
+        "unresolved": requested - matched - ambiguous,
         "v_scenarios_read": outcome.v_scenarios_read,
         "v_scenarios_total": v_total,
         "v_bytes_read": outcome.v_bytes_read,
         "seconds": round(time.perf_counter() - started, 3),
+        "ambiguous": ambiguous,
+        "v_scenarios_missing": len(vstore.missing),
+        "v_topics_missing": len(vstore.missing_topics()),
         "v_scenarios_unique": outcome.v_scenarios_unique,
         "e_scenarios_total": int(data.rows[["w", "cell"]].drop_duplicates().shape[0]),
         "eids_in_log": len(data.eids),

@@ -501,10 +501,14 @@ class EvMatch(JsonMessage):
     Attributes:
         eid: The electronic ID.
         vid: Matched VID, null when unresolved.
-        confidence: Share of the EID's evidence scenarios that show the VID, scaled by the margin
-            over the runner-up (0..1); 0 when unresolved.
-        scenarios: Evidence EV-scenarios as <cell>@<window start ns>.
-        reason: Why the EID is unresolved; empty when matched.
+        confidence: The best VID's lead over the runner-up, as a share of the evidence
+            scenarios that had video (0..1); 0 when not matched.
+        scenarios: Evidence EV-scenarios (those with video) as <cell>@<window start ns>.
+        reason: Why the EID is not matched; empty when matched.
+        status: matched, ambiguous (the evidence fits several VIDs, or several devices carry the
+            EID: see candidates) or unresolved; empty in logs written before this field existed
+            (then a null vid means unresolved).
+        candidates: The VIDs the evidence shows most, best first (at most two).
     """
 
     eid: str
@@ -512,6 +516,8 @@ class EvMatch(JsonMessage):
     confidence: Annotated[float, Range(ge=0, le=1)]
     scenarios: tuple[str, ...] = ()
     reason: str = ""
+    status: str = ""
+    candidates: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

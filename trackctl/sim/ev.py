@@ -8,14 +8,27 @@ pause) in a square area cut into square cells. Every ``sample_s`` each person is
   probability that falls linearly from ``drift_p`` at the border to 0 at ``drift_m``. Per window
   and cell the EIDs' occurrence shares give the zones: ``>= inclusive_frac`` inclusive,
   ``>= vague_frac`` vague, below that exclusive (not listed).
+  With ``drift_m`` > cell/2 every sample can drift, and a drifting sample lands up to
+  ``drift_m - d`` past the border (uniform), so beyond the adjacent cell when ``drift_m`` > cell
+  (cell-ID positioning on large or overlapping cells). A phone is heard only when it talks to the
+  network: with ``hear_s`` set, each sample is heard with probability ``sample_s / hear_s``
+  (random activity; the default hears every sample) and the zone shares count heard samples only.
+  ``shared_eids`` pairs of people carry one EID (a cloned or colliding MAC, a shared phone): one
+  EID then moves in two places at once.
 * **V side** - each cell has a camera: its V-scenario of a window lists every person seen in the
   cell in at least one sampled frame, with the mean ground position and the number of frames; a
   person's VID is missing from a V-scenario with probability ``vid_miss`` (occlusion, missed
-  detection).
+  detection). **Re-identification errors**: with probability ``reid_error`` per person and window
+  the person's detections carry another person's VID for the whole window (errors are correlated
+  within a window, as a tracker's identity switch is): the VID of someone in the same cell when
+  there is one (an identity switch between neighbours), else of a random person (a wrong gallery
+  match). The person's own VID is then absent from those V-scenarios.
 
 Each cell's V-scenarios are on their own topic (``/ev/cell/<i>_<j>/v``), one message per window at
 the window's start time, so a matcher reads one V-scenario through the MCAP index without touching
-the others. The EID <-> VID ground truth is one ``trackctl.GroundTruth`` on ``/ev/ground_truth``.
+the others. E-observations and V-scenarios go to separate chunks (each window: one or more chunks of
+E, then of V), so loading the E table never decompresses video data. The EID <-> VID ground truth
+is one ``trackctl.GroundTruth`` on ``/ev/ground_truth``.
 
 The walkers are vectorised over people (one state array, stepped at ``sample_s``) instead of
 :func:`trackctl.sim.walkers.random_waypoint`, which samples one person at a time on a 50 ms grid:
@@ -62,6 +75,9 @@ class EvScenario:
     vague_frac: float = 0.25
     speed_mps: tuple[float, float] = (0.5, 1.5)
     pause_s: tuple[float, float] = (0.0, 60.0)
+    hear_s: float | None = None
+    reid_error: float = 0.0
+    shared_eids: int = 0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -69,12 +85,18 @@ class EvScenario:
             raise InputError(f"--people {self.people}: need at least one person")
         if not (self.cell_m > 0 and self.area_m >= self.cell_m):
             raise InputError(f"--cell {self.cell_m} / --area {self.area_m}: need 0 < cell <= area")
-        for name in ("eid_miss", "vid_miss", "drift_p"):
+        for name in ("eid_miss", "vid_miss", "drift_p", "reid_error"):
             value = getattr(self, name)
             if not 0.0 <= value <= 1.0:
                 raise InputError(f"--{name.replace('_', '-')} {value}: expected a share in [0, 1]")
-        if self.drift_m < 0 or self.drift_m > self.cell_m / 2:
-            raise InputError(f"--drift-m {self.drift_m}: expected 0..cell/2 ({self.cell_m / 2})")
+        if not 0 <= self.drift_m <= self.area_m:
+            raise InputError(f"--drift-m {self.drift_m}: expected 0..area ({self.area_m})")
+        if self.hear_s is not None and not self.hear_s > 0:
+            raise InputError(f"--hear-interval {self.hear_s}: expected seconds > 0")
+        if not 0 <= 2 * self.shared_eids <= self.people:
+            raise InputError(
+                f"--shared-eids {self.shared_eids}: expected 0..people/2 ({self.people // 2})"
+            )
         if not (0 < self.sample_s <= self.window_s <= self.duration_s):
             raise InputError(
                 f"sample {self.sample_s} s, window {self.window_s} s, duration "
@@ -160,9 +182,14 @@ def _e_cells(cfg: EvScenario, pos: np.ndarray, rng: np.random.Generator, n_side:
     else:
         p = np.zeros_like(d)
     drift = rng.random(d.shape) < p
-    moved = ij + np.where(drift, toward, 0)
-    ok = (moved >= 0) & (moved < n_side)
-    return np.where(ok, moved, ij)
+    step = toward
+    if cfg.drift_m > c / 2:
+        # past the border by up to drift_m - d: 1 cell, or more when drift_m > cell
+        beyond = rng.uniform(0.0, 1.0, d.shape) * np.maximum(cfg.drift_m - d, 0.0)
+        step = toward * (1 + np.floor(beyond / c).astype(np.int64))
+    moved = ij + np.where(drift, step, 0)
+    moved = np.clip(moved, 0, n_side - 1)
+    return np.where(drift, moved, ij)
 
 
 def simulate_ev(out: str, cfg: EvScenario | None = None) -> dict[str, int]:
@@ -181,6 +208,12 @@ def simulate_ev(out: str, cfg: EvScenario | None = None) -> dict[str, int]:
     vid_codes = rng.permutation(n) + 1
     eids = np.array([eid_name(int(c)) for c in eid_codes])
     vids = np.array([vid_name(int(c)) for c in vid_codes])
+    if cfg.shared_eids:
+        # pairs of phone carriers: the second of each pair carries the first's EID
+        carriers = np.flatnonzero(has_phone)
+        k = min(cfg.shared_eids, len(carriers) // 2)
+        pick = rng.choice(carriers, 2 * k, replace=False)
+        eids[pick[k:]] = eids[pick[:k]]
     walkers = _Walkers(cfg, rng)
     k_per_w = cfg.samples_per_window
     window_ns = int(round(cfg.window_s * NS_PER_S))
@@ -210,16 +243,24 @@ def simulate_ev(out: str, cfg: EvScenario | None = None) -> dict[str, int]:
             e_keys = []
             v_keys = []
             v_pos = []
+            heard = np.zeros(n, np.int64)
             for _ in range(k_per_w):
                 ij = np.clip(np.floor(walkers.pos / cfg.cell_m).astype(np.int64), 0, n_side - 1)
                 v_keys.append(np.arange(n) * n_cells + ij[:, 1] * n_side + ij[:, 0])
                 v_pos.append(walkers.pos.copy())
                 eij = _e_cells(cfg, walkers.pos[phone_idx], rng, n_side)
-                e_keys.append(phone_idx * n_cells + eij[:, 1] * n_side + eij[:, 0])
+                keys = phone_idx * n_cells + eij[:, 1] * n_side + eij[:, 0]
+                if cfg.hear_s is not None:
+                    on = rng.random(len(phone_idx)) < min(1.0, cfg.sample_s / cfg.hear_s)
+                    keys = keys[on]
+                    heard[phone_idx[on]] += 1
+                else:
+                    heard[phone_idx] += 1
+                e_keys.append(keys)
                 walkers.step(cfg.sample_s)
             # E-scenarios: occurrence share per (person, cell) -> inclusive / vague / exclusive
             ek, ecount = np.unique(np.concatenate(e_keys), return_counts=True)
-            share = ecount / k_per_w
+            share = ecount / np.maximum(heard[ek // n_cells], 1)
             listed = share >= cfg.vague_frac - 1e-12
             ek, share = ek[listed], share[listed]
             e_person, e_cell = ek // n_cells, ek % n_cells
@@ -233,6 +274,8 @@ def simulate_ev(out: str, cfg: EvScenario | None = None) -> dict[str, int]:
             keep = rng.random(vk.size) >= cfg.vid_miss
             vk, vx, vy, vcount = vk[keep], vx[keep], vy[keep], vcount[keep]
             v_person, v_cell = vk // n_cells, vk % n_cells
+            if cfg.reid_error > 0:
+                v_person = _reid_errors(cfg.reid_error, v_person, v_cell, n, rng)
             e_order = np.lexsort((eids[e_person], e_cell))
             v_order = np.lexsort((vids[v_person], v_cell))
             e_bounds = np.searchsorted(e_cell[e_order], np.arange(n_cells + 1))
@@ -251,6 +294,7 @@ def simulate_ev(out: str, cfg: EvScenario | None = None) -> dict[str, int]:
                         samples=k_per_w,
                     ),
                 )
+            writer.flush()  # E and V in separate chunks
             for c in range(n_cells):
                 sel = v_order[v_bounds[c] : v_bounds[c + 1]]
                 put(
@@ -267,4 +311,39 @@ def simulate_ev(out: str, cfg: EvScenario | None = None) -> dict[str, int]:
                         frames=tuple(vcount[sel].tolist()),
                     ),
                 )
+            writer.flush()
     return counts
+
+
+def _reid_errors(
+    p: float, person: np.ndarray, cell: np.ndarray, n: int, rng: np.random.Generator
+) -> np.ndarray:
+    """Who each V detection is labelled as, after re-identification errors (module docstring).
+
+    One draw per person and window: a person whose draw fails is labelled, in every cell they are
+    seen in this window, as a neighbour in the same cell (identity switch) or, alone, as a random
+    person (wrong gallery match)."""
+    wrong = rng.random(n) < p
+    hit = np.flatnonzero(wrong[person])
+    if not hit.size:
+        return person
+    out = person.copy()
+    # a random other detection of the same cell: sort detections by cell, pick an offset that
+    # skips the detection itself
+    order = np.argsort(cell, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    lo = np.searchsorted(cell[order], cell[hit], side="left")
+    sizes = np.searchsorted(cell[order], cell[hit], side="right") - lo
+    r = (rng.random(hit.size) * np.maximum(sizes - 1, 1)).astype(np.int64)
+    cand = lo + r
+    cand = np.where(cand >= rank[hit], cand + 1, cand).clip(0, order.size - 1)
+    other = person[order[cand]]
+    stranger = rng.integers(0, max(n - 1, 1), hit.size)
+    stranger = np.where(stranger >= person[hit], stranger + 1, stranger) % n
+    out[hit] = np.where(sizes > 1, other, stranger)
+    # one wrong label per person per window: the same substitute in every cell they are seen in
+    first: dict[int, int] = {}
+    for i, (who, sub) in enumerate(zip(person[hit].tolist(), out[hit].tolist(), strict=True)):
+        out[hit[i]] = first.setdefault(who, sub)
+    return out
