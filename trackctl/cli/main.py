@@ -10,7 +10,7 @@ from trackctl.cli.common import TrackctlGroup
 from trackctl.cli.evmatch import ev_match, simulate_ev
 from trackctl.cli.info import info
 from trackctl.cli.process import process, report
-from trackctl.cli.record import record, recover
+from trackctl.cli.record import filter_cmd, record, recover
 from trackctl.cli.replay import replay
 from trackctl.cli.simulate import simulate_app
 from trackctl.cli.smirror import simulate_smirror, smirror
@@ -44,6 +44,7 @@ def _root(
 app.command()(info)
 app.command()(record)
 app.command()(recover)
+app.command("filter")(filter_cmd)
 app.command()(replay)
 app.command()(process)
 app.command()(report)

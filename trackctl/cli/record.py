@@ -213,3 +213,38 @@ def recover(
         )
     elif not quiet:
         stderr.print(f"recovered {result.messages} messages from {partial} into {result.out}")
+
+
+def filter_cmd(
+    log: Annotated[Path, typer.Argument(help="MCAP log to read (never changed).")],
+    out: Annotated[Path, typer.Option(help="Filtered MCAP log to write.")],
+    include: Annotated[
+        list[str] | None,
+        typer.Option("--include", help="Keep only topics matching this glob (repeatable)."),
+    ] = None,
+    exclude: Annotated[
+        list[str] | None,
+        typer.Option("--exclude", help="Drop topics matching this glob (repeatable)."),
+    ] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No notes.")] = False,
+) -> None:
+    """Copy a log without some topics (metadata and attachments kept), e.g. drop the ground
+    truth or a camera to see how a processor copes."""
+    from trackctl.logs.copy import filter_log
+
+    result = filter_log(log, out, include=tuple(include or ()), exclude=tuple(exclude or ()))
+    if json_out:
+        print_json(
+            {
+                "out": str(result.out),
+                "messages": result.messages,
+                "kept_topics": len(result.kept_topics),
+                "dropped_topics": list(result.dropped_topics),
+            }
+        )
+    elif not quiet:
+        stderr.print(
+            f"wrote {result.messages} messages on {len(result.kept_topics)} topics to "
+            f"{result.out}; dropped {', '.join(result.dropped_topics) or 'nothing'}"
+        )

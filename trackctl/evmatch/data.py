@@ -170,7 +170,7 @@ class VStore:
         )
 
     def _window_reader(self) -> IndexedWindowReader | None:
-        if self._indexed is None and not self.reader.truncated:
+        if self._indexed is None and self.reader.reindex():
             try:
                 self._indexed = IndexedWindowReader(self.reader)
             except LogError:

@@ -57,6 +57,8 @@ def match_log(
     if config.engine not in ("local", "spark"):
         raise InputError(f"--engine {config.engine!r}: expected local or spark")
     t0 = time.perf_counter()
+    # a cut log is indexed once, so that V-scenario fetches seek instead of rescanning it
+    reader.reindex()
     data = load_e(reader)
     t1 = time.perf_counter()
     requested = list(config.eids) if config.eids is not None else data.eids.tolist()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import fcntl
+import fnmatch
 import os
 from collections.abc import Callable, Container
 from dataclasses import dataclass
@@ -12,7 +13,7 @@ from trackctl.errors import LogError, OutputError
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import PARTIAL_SUFFIX, LogWriter
 
-__all__ = ["copy_log", "recover_log", "RecoverResult"]
+__all__ = ["copy_log", "filter_log", "FilterResult", "recover_log", "RecoverResult"]
 
 Progress = Callable[[int, int | None], None]
 
@@ -52,6 +53,58 @@ def copy_log(
         for name, (media_type, blob) in reader.attachments().items():
             writer.add_attachment(name, blob, media_type)
     return n
+
+
+@dataclass(frozen=True, slots=True)
+class FilterResult:
+    """What :func:`filter_log` wrote."""
+
+    out: Path
+    messages: int
+    kept_topics: tuple[str, ...]
+    dropped_topics: tuple[str, ...]
+
+
+def filter_log(
+    src: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    include: tuple[str, ...] = (),
+    exclude: tuple[str, ...] = (),
+    progress: Progress | None = None,
+) -> FilterResult:
+    """Copy ``src`` to ``out`` without some topics; metadata and attachments are kept.
+
+    Args:
+        include: glob patterns (``fnmatch``) of the topics to keep; empty keeps every topic.
+        exclude: glob patterns of topics to drop (applied after ``include``).
+
+    Raises:
+        InputError: a pattern matches no topic of the log (a typo would silently keep it).
+        OutputError: ``out`` is the input.
+    """
+    from trackctl.errors import InputError
+
+    reader = LogReader(src)
+    if Path(out).resolve() == Path(src).resolve():
+        raise OutputError(f"{out}: output path is the input log; choose another --out")
+    topics = sorted(reader.topics())
+    for flag, patterns in (("--include", include), ("--exclude", exclude)):
+        for pat in patterns:
+            if not fnmatch.filter(topics, pat):
+                raise InputError(
+                    f"{flag} {pat!r}: no topic of {src} matches; it has {', '.join(topics)}"
+                )
+    kept = [
+        t
+        for t in topics
+        if (not include or any(fnmatch.fnmatchcase(t, p) for p in include))
+        and not any(fnmatch.fnmatchcase(t, p) for p in exclude)
+    ]
+    dropped = sorted(set(topics) - set(kept))
+    with LogWriter(out, inputs=[Path(src)]) as writer:
+        n = copy_log(reader, writer, progress, skip_topics=set(dropped))
+    return FilterResult(Path(out), n, tuple(kept), tuple(dropped))
 
 
 @dataclass(frozen=True, slots=True)

@@ -52,6 +52,7 @@ from trackctl.logs.recovery import (
     ScanEnd,
     decode_chunk,
     parse_message_index,
+    rebuild_index,
     scan_damaged,
 )
 
@@ -264,6 +265,44 @@ class LogReader:
             bool(self._summary.chunk_indexes) or (stats is not None and stats.message_count == 0)
         )
         self._stats_cache: dict[str, TopicInfo] | None = None
+
+    def reindex(self) -> bool:
+        """Index a log that has no usable summary (a cut copy, an unfinished recording) once, so
+        that topic and time-range reads seek instead of rescanning the file each time.
+
+        The index covers every complete chunk up to the cut (see
+        :func:`~trackctl.logs.recovery.rebuild_index`); the warning says where the log is cut and
+        what the index leaves out. A log that is already indexed is left as it is.
+
+        Returns:
+            True when the log can now be read through an index.
+        """
+        if self._indexed or not self.truncated:
+            return self._indexed
+        with self.path.open("rb") as f:
+            rebuilt = rebuild_index(f)
+        if rebuilt.unindexed_messages or not rebuilt.summary.chunk_indexes:
+            # messages outside chunks, or no complete chunk: only a sequential read sees them
+            return False
+        for damage in rebuilt.end.damage:
+            self._damaged(damage)
+        summary = rebuilt.summary
+        self._summary = summary
+        self._indexed = bool(summary.chunk_indexes)
+        self._stats_cache = None
+        stats = summary.statistics
+        left = (
+            f"; {rebuilt.cut_chunk_messages} complete messages of the cut-off chunk are left out"
+            if rebuilt.cut_chunk_messages
+            else ""
+        )
+        where = "ends" if rebuilt.end.reason == "end" else f"is cut {rebuilt.end.reason}"
+        self._warn(
+            f"{self.path}: log {where} at byte {rebuilt.end.offset} of {self.size}: indexed "
+            f"{len(summary.chunk_indexes)} chunks, {stats.message_count} messages up to log time "
+            f"{stats.message_end_time} ns{left}"
+        )
+        return self._indexed
 
     # -- warnings -----------------------------------------------------------------------------
     def _warn(self, text: str) -> None:

@@ -342,3 +342,179 @@ def scan_damaged(f: IO[bytes], end: ScanEnd) -> Iterator[Any]:
             yield record
     if lost_chunk is not None:
         end.damage.append(lost_chunk)
+
+
+@dataclass
+class RebuiltIndex:
+    """A summary rebuilt from the records of a log that has none (see :func:`rebuild_index`).
+
+    Attributes:
+        summary: schemas, channels, chunk indexes (pointing at the message index records that
+            follow each chunk), metadata and attachment indexes, and statistics.
+        end: where and why the walk stopped, and the damage met.
+        cut_chunk_messages: complete messages in a chunk the log ends inside (not indexed).
+        unindexed_messages: messages outside any chunk (the log then cannot be used indexed).
+    """
+
+    summary: Any
+    end: ScanEnd
+    cut_chunk_messages: int = 0
+    unindexed_messages: int = 0
+
+
+def _chunk_index(start: int, length: int, head: ChunkHeader) -> Any:
+    from mcap.records import ChunkIndex
+
+    return ChunkIndex(
+        message_start_time=head.start_ns,
+        message_end_time=head.end_ns,
+        chunk_start_offset=start,
+        chunk_length=_HEAD.size + length,
+        message_index_offsets={},
+        message_index_length=0,
+        compression=head.compression,
+        compressed_size=head.data_length,
+        uncompressed_size=head.uncompressed_size,
+    )
+
+
+class _IndexBuilder:
+    """State of :func:`rebuild_index`: the chunk being completed by its message indexes."""
+
+    def __init__(self) -> None:
+        from mcap.summary import Summary
+
+        self.summary = Summary()
+        self.counts: dict[int, int] = {}
+        self.chunk: Any = None
+        self.body = b""
+        self.damage: list[Damage] = []
+
+    def finish_chunk(self) -> None:
+        """Keep the chunk in progress; decompress it only when it declares a channel (or has no
+        message index to say which channels it holds)."""
+        ci, self.chunk = self.chunk, None
+        if ci is None:
+            return
+        known = self.summary.channels
+        if not ci.message_index_offsets or not ci.message_index_offsets.keys() <= known.keys():
+            try:
+                records = decode_chunk(self.body)
+            except ChunkError as err:
+                lost = sum(self._indexed.values()) if ci.message_index_offsets else None
+                self.damage.append(Damage(ci.chunk_start_offset, str(err), lost))
+                for channel_id in ci.message_index_offsets:
+                    self.counts[channel_id] -= self._indexed.get(channel_id, 0)
+                return
+            for record in records:
+                self.add(record)
+            if not ci.message_index_offsets:
+                for record in records:
+                    if isinstance(record, Message):
+                        self.counts[record.channel_id] = self.counts.get(record.channel_id, 0) + 1
+        self.summary.chunk_indexes.append(ci)
+
+    def add(self, record: Any) -> None:
+        if isinstance(record, Schema):
+            self.summary.schemas[record.id] = record
+        elif isinstance(record, Channel):
+            self.summary.channels[record.id] = record
+
+    def message_index(self, start: int, length: int, body: bytes) -> None:
+        index = parse_message_index(body)
+        self.chunk.message_index_offsets[index.channel_id] = start
+        self.chunk.message_index_length += _HEAD.size + length
+        n = len(index.records)
+        self._indexed[index.channel_id] = n
+        self.counts[index.channel_id] = self.counts.get(index.channel_id, 0) + n
+
+    def start_chunk(self, start: int, length: int, body: bytes) -> None:
+        self.finish_chunk()
+        self.chunk = _chunk_index(start, length, parse_chunk_header(body))
+        self.body = body
+        self._indexed: dict[int, int] = {}
+
+
+def rebuild_index(f: IO[bytes]) -> RebuiltIndex:
+    """Walk a log without a usable summary once and rebuild one, as far as the log is sound.
+
+    Chunks are indexed through the message index records the writer put after each of them; a
+    chunk is decompressed only when it declares a schema or channel not seen before (or has no
+    message index), so the walk costs about one read of the file. A chunk the log ends inside is
+    not indexed (its complete messages are counted); a damaged chunk met while decompressing is
+    left out and listed in ``end.damage``.
+    """
+    from mcap.records import AttachmentIndex, MetadataIndex, Statistics
+
+    size = os.fstat(f.fileno()).st_size
+    f.seek(_MAGIC_LEN)
+    b = _IndexBuilder()
+    end = ScanEnd()
+    out = RebuiltIndex(b.summary, end)
+    while True:
+        start = f.tell()
+        head = f.read(_HEAD.size)
+        if len(head) < _HEAD.size:
+            end.offset, end.reason = start, "inside a record header" if head else "end"
+            break
+        opcode, length = _HEAD.unpack(head)
+        if length > size - start - _HEAD.size:
+            end.offset, end.reason = start, f"inside a {_NAMES.get(opcode, hex(opcode))} record"
+            if opcode == Opcode.CHUNK:
+                out.cut_chunk_messages = sum(
+                    isinstance(r, Message) for r in _cut_chunk(f.read(), ScanEnd())
+                )
+            break
+        body = f.read(length)
+        try:
+            if opcode == Opcode.MESSAGE_INDEX and b.chunk is not None:
+                b.message_index(start, length, body)
+                continue
+            if opcode == Opcode.CHUNK:
+                b.start_chunk(start, length, body)
+                continue
+            b.finish_chunk()
+            if opcode in (Opcode.FOOTER, Opcode.DATA_END):
+                end.offset, end.reason = start, "end"
+                break
+            record = _top_level(opcode, head, body)
+        except ChunkError as err:
+            b.chunk = None
+            end.damage.append(Damage(start, str(err), None, _NAMES.get(opcode, "record")))
+            continue
+        if isinstance(record, Message):
+            out.unindexed_messages += 1
+        elif isinstance(record, Metadata):
+            b.summary.metadata_indexes.append(
+                MetadataIndex(offset=start, length=_HEAD.size + length, name=record.name)
+            )
+        elif isinstance(record, Attachment):
+            b.summary.attachment_indexes.append(
+                AttachmentIndex(
+                    offset=start,
+                    length=_HEAD.size + length,
+                    log_time=record.log_time,
+                    create_time=record.create_time,
+                    data_size=len(record.data),
+                    name=record.name,
+                    media_type=record.media_type,
+                )
+            )
+        else:
+            b.add(record)
+    b.finish_chunk()
+    end.damage.extend(b.damage)
+    chunks = b.summary.chunk_indexes
+    counts = {k: v for k, v in b.counts.items() if v > 0}
+    b.summary.statistics = Statistics(
+        message_count=sum(counts.values()),
+        schema_count=len(b.summary.schemas),
+        channel_count=len(b.summary.channels),
+        attachment_count=len(b.summary.attachment_indexes),
+        metadata_count=len(b.summary.metadata_indexes),
+        chunk_count=len(chunks),
+        message_start_time=min((c.message_start_time for c in chunks), default=0),
+        message_end_time=max((c.message_end_time for c in chunks), default=0),
+        channel_message_counts=counts,
+    )
+    return out

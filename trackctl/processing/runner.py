@@ -6,6 +6,7 @@ import json
 import os
 import tempfile
 import time
+import warnings
 from collections.abc import Container, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -87,7 +88,10 @@ def run_processors(
     if not chain:
         raise OutputError("no processor given; pass --with NAME (see `trackctl process --list`)")
     input_path = Path(input_path)
-    source = LogReader(input_path)  # fail early on a bad input, before creating anything
+    with warnings.catch_warnings():
+        # the processor's own reader warns about a damaged input; say it once, not twice
+        warnings.simplefilter("ignore")
+        source = LogReader(input_path)  # fail early on a bad input, before creating anything
     if out_path is None:
         with tempfile.TemporaryDirectory(prefix="trackctl-") as tmp:
             return run_processors(
@@ -103,8 +107,10 @@ def run_processors(
     skip_topics: Container[str] = ()
     skip_metadata: Container[str] = ()
     if outputs_only:
-        skip_topics = set(source.topics())
-        skip_metadata = set(source.metadata())
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            skip_topics = set(source.topics())
+            skip_metadata = set(source.metadata())
     reports: list[MetricReport] = []
     current = input_path
     temps: list[Path] = []
