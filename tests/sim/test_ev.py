@@ -73,3 +73,84 @@ def test_drift_makes_vague_eids_and_missing_people(tmp_path: Path) -> None:
     ]
     per_window = sum(seen) / reader.topics()[topics.EV_E].count * 9
     assert 0.7 * 60 < per_window < 1.1 * 60 * 1.3
+
+
+def _labels(path: Path) -> tuple[dict[str, str], list[tuple[int, str, tuple[str, ...]]]]:
+    reader = LogReader(path)
+    (gt,) = [m.message for m in reader.messages([topics.EV_GROUND_TRUTH])]
+    vid_of = {e.entity_id: e.visual_id for e in gt.entities}
+    v = [
+        (m.log_time_ns, m.message.cell, m.message.vids)
+        for m in reader.messages()
+        if m.topic.startswith(topics.EV_V_PREFIX)
+    ]
+    return vid_of, v
+
+
+def test_reid_errors_swap_labels_per_window() -> None:
+    from trackctl.sim.ev import _reid_errors
+
+    rng = np.random.default_rng(0)
+    n = 2000
+    # each person seen in one or two cells of 50 this window
+    person = np.concatenate([np.arange(n), np.arange(0, n, 2)])
+    cell = np.concatenate([rng.integers(0, 50, n), rng.integers(0, 50, n // 2)])
+    lonely = 10_000  # a cell with one person: a swap there takes a random person's VID
+    cell[0] = lonely
+    got = _reid_errors(0.2, person, cell, n, rng)
+    wrong = got != person
+    # ~20% of people, all their detections of the window
+    share = len(set(person[wrong].tolist())) / n
+    assert 0.17 < share < 0.23
+    for who in set(person[wrong].tolist()):
+        subs = set(got[person == who].tolist())
+        assert len(subs) == 1 and who not in subs
+    # a switch lands on someone in the same cell when there is one
+    same_cell = [
+        bool(np.any((person == s) & (cell == c)))
+        for s, c, w in zip(got.tolist(), cell.tolist(), wrong.tolist(), strict=True)
+        if w and c != lonely
+    ]
+    assert np.mean(same_cell) > 0.45  # the first cell's pick wins for a person seen in two
+
+
+def test_hear_interval_and_long_drift(tmp_path: Path) -> None:
+    always, sparse = tmp_path / "always.mcap", tmp_path / "sparse.mcap"
+    simulate_ev(str(always), EvScenario(**SMALL, seed=7))
+    simulate_ev(str(sparse), EvScenario(**SMALL, hear_s=30.0, seed=7))
+
+    def listings(path: Path) -> int:
+        return sum(len(m.message.eids) for m in LogReader(path).messages([topics.EV_E]))
+
+    # heard in ~1/6 of the samples: windows with a single sample make zones coarse but a phone
+    # is still listed most windows; without any contact it is not listed at all
+    assert listings(sparse) < listings(always)
+
+    def far_listings(path: Path) -> int:
+        """E listings two or more cells from every cell the person's camera saw them in."""
+        reader = LogReader(path)
+        (gt,) = [m.message for m in reader.messages([topics.EV_GROUND_TRUTH])]
+        vid_of = {e.electronic_id: e.visual_id for e in gt.entities if e.electronic_id}
+        seen: dict[tuple[int, str], list[tuple[int, int]]] = {}
+        far = 0
+        for m in reader.messages():
+            ij = (
+                tuple(int(x) for x in m.message.cell.split("_"))
+                if m.topic != topics.EV_GROUND_TRUTH
+                else None
+            )
+            if m.topic.startswith(topics.EV_V_PREFIX):
+                for v in m.message.vids:
+                    seen.setdefault((m.log_time_ns, v), []).append(ij)
+        for m in reader.messages([topics.EV_E]):
+            i, j = (int(x) for x in m.message.cell.split("_"))
+            for e in m.message.eids:
+                cells = seen.get((m.log_time_ns, vid_of[e]), [])
+                far += bool(cells) and all(max(abs(i - a), abs(j - b)) >= 2 for a, b in cells)
+        return far
+
+    near, far = tmp_path / "near.mcap", tmp_path / "far.mcap"
+    simulate_ev(str(near), EvScenario(**SMALL, vid_miss=0.0, drift_m=40.0, seed=7))
+    simulate_ev(str(far), EvScenario(**SMALL, vid_miss=0.0, drift_m=250.0, seed=7))
+    assert far_listings(near) == 0
+    assert far_listings(far) > 10

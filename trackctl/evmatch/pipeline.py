@@ -70,6 +70,7 @@ def match_log(
     finally:
         engine.close()
         vstore.close()
+    _warn_incomplete(reader, data, vstore, outcome)
     stages = {"seconds_load_e": t1 - t0, **outcome.stage_seconds}
     return outcome, data, vstore, stages
 
@@ -111,7 +112,6 @@ def run(
     started = time.perf_counter()
     outcome, data, vstore, stages = match_log(reader, config, progress)
     truth = load_ground_truth(reader)
-    _warn_incomplete(reader, data, vstore, outcome)
     matched = sum(m.vid is not None for m in outcome.matches)
     ambiguous = sum(m.status == AMBIGUOUS for m in outcome.matches)
     correct = sum(m.vid is not None and truth.get(m.eid) == m.vid for m in outcome.matches)
@@ -136,6 +136,7 @@ def run(
         "v_bytes_read": outcome.v_bytes_read,
         "seconds": round(time.perf_counter() - started, 3),
         "ambiguous": ambiguous,
+        "precision": round(correct / matched, 4) if truth and matched else None,
         "v_scenarios_missing": len(vstore.missing),
         "v_topics_missing": len(vstore.missing_topics()),
         "v_scenarios_unique": outcome.v_scenarios_unique,
