@@ -236,9 +236,9 @@ class _Verdict(NamedTuple):
     why the result is not acceptable ('' when it is)."""
 
     vid: str | None
-    count: int
+    votes: int
     second: str | None
-    second_count: int
+    second_votes: int
     why: str
 
 
@@ -429,7 +429,7 @@ def _refine_round(
     verdicts = _judge_all(engine.vote(ev_e, ev_s, vids), usable, pending, taken, params)
     ok = sorted(
         (e for e in pending if not verdicts[e].why),
-        key=lambda e: (-(verdicts[e].count - verdicts[e].second_count), -verdicts[e].count, e),
+        key=lambda e: (-(verdicts[e].votes - verdicts[e].second_votes), -verdicts[e].votes, e),
     )
     still: list[int] = []
     claimed: set[str] = set()
@@ -442,7 +442,7 @@ def _refine_round(
         result[e] = EvMatch(
             str(data.eids[e]),
             v.vid,
-            _confidence(v.count, v.second_count, usable[e]),
+            _confidence(v.votes, v.second_votes, usable[e]),
             _names(data, evidence[e], vstore),
             "",
             "matched",
