@@ -4,58 +4,34 @@ store that reads one (cell topic, window) at a time and counts what it read."""
 from __future__ import annotations
 
 from array import array
-from collections.abc import Iterable
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
 from trackctl.errors import InputError, LogError, MissingTopicError
+from trackctl.evmatch.eindex import ECatalog
+from trackctl.evmatch.engines import Engine
 from trackctl.logs import topics
 from trackctl.logs.codecs import Codec
 from trackctl.logs.messages import GroundTruth, VScenario
 from trackctl.logs.reader import IndexedWindowReader, LogReader, RawMessage
 
-__all__ = ["EData", "VStore", "load_e", "load_ground_truth"]
+__all__ = ["ECatalog", "EData", "VStore", "load_e", "load_ground_truth"]
 
 
 @dataclass
-class EData:
-    """Every E-scenario of a log, as integer codes.
+class EData(ECatalog):
+    """Every E-scenario of a log, as integer codes (the catalog plus the listings).
 
     Attributes:
-        eids: EID names, sorted; an EID's code is its index.
-        cells: cell names, sorted; a cell's code is its index.
-        windows_ns: window start times, sorted; a window's code is its index.
-        window_ns: window length (ns).
         rows: one row per (window, cell, EID) listing: columns ``w``, ``cell``, ``eid`` (codes)
-            and ``vague`` (bool). A scenario's id is ``w * len(cells) + cell``.
+            and ``vague`` (bool), sorted by (w, cell, eid). A scenario's id is
+            ``w * len(cells) + cell``.
     """
 
-    eids: np.ndarray
-    cells: list[str]
-    windows_ns: np.ndarray
-    window_ns: int
-    rows: pd.DataFrame
-
-    @property
-    def n_cells(self) -> int:
-        return len(self.cells)
-
-    def scenario_id(self, w: np.ndarray | int, cell: np.ndarray | int) -> np.ndarray | int:
-        return w * self.n_cells + cell
-
-    def scenario_name(self, s: int) -> str:
-        """``<cell>@<window start ns>`` (how matches name their evidence)."""
-        w, c = divmod(int(s), self.n_cells)
-        return f"{self.cells[c]}@{int(self.windows_ns[w])}"
-
-    def eid_codes(self, names: Iterable[str]) -> tuple[np.ndarray, list[str]]:
-        """Codes of the known names (in the given order) and the names that never appear."""
-        names = list(names)
-        idx = pd.Index(self.eids).get_indexer(names) if names else np.zeros(0, np.int64)
-        missing = [n for n, i in zip(names, idx, strict=True) if i < 0]
-        return idx[idx >= 0].astype(np.int64), missing
+    rows: pd.DataFrame = field(default_factory=pd.DataFrame)
 
 
 def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
@@ -120,11 +96,13 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
     sel = order[first]
     del key, order, first
     rows = pd.DataFrame({"w": w[sel], "cell": c[sel], "eid": e[sel], "vague": v[sel]})
+    scen = rows["w"].to_numpy(np.int64) * max(len(cells), 1) + rows["cell"].to_numpy(np.int64)
     return EData(
         eids=eids,
         cells=cells,
         windows_ns=windows,
         window_ns=int(window_ns or 0),
+        e_scenarios=int(len(np.unique(scen))),
         rows=rows,
     )
 
@@ -152,7 +130,7 @@ class VStore:
     """
 
     reader: LogReader
-    data: EData
+    data: ECatalog
     cache: dict[int, tuple[str, ...]] = field(default_factory=dict)
     sizes: dict[int, int] = field(default_factory=dict)
     _indexed: IndexedWindowReader | None = None
@@ -232,6 +210,17 @@ class VStore:
             else:
                 self.missing.add(s)
         return {s: self.cache[s] for s in scenarios if s in self.cache}
+
+    @property
+    def known(self) -> Collection[int]:
+        """Scenario ids read so far (with video)."""
+        return self.cache.keys()
+
+    def vote(self, engine: Engine, eid: np.ndarray, scenario: np.ndarray) -> pd.DataFrame:
+        """Read the scenarios' V-scenarios and count, per EID, the VIDs over its evidence
+        (``engine.vote``); scenarios without video do not vote."""
+        vids = self.fetch(scenario.tolist())
+        return engine.vote(eid, scenario, vids)
 
     def missing_topics(self) -> list[str]:
         """V topics of cells listed in the E-observations that the log does not have."""

@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 
 from trackctl.evmatch.data import EData, VStore
+from trackctl.evmatch.eindex import ECatalog, EIndex, local_index
 from trackctl.evmatch.engines import Engine
 from trackctl.logs.messages import EvMatch
 
@@ -49,7 +50,6 @@ __all__ = [
     "match_edp",
     "window_order",
     "AMBIGUOUS",
-    "multi_located",
 ]
 
 AMBIGUOUS = "ambiguous"
@@ -86,51 +86,41 @@ def window_order(n_windows: int, seed: int) -> np.ndarray:
     return np.random.default_rng(seed).permutation(n_windows)
 
 
-class _Inclusive:
-    """Fast look-ups into the inclusive listings: membership and each EID's scenarios by rank."""
+def _rank(order: np.ndarray) -> np.ndarray:
+    rank = np.empty(len(order), np.int64)
+    rank[order] = np.arange(len(order))
+    return rank
 
-    def __init__(self, data: EData, order: np.ndarray) -> None:
-        rows = data.rows[~data.rows["vague"].to_numpy()]
-        w = rows["w"].to_numpy(np.int64)
-        c = rows["cell"].to_numpy(np.int64)
-        e = rows["eid"].to_numpy(np.int64)
-        s = w * data.n_cells + c
-        n_e = max(len(data.eids), 1)
-        self.keys = np.sort(s * n_e + e)
-        self.n_e = n_e
-        rank = np.empty(len(order), np.int64)
-        rank[order] = np.arange(len(order))
-        r = rank[w] if len(order) else w
-        by = np.lexsort((c, r, e))
-        self.eid_sorted = e[by]
-        self.scen_sorted = s[by]
-        self.bounds = np.searchsorted(self.eid_sorted, np.arange(n_e + 1))
-        self.n_cells = data.n_cells
 
-    def has(self, s: int, e: int) -> bool:
-        k = s * self.n_e + e
-        i = np.searchsorted(self.keys, k)
-        return bool(i < len(self.keys) and self.keys[i] == k)
-
-    def scenarios_of(self, e: int) -> np.ndarray:
-        """Scenarios where ``e`` is inclusive, in window order."""
-        return self.scen_sorted[self.bounds[e] : self.bounds[e + 1]]
+def _path_evidence(
+    eindex: EIndex, pairs: list[tuple[int, int]], paths: dict[int, tuple[int, ...]]
+) -> dict[tuple[int, int], list[int]]:
+    """For each (set, EID) pair: the scenarios of the set's path where the EID is inclusive
+    (one batched question to the E index)."""
+    flat_e = [e for g, e in pairs for _ in paths[g]]
+    flat_s = [x for g, _ in pairs for x in paths[g]]
+    mask = eindex.inclusive_mask(np.array(flat_e, np.int64), np.array(flat_s, np.int64)).tolist()
+    out: dict[tuple[int, int], list[int]] = {}
+    i = 0
+    for g, e in pairs:
+        n = len(paths[g])
+        out[(g, e)] = [x for x, ok in zip(paths[g], mask[i : i + n], strict=True) if ok]
+        i += n
+    return out
 
 
 def _set_split(
-    data: EData,
+    eindex: EIndex,
     targets: np.ndarray,
     order: np.ndarray,
     engine: Engine,
-    inc: _Inclusive,
     progress: Callable[[int, int | None], None] | None,
 ) -> tuple[dict[int, list[int]], set[int], int]:
     """EID set splitting; returns evidence per target, the distinguished targets, iterations."""
-    n_e = len(data.eids)
+    cat = eindex.catalog
+    n_e = len(cat.eids)
     pending = np.zeros(n_e, bool)
     pending[targets] = True
-    rows = data.rows
-    w_bounds = np.searchsorted(rows["w"].to_numpy(), np.arange(len(data.windows_ns) + 1))
     node = np.zeros(n_e, np.int64)
     eid = np.arange(n_e, dtype=np.int64)
     paths: dict[int, tuple[int, ...]] = {0: ()}
@@ -142,23 +132,23 @@ def _set_split(
         if not pending.any():
             break
         iterations += 1
-        lw = rows.iloc[w_bounds[w] : w_bounds[w + 1]]
-        lw_eid = lw["eid"].to_numpy(np.int64)
-        lw_cell = lw["cell"].to_numpy(np.int64)
+        lw_eid, lw_cell = eindex.listing(int(w))
         # Preprocess: only the scenarios that list an EID still to be distinguished
         useful = np.unique(lw_cell[pending[lw_eid]])
         keep = np.isin(lw_cell, useful)
         listing = pd.DataFrame({"eid": lw_eid[keep], "cell": lw_cell[keep]})
-        split = _split_sets(engine.split(node, eid, listing), node, paths, int(w), data.n_cells)
+        split = _split_sets(engine.split(node, eid, listing), node, paths, int(w), cat.n_cells)
         if split is None:
             break
-        node, eid, paths = _settle(*split, pending, inc, evidence, distinguished, best_copy)
+        node, eid, paths = _settle(*split, pending, eindex, evidence, distinguished, best_copy)
         if progress is not None:
             progress(int((~pending[targets]).sum()), len(targets))
     # targets never alone: their best copy's evidence (refining may still resolve them)
-    for g, e in zip(node.tolist(), eid.tolist(), strict=True):
+    left = [(g, e) for g, e in zip(node.tolist(), eid.tolist(), strict=True) if pending[e]]
+    found = _path_evidence(eindex, left, paths)
+    for g, e in left:
         if pending[e]:
-            ev = [s for s in paths[g] if inc.has(s, e)]
+            ev = found[(g, e)]
             prev = evidence.get(e)
             if prev is None or len(ev) > len(prev):
                 evidence[e] = ev
@@ -197,7 +187,7 @@ def _settle(
     eid: np.ndarray,
     paths: dict[int, tuple[int, ...]],
     pending: np.ndarray,
-    inc: _Inclusive,
+    eindex: EIndex,
     evidence: dict[int, list[int]],
     distinguished: set[int],
     best_copy: dict[int, list[int]],
@@ -207,8 +197,10 @@ def _settle(
     while True:
         alone = (np.bincount(node)[node] == 1) & pending[eid] if len(node) else node > 0
         if alone.any():
-            for g, e in zip(node[alone].tolist(), eid[alone].tolist(), strict=True):
-                ev = [s for s in paths[g] if inc.has(s, e)]
+            pairs = list(zip(node[alone].tolist(), eid[alone].tolist(), strict=True))
+            found = _path_evidence(eindex, pairs, paths)
+            for g, e in pairs:
+                ev = found[(g, e)]
                 prev = best_copy.get(e)
                 if prev is None or len(ev) > len(prev):
                     best_copy[e] = ev
@@ -289,7 +281,7 @@ def _confidence(c1: int, c2: int, n: int) -> float:
 
 
 def _targets_and_order(
-    data: EData, requested: Sequence[str], seed: int
+    data: ECatalog, requested: Sequence[str], seed: int
 ) -> tuple[np.ndarray, np.ndarray]:
     """The requested EIDs' codes (unique, sorted; EIDs the log never saw are answered apart)
     and the seeded order in which both algorithms visit the time windows."""
@@ -297,29 +289,8 @@ def _targets_and_order(
     return np.unique(codes), window_order(len(data.windows_ns), seed)
 
 
-def multi_located(data: EData, min_windows: int = 2, min_share: float = 0.25) -> dict[int, str]:
-    """EIDs inclusive in two or more cells in the same window, often: more than one device.
-
-    One phone cannot spend most of a window in each of two cells (an inclusive zone means "most
-    of the window here"), so an EID that does so in >= ``min_windows`` windows and in
-    >= ``min_share`` of the windows it is inclusive in is carried by several devices (a cloned or
-    colliding MAC, an IMSI shared by two people). Returns EID code -> the reason.
-    """
-    rows = data.rows[~data.rows["vague"].to_numpy()]
-    if rows.empty:
-        return {}
-    per = rows.groupby(["eid", "w"], sort=False).size()
-    multi = (per >= 2).groupby(level="eid").agg(["sum", "size"])
-    hits = multi[(multi["sum"] >= min_windows) & (multi["sum"] >= min_share * multi["size"])]
-    return {
-        int(e): f"inclusive in 2+ cells at once in {int(r['sum'])} of its {int(r['size'])} "
-        "windows: more than one device carries this EID"
-        for e, r in hits.iterrows()
-    }
-
-
 def match_ss(
-    data: EData,
+    data: EData | EIndex,
     vstore: VStore,
     requested: Sequence[str],
     engine: Engine,
@@ -327,34 +298,39 @@ def match_ss(
     seed: int,
     progress: Callable[[int, int | None], None] | None = None,
 ) -> MatchOutcome:
-    """EID set splitting + VID filtering + matching refining (see the module docstring)."""
+    """EID set splitting + VID filtering + matching refining (see the module docstring).
+
+    ``data`` is the E table (queried in this process) or an :class:`EIndex` built with the
+    same seed's window order (the Spark engine's, whose shards live on the executors).
+    """
     t0 = time.perf_counter()
-    targets, order = _targets_and_order(data, requested, seed)
-    inc = _Inclusive(data, order)
-    evidence, distinguished, iterations = _set_split(data, targets, order, engine, inc, progress)
+    cat = data.catalog if isinstance(data, EIndex) else data
+    targets, order = _targets_and_order(cat, requested, seed)
+    eindex = data if isinstance(data, EIndex) else local_index(data, data.rows, _rank(order))
+    evidence, distinguished, iterations = _set_split(eindex, targets, order, engine, progress)
     t1 = time.perf_counter()
     result: dict[int, EvMatch] = {}
-    shared = multi_located(data)
+    shared = eindex.multi_located()
+    have_inclusive = eindex.with_inclusive(targets)
     pending: list[int] = []
     for e in targets.tolist():
-        ev = evidence.get(e, [])
-        evidence[e] = ev
-        if not ev and not len(inc.scenarios_of(e)):
-            result[e] = _unresolved(data, e, (), REASON_NO_INCLUSIVE)
-        elif e in shared:
-            evidence[e] = inc.scenarios_of(e)[: params.max_evidence].tolist()
-        else:
+        evidence[e] = evidence.get(e, [])
+        if not evidence[e] and e not in have_inclusive:
+            result[e] = _unresolved(cat, e, (), REASON_NO_INCLUSIVE)
+        elif e not in shared:
             pending.append(e)
-    result.update(_judge_shared(data, vstore, engine, evidence, shared, targets))
+    mine = [e for e in targets.tolist() if e in shared and e not in result]
+    evidence.update(eindex.first_inclusive(mine, params.max_evidence))
+    result.update(_judge_shared(cat, vstore, engine, evidence, shared, mine))
     rounds = 0
     taken: set[str] = set()
     while pending:
         rounds += 1
-        pending = _refine_round(data, vstore, engine, inc, params, evidence, pending, taken, result)
+        pending = _refine_round(eindex, vstore, engine, params, evidence, pending, taken, result)
         if progress is not None:
             progress(len(result), len(targets))
     t2 = time.perf_counter()
-    matches = _in_request_order(data, requested, result)
+    matches = _in_request_order(cat, requested, result)
     return MatchOutcome(
         matches=matches,
         v_scenarios_read=vstore.reads,
@@ -367,49 +343,69 @@ def match_ss(
     )
 
 
-def _names(data: EData, scenarios: Sequence[int], vstore: VStore) -> tuple[str, ...]:
+def _names(cat: ECatalog, scenarios: Sequence[int], vstore: VStore) -> tuple[str, ...]:
     """Evidence scenarios that had video, by name."""
-    return tuple(data.scenario_name(s) for s in scenarios if s not in vstore.missing)
+    return tuple(cat.scenario_name(s) for s in scenarios if s not in vstore.missing)
 
 
 def _unresolved(
-    data: EData, e: int, names: tuple[str, ...], why: str, candidates: tuple[str, ...] = ()
+    cat: ECatalog, e: int, names: tuple[str, ...], why: str, candidates: tuple[str, ...] = ()
 ) -> EvMatch:
     status = AMBIGUOUS if why.startswith(AMBIGUOUS) else "unresolved"
-    return EvMatch(str(data.eids[e]), None, 0.0, names, why, status, candidates)
+    return EvMatch(str(cat.eids[e]), None, 0.0, names, why, status, candidates)
 
 
 def _judge_shared(
-    data: EData,
+    cat: ECatalog,
     vstore: VStore,
     engine: Engine,
     evidence: dict[int, list[int]],
     shared: dict[int, str],
-    targets: np.ndarray,
+    mine: list[int],
 ) -> dict[int, EvMatch]:
     """EIDs carried by several devices: ``ambiguous``, with the VIDs their evidence shows most."""
-    mine = [e for e in targets.tolist() if e in shared]
     if not mine:
         return {}
     ev_e = np.array([e for e in mine for _ in evidence[e]], np.int64)
     ev_s = np.array([s for e in mine for s in evidence[e]], np.int64)
-    ranked = _ranked(engine.vote(ev_e, ev_s, vstore.fetch(ev_s.tolist())))
+    ranked = _ranked(vstore.vote(engine, ev_e, ev_s))
     out = {}
     for e in mine:
         top = ranked.get(e, [])
         shown = ", ".join(f"{v} in {c}" for v, c in top)
         why = f"{AMBIGUOUS}: {shared[e]}" + (f"; candidates {shown}" if shown else "")
         out[e] = _unresolved(
-            data, e, _names(data, evidence[e], vstore), why, tuple(v for v, _ in top)
+            cat, e, _names(cat, evidence[e], vstore), why, tuple(v for v, _ in top)
         )
     return out
 
 
+def _extend_all(
+    eindex: EIndex,
+    eids: Sequence[int],
+    evidence: dict[int, list[int]],
+    params: MatchParams,
+    vstore: VStore,
+) -> set[int]:
+    """Give each EID more evidence (one batched question to the E index): every V-scenario
+    already read where it is inclusive (no extra video to process), else the inclusive scenario
+    farthest in time from its evidence (people who share a cell now likely share it a minute
+    later, so a near window rarely tells them apart); ties go to the earlier window in the random
+    order. Scenarios without video do not count toward ``max_evidence``. Returns the EIDs that
+    got more."""
+    missing = vstore.missing
+    room = {e: params.max_evidence - _usable(evidence[e], missing) for e in eids}
+    requests = {e: evidence[e] for e in eids if room[e] > 0}
+    added = eindex.extend(requests, vstore.known, missing, room)
+    for e, more in added.items():
+        evidence[e].extend(more)
+    return set(added)
+
+
 def _refine_round(
-    data: EData,
+    eindex: EIndex,
     vstore: VStore,
     engine: Engine,
-    inc: _Inclusive,
     params: MatchParams,
     evidence: dict[int, list[int]],
     pending: list[int],
@@ -417,16 +413,16 @@ def _refine_round(
     result: dict[int, EvMatch],
 ) -> list[int]:
     """One round of VID filtering and matching refining; returns the EIDs still pending."""
+    cat = eindex.catalog
     missing = vstore.missing
     # add one scenario to EIDs short of evidence before filtering (free of a V read if shared)
-    for e in pending:
-        if _usable(evidence[e], missing) < params.min_evidence:
-            _extend(e, evidence, inc, params, vstore.cache, missing)
+    short = [e for e in pending if _usable(evidence[e], missing) < params.min_evidence]
+    _extend_all(eindex, short, evidence, params, vstore)
     ev_e = np.array([e for e in pending for _ in evidence[e]], np.int64)
     ev_s = np.array([s for e in pending for s in evidence[e]], np.int64)
-    vids = vstore.fetch(ev_s.tolist())
+    counts = vstore.vote(engine, ev_e, ev_s)
     usable = {e: _usable(evidence[e], missing) for e in pending}
-    verdicts = _judge_all(engine.vote(ev_e, ev_s, vids), usable, pending, taken, params)
+    verdicts = _judge_all(counts, usable, pending, taken, params)
     ok = sorted(
         (e for e in pending if not verdicts[e].why),
         key=lambda e: (-(verdicts[e].votes - verdicts[e].second_votes), -verdicts[e].votes, e),
@@ -440,31 +436,31 @@ def _refine_round(
             continue
         claimed.add(v.vid)
         result[e] = EvMatch(
-            str(data.eids[e]),
+            str(cat.eids[e]),
             v.vid,
             _confidence(v.votes, v.second_votes, usable[e]),
-            _names(data, evidence[e], vstore),
+            _names(cat, evidence[e], vstore),
             "",
             "matched",
             (v.vid,) if v.second is None else (v.vid, v.second),
         )
     taken |= claimed
-    for e in pending:
-        if e in result or e in still:
-            continue
-        if _extend(e, evidence, inc, params, vstore.cache, missing):
+    rest = [e for e in pending if e not in result and e not in still]
+    grown = _extend_all(eindex, rest, evidence, params, vstore)
+    for e in rest:
+        if e in grown:
             still.append(e)
             continue
         v = verdicts[e]
         cands = tuple(x for x in (v.vid, v.second) if x is not None)
-        result[e] = _unresolved(data, e, _names(data, evidence[e], vstore), v.why, cands)
+        result[e] = _unresolved(cat, e, _names(cat, evidence[e], vstore), v.why, cands)
     return sorted(still)
 
 
 def _in_request_order(
-    data: EData, requested: Sequence[str], result: dict[int, EvMatch]
+    cat: ECatalog, requested: Sequence[str], result: dict[int, EvMatch]
 ) -> list[EvMatch]:
-    idx = pd.Index(data.eids).get_indexer(list(requested)) if len(requested) else []
+    idx = pd.Index(cat.eids).get_indexer(list(requested)) if len(requested) else []
     return [
         result[int(i)] if i >= 0 else EvMatch(name, None, 0.0, (), REASON_UNKNOWN, "unresolved")
         for name, i in zip(requested, idx, strict=True)
@@ -473,42 +469,6 @@ def _in_request_order(
 
 def _usable(scenarios: Sequence[int], missing: Collection[int]) -> int:
     return sum(1 for s in scenarios if s not in missing)
-
-
-def _extend(
-    e: int,
-    evidence: dict[int, list[int]],
-    inc: _Inclusive,
-    p: MatchParams,
-    read: Collection[int] | None = None,
-    missing: Collection[int] = (),
-) -> bool:
-    """Give the EID more evidence: every V-scenario already read where it is inclusive (no extra
-    video to process), else the inclusive scenario farthest in time from its evidence (people
-    who share a cell now likely share it a minute later, so a near window rarely tells them
-    apart); ties go to the earlier window in the random order. Scenarios without video do not
-    count toward ``max_evidence``."""
-    if _usable(evidence[e], missing) >= p.max_evidence:
-        return False
-    mine = inc.scenarios_of(e)
-    have = set(evidence[e])
-    fresh = np.array([int(s) not in have and int(s) not in missing for s in mine.tolist()], bool)
-    if not fresh.any():
-        return False
-    cand = mine[fresh]
-    if read:
-        free = [s for s in cand.tolist() if s in read]
-        if free:
-            evidence[e].extend(free[: p.max_evidence - _usable(evidence[e], missing)])
-            return True
-    if evidence[e]:
-        used_w = np.array(evidence[e], np.int64) // inc.n_cells
-        gap = np.abs((cand // inc.n_cells)[:, None] - used_w[None, :]).min(axis=1)
-        pick = int(cand[int(np.argmax(gap))])  # argmax keeps the first (random-order) maximum
-    else:
-        pick = int(cand[0])
-    evidence[e].append(pick)
-    return True
 
 
 def match_edp(
@@ -569,8 +529,7 @@ def match_edp(
     t1 = time.perf_counter()
     ev_e = np.array([e for e, ch in zip(targets.tolist(), chosen_all, strict=True) for _ in ch])
     ev_s = np.array([s for ch in chosen_all for s in ch], np.int64)
-    vids = vstore.fetch(ev_s.tolist())
-    ranked = _ranked(engine.vote(ev_e.astype(np.int64), ev_s, vids))
+    ranked = _ranked(vstore.vote(engine, ev_e.astype(np.int64), ev_s))
     result: dict[int, EvMatch] = {}
     reads = 0
     nbytes = 0

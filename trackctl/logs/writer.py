@@ -37,6 +37,7 @@ COMPRESSIONS = {
     "none": CompressionType.NONE,
 }
 PROFILE = "trackctl"
+MAX_CHANNELS = 65535  # MCAP channel ids are uint16 (id 0 is valid)
 PARTIAL_SUFFIX = ".partial"
 MAX_LOG_TIME_NS = (1 << 64) - 1
 
@@ -225,6 +226,11 @@ class LogWriter:
                     f"cannot also write {schema_name} ({message_encoding}) on it"
                 )
             return cid
+        if len(self._channels) >= MAX_CHANNELS:
+            raise OutputError(
+                f"{self.path}: topic {topic} would be channel {len(self._channels) + 1}; an MCAP "
+                f"log holds at most {MAX_CHANNELS} channels (16-bit channel ids)"
+            )
         sid = 0
         if schema_name or schema_data:
             sid = self._schema_id(schema_name, schema_encoding, schema_data)

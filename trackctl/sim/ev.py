@@ -52,7 +52,9 @@ from trackctl.logs.messages import (
     Vec3,
     VScenario,
 )
-from trackctl.logs.writer import LogWriter
+from trackctl.logs.writer import MAX_CHANNELS, LogWriter
+
+GROUND_TRUTH_BATCH = 10_000
 
 __all__ = ["EvScenario", "simulate_ev", "cell_name", "eid_name", "vid_name"]
 
@@ -93,6 +95,12 @@ class EvScenario:
             raise InputError(f"--drift-m {self.drift_m}: expected 0..area ({self.area_m})")
         if self.hear_s is not None and not self.hear_s > 0:
             raise InputError(f"--hear-interval {self.hear_s}: expected seconds > 0")
+        if self.cells_per_side**2 + 2 > MAX_CHANNELS:
+            raise InputError(
+                f"--area {self.area_m} / --cell {self.cell_m}: {self.cells_per_side**2} cells, one "
+                f"V topic each, exceed the {MAX_CHANNELS - 2} an MCAP log can hold (16-bit channel "
+                "ids); use larger cells"
+            )
         if not 0 <= 2 * self.shared_eids <= self.people:
             raise InputError(
                 f"--shared-eids {self.shared_eids}: expected 0..people/2 ({self.people // 2})"
@@ -227,16 +235,19 @@ def simulate_ev(out: str, cfg: EvScenario | None = None) -> dict[str, int]:
 
     with LogWriter(out) as writer:
         writer.add_metadata("ev/scenario", {k: str(v) for k, v in asdict(cfg).items()})
-        entities = tuple(
-            GroundTruthEntity(
-                entity_id=f"person{p:06d}",
-                position_m=Vec3(float(walkers.pos[p, 0]), float(walkers.pos[p, 1]), 0.0),
-                electronic_id=str(eids[p]) if has_phone[p] else None,
-                visual_id=str(vids[p]),
+        # the truth in messages of at most 10 000 people: a million-person city stays streamable
+        for first in range(0, n, GROUND_TRUTH_BATCH):
+            entities = tuple(
+                GroundTruthEntity(
+                    entity_id=f"person{p:06d}",
+                    position_m=Vec3(float(walkers.pos[p, 0]), float(walkers.pos[p, 1]), 0.0),
+                    electronic_id=str(eids[p]) if has_phone[p] else None,
+                    visual_id=str(vids[p]),
+                )
+                for p in range(first, min(n, first + GROUND_TRUTH_BATCH))
             )
-            for p in range(n)
-        )
-        put(writer, topics.EV_GROUND_TRUTH, GroundTruth(0, entities))
+            put(writer, topics.EV_GROUND_TRUTH, GroundTruth(0, entities))
+        writer.flush()
         phone_idx = np.flatnonzero(has_phone)
         for w in range(cfg.windows):
             t_ns = w * window_ns

@@ -1,0 +1,335 @@
+"""The E side of EV-Matching as set splitting and refining query it, in shards.
+
+The matcher never walks the E table itself: it asks an :class:`EIndex` for one window's listings
+(set splitting), for which (EID, scenario) pairs are inclusive (evidence), for each EID's next
+evidence scenario (refining) and for EIDs listed in two places at once. Every question is answered
+per :class:`EShard` (the listings of some windows, integer-coded with the log's global codes) and
+the partial answers are combined on the driver by the same functions, so
+
+* the local engine holds one shard with every window (:func:`local_index`), and
+* the Spark engine holds one shard per group of windows on the executors, each built by the
+  executor from the log's E chunks (:mod:`trackctl.evmatch.spark`); the driver only receives the
+  answers (one window's listings, evidence lists, picks), never the E table.
+
+Both therefore give the same answers, and the matches are identical whichever engine ran.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Collection, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["ECatalog", "EShard", "EIndex", "local_index", "Pick"]
+
+# a candidate scenario in the random window order: (rank of its window, cell, scenario id)
+Pick = tuple[int, int, int]
+
+
+@dataclass
+class ECatalog:
+    """What the driver knows of the E-observations: names and codes, not the listings.
+
+    Attributes:
+        eids: EID names, sorted; an EID's code is its index.
+        cells: cell names, sorted; a cell's code is its index.
+        windows_ns: window start times, sorted; a window's code is its index.
+        window_ns: window length (ns).
+        e_scenarios: number of (window, cell) E-scenarios that list at least one EID.
+    """
+
+    eids: np.ndarray
+    cells: list[str]
+    windows_ns: np.ndarray
+    window_ns: int
+    e_scenarios: int = 0
+
+    @property
+    def n_cells(self) -> int:
+        return len(self.cells)
+
+    def scenario_id(self, w: np.ndarray | int, cell: np.ndarray | int) -> np.ndarray | int:
+        return w * self.n_cells + cell
+
+    def scenario_name(self, s: int) -> str:
+        """``<cell>@<window start ns>`` (how matches name their evidence)."""
+        w, c = divmod(int(s), self.n_cells)
+        return f"{self.cells[c]}@{int(self.windows_ns[w])}"
+
+    def eid_codes(self, names: Iterable[str]) -> tuple[np.ndarray, list[str]]:
+        """Codes of the known names (in the given order) and the names that never appear."""
+        names = list(names)
+        idx = pd.Index(self.eids).get_indexer(names) if names else np.zeros(0, np.int64)
+        missing = [n for n, i in zip(names, idx, strict=True) if i < 0]
+        return idx[idx >= 0].astype(np.int64), missing
+
+
+@dataclass
+class EShard:
+    """The E listings of some windows: parallel arrays sorted by (window, cell, EID).
+
+    Attributes:
+        w, cell, eid: integer codes (global: the catalog's).
+        vague: the listing is in the vague zone.
+        n_cells, n_eids: sizes of the code spaces.
+        rank: each window's rank in the matcher's random window order (every window of the log).
+    """
+
+    w: np.ndarray
+    cell: np.ndarray
+    eid: np.ndarray
+    vague: np.ndarray
+    n_cells: int
+    n_eids: int
+    rank: np.ndarray
+    _inc: tuple[np.ndarray, ...] | None = field(default=None, repr=False)
+
+    @property
+    def windows(self) -> np.ndarray:
+        return np.unique(self.w)
+
+    def _inclusive(self) -> tuple[np.ndarray, ...]:
+        """Inclusive listings as sorted keys (membership) and grouped by EID in window order."""
+        if self._inc is None:
+            keep = ~self.vague
+            w = self.w[keep].astype(np.int64)
+            c = self.cell[keep].astype(np.int64)
+            e = self.eid[keep].astype(np.int64)
+            s = w * self.n_cells + c
+            keys = np.sort(s * max(self.n_eids, 1) + e)
+            r = self.rank[w] if len(w) else w
+            by = np.lexsort((c, r, e))
+            bounds = np.searchsorted(e[by], np.arange(self.n_eids + 1))
+            self._inc = (keys, s[by], r[by], c[by], w[by], bounds)
+        return self._inc
+
+    def listing(self, w: int) -> tuple[np.ndarray, np.ndarray]:
+        """(EID, cell) of every listing in window ``w`` (empty when the shard lacks it)."""
+        lo, hi = np.searchsorted(self.w, [w, w + 1])
+        return self.eid[lo:hi].astype(np.int64), self.cell[lo:hi].astype(np.int64)
+
+    def inclusive_mask(self, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Whether each (EID, scenario) pair is an inclusive listing of this shard."""
+        keys = self._inclusive()[0]
+        k = np.asarray(s, np.int64) * max(self.n_eids, 1) + np.asarray(e, np.int64)
+        i = np.searchsorted(keys, k)
+        return (i < len(keys)) & (keys[np.minimum(i, len(keys) - 1)] == k) if len(keys) else k < 0
+
+    def _of(self, e: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        _, s, r, c, w, bounds = self._inclusive()
+        lo, hi = bounds[e], bounds[e + 1]
+        return s[lo:hi], r[lo:hi], c[lo:hi], w[lo:hi]
+
+    def with_inclusive(self, eids: np.ndarray) -> np.ndarray:
+        """The EIDs of ``eids`` with at least one inclusive listing here."""
+        bounds = self._inclusive()[5]
+        eids = np.asarray(eids, np.int64)
+        return eids[bounds[eids + 1] > bounds[eids]]
+
+    def first_inclusive(self, eids: Iterable[int], k: int) -> dict[int, list[Pick]]:
+        """Each EID's first ``k`` inclusive scenarios here, in window order."""
+        out: dict[int, list[Pick]] = {}
+        for e in eids:
+            s, r, c, _ = self._of(int(e))
+            if len(s):
+                out[int(e)] = list(zip(r[:k].tolist(), c[:k].tolist(), s[:k].tolist(), strict=True))
+        return out
+
+    def extend_candidates(
+        self,
+        requests: Sequence[tuple[int, Sequence[int]]],
+        read: Collection[int],
+        missing: Collection[int],
+    ) -> dict[int, tuple[list[Pick], tuple[int, int, int, int] | None]]:
+        """For each (EID, evidence) request: the fresh inclusive scenarios here already read (in
+        window order), and the best fresh one to read next: farthest in windows from the
+        evidence, the earlier in window order on ties, as ``(gap, -rank, -cell, scenario)``."""
+        out: dict[int, tuple[list[Pick], tuple[int, int, int, int] | None]] = {}
+        for e, evidence in requests:
+            s, r, c, w = self._of(int(e))
+            if not len(s):
+                continue
+            have = set(evidence)
+            fresh = np.array([x not in have and x not in missing for x in s.tolist()], bool)
+            if not fresh.any():
+                continue
+            s, r, c, w = s[fresh], r[fresh], c[fresh], w[fresh]
+            free = [
+                (ri, ci, si)
+                for ri, ci, si in zip(r.tolist(), c.tolist(), s.tolist(), strict=True)
+                if si in read
+            ]
+            if evidence:
+                used = np.asarray(evidence, np.int64) // self.n_cells
+                gap = np.abs(w.astype(np.int64)[:, None] - used[None, :]).min(axis=1)
+            else:
+                gap = np.zeros(len(s), np.int64)
+            i = int(np.argmax(gap))  # the first maximum: earliest in window order
+            out[int(e)] = (free, (int(gap[i]), -int(r[i]), -int(c[i]), int(s[i])))
+        return out
+
+    def multi_counts(self) -> pd.DataFrame:
+        """Per EID: windows here where it is inclusive in 2+ cells (``multi``); only EIDs with
+        ``multi`` > 0."""
+        keep = ~self.vague
+        if not keep.any():
+            return pd.DataFrame({"eid": [], "multi": []}, dtype=np.int64)
+        per = (
+            pd.DataFrame({"eid": self.eid[keep], "w": self.w[keep]})
+            .groupby(["eid", "w"], sort=True)
+            .size()
+        )
+        multi = (per >= 2).groupby(level="eid").sum()
+        multi = multi[multi > 0]
+        return pd.DataFrame(
+            {"eid": multi.index.to_numpy(np.int64), "multi": multi.to_numpy(np.int64)}
+        )
+
+
+# A runner applies a function to every shard (or the shards holding one window) and returns the
+# partial answers; the EIndex combines them.
+Runner = Callable[[Callable[[EShard], Any], int | None], list[Any]]
+
+
+class EIndex:
+    """The E side, answered shard by shard (see the module docstring).
+
+    Args:
+        catalog: names and codes.
+        run: applies a function to the shards: ``run(f, window)`` returns ``[f(shard), ...]`` for
+            every shard, or for the shard holding ``window`` when it is not None.
+        rank: each window's rank in the random window order.
+        close: releases the shards (the Spark engine unpersists its RDD).
+    """
+
+    def __init__(
+        self,
+        catalog: ECatalog,
+        run: Runner,
+        rank: np.ndarray,
+        close: Callable[[], None] | None = None,
+    ) -> None:
+        self.catalog = catalog
+        self._run = run
+        self.rank = rank
+        self._close = close
+
+    def close(self) -> None:
+        if self._close is not None:
+            self._close()
+
+    def listing(self, w: int) -> tuple[np.ndarray, np.ndarray]:
+        parts = self._run(lambda sh: sh.listing(w), w)
+        eid = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
+        cell = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int64)
+        return eid, cell
+
+    def inclusive_mask(self, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        e, s = np.asarray(e, np.int64), np.asarray(s, np.int64)
+        if not len(e):
+            return np.zeros(0, bool)
+        out = np.zeros(len(e), bool)
+        for part in self._run(lambda sh: sh.inclusive_mask(e, s), None):
+            out |= part
+        return out
+
+    def with_inclusive(self, eids: np.ndarray) -> set[int]:
+        eids = np.asarray(eids, np.int64)
+        found: set[int] = set()
+        for part in self._run(lambda sh: sh.with_inclusive(eids), None):
+            found.update(part.tolist())
+        return found
+
+    def first_inclusive(self, eids: Sequence[int], k: int) -> dict[int, list[int]]:
+        merged: dict[int, list[Pick]] = {}
+        for part in self._run(lambda sh: sh.first_inclusive(eids, k), None):
+            for e, picks in part.items():
+                merged.setdefault(e, []).extend(picks)
+        return {e: [p[2] for p in sorted(picks)[:k]] for e, picks in merged.items()}
+
+    def extend(
+        self,
+        requests: dict[int, list[int]],
+        read: Collection[int],
+        missing: Collection[int],
+        room: dict[int, int],
+    ) -> dict[int, list[int]]:
+        """The scenarios to add to each requesting EID's evidence (see
+        :meth:`EShard.extend_candidates`): every fresh one already read, up to ``room[e]``, else
+        the best one to read next. EIDs with nothing fresh are left out."""
+        if not requests:
+            return {}
+        items = list(requests.items())
+        frees: dict[int, list[Pick]] = {}
+        best: dict[int, tuple[int, int, int, int]] = {}
+        for part in self._run(lambda sh: sh.extend_candidates(items, read, missing), None):
+            for e, (free, b) in part.items():
+                frees.setdefault(e, []).extend(free)
+                if b is not None and (e not in best or b > best[e]):
+                    best[e] = b
+        out: dict[int, list[int]] = {}
+        for e in best:
+            free = sorted(frees.get(e, []))
+            out[e] = [p[2] for p in free[: room[e]]] if free else [best[e][3]]
+        return out
+
+    def multi_located(self, min_windows: int = 2, min_share: float = 0.25) -> dict[int, str]:
+        """EIDs inclusive in two or more cells in the same window, often: more than one device.
+
+        One phone cannot spend most of a window in each of two cells (an inclusive zone means
+        "most of the window here"), so an EID that does so in >= ``min_windows`` windows and in
+        >= ``min_share`` of the windows it is inclusive in is carried by several devices (a
+        cloned or colliding MAC, an IMSI shared by two people). Returns EID code -> the reason.
+        """
+        parts = [p for p in self._run(lambda sh: sh.multi_counts(), None) if len(p)]
+        if not parts:
+            return {}
+        multi = pd.concat(parts).groupby("eid")["multi"].sum()
+        flagged = multi[multi >= min_windows]
+        if flagged.empty:
+            return {}
+        # the share needs every window where the EID is inclusive, in every shard
+        totals = self._inclusive_windows(flagged.index.to_numpy(np.int64))
+        out = {}
+        for e, n in flagged.items():
+            total = totals[int(e)]
+            if n >= min_share * total:
+                out[int(e)] = (
+                    f"inclusive in 2+ cells at once in {int(n)} of its {total} "
+                    "windows: more than one device carries this EID"
+                )
+        return out
+
+    def _inclusive_windows(self, eids: np.ndarray) -> dict[int, int]:
+        counts: dict[int, int] = {}
+        for part in self._run(lambda sh: _window_counts(sh, eids), None):
+            for e, n in part.items():
+                counts[e] = counts.get(e, 0) + n
+        return counts
+
+
+def _window_counts(shard: EShard, eids: np.ndarray) -> dict[int, int]:
+    """Windows of this shard in which each EID of ``eids`` is inclusive."""
+    out = {}
+    for e in eids.tolist():
+        w = shard._of(int(e))[3]
+        if len(w):
+            out[int(e)] = len(np.unique(w))
+    return out
+
+
+def local_index(catalog: ECatalog, rows: pd.DataFrame, rank: np.ndarray) -> EIndex:
+    """One shard holding every window, queried in this process (the local engine)."""
+    shard = EShard(
+        w=rows["w"].to_numpy(np.int32),
+        cell=rows["cell"].to_numpy(np.int32),
+        eid=rows["eid"].to_numpy(np.int32),
+        vague=rows["vague"].to_numpy(bool),
+        n_cells=catalog.n_cells,
+        n_eids=len(catalog.eids),
+        rank=rank,
+    )
+    return EIndex(catalog, lambda f, _w: [f(shard)], rank)
