@@ -6,6 +6,7 @@ from __future__ import annotations
 from array import array
 from collections.abc import Collection, Iterable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 import pandas as pd
@@ -18,7 +19,7 @@ from trackctl.logs.codecs import Codec
 from trackctl.logs.messages import GroundTruth, VScenario
 from trackctl.logs.reader import IndexedWindowReader, LogReader, RawMessage
 
-__all__ = ["ECatalog", "EData", "VStore", "load_e", "load_ground_truth"]
+__all__ = ["ECatalog", "EData", "VSource", "VStore", "load_e", "load_ground_truth"]
 
 
 @dataclass
@@ -118,6 +119,24 @@ def load_ground_truth(reader: LogReader, topic: str = topics.EV_GROUND_TRUTH) ->
             if ent.electronic_id is not None and ent.visual_id is not None:
                 out[ent.electronic_id] = ent.visual_id
     return out
+
+
+class VSource(Protocol):
+    """Where VID filtering gets its votes: :class:`VStore` (this process) or the Spark engine's
+    executors (:class:`~trackctl.evmatch.spark.SparkVStore`)."""
+
+    missing: set[int]
+    reads: int
+    bytes_read: int
+
+    @property
+    def known(self) -> Collection[int]:
+        """Scenario ids read so far (with video)."""
+        ...
+
+    def vote(self, engine: Engine, eid: np.ndarray, scenario: np.ndarray) -> pd.DataFrame:
+        """Per-EID VID counts over the given (EID, scenario) pairs (``Engine.vote`` columns)."""
+        ...
 
 
 @dataclass

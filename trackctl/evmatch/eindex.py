@@ -85,14 +85,15 @@ class EShard:
     n_cells: int
     n_eids: int
     rank: np.ndarray
-    _inc: tuple[np.ndarray, ...] | None = field(default=None, repr=False)
+    _inc: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(default=None, repr=False)
 
     @property
     def windows(self) -> np.ndarray:
         return np.unique(self.w)
 
-    def _inclusive(self) -> tuple[np.ndarray, ...]:
-        """Inclusive listings as sorted keys (membership) and grouped by EID in window order."""
+    def _inclusive(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Inclusive listings as sorted keys (membership) and their scenarios grouped by EID in
+        window order (with each EID's bounds); 12 bytes per listing plus 8 per EID."""
         if self._inc is None:
             keep = ~self.vague
             w = self.w[keep].astype(np.int64)
@@ -103,7 +104,11 @@ class EShard:
             r = self.rank[w] if len(w) else w
             by = np.lexsort((c, r, e))
             bounds = np.searchsorted(e[by], np.arange(self.n_eids + 1))
-            self._inc = (keys, s[by], r[by], c[by], w[by], bounds)
+            self._inc = (
+                keys,
+                s[by].astype(np.int32 if len(s) and s.max() < 2**31 else np.int64),
+                bounds,
+            )
         return self._inc
 
     def listing(self, w: int) -> tuple[np.ndarray, np.ndarray]:
@@ -119,13 +124,16 @@ class EShard:
         return (i < len(keys)) & (keys[np.minimum(i, len(keys) - 1)] == k) if len(keys) else k < 0
 
     def _of(self, e: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        _, s, r, c, w, bounds = self._inclusive()
-        lo, hi = bounds[e], bounds[e + 1]
-        return s[lo:hi], r[lo:hi], c[lo:hi], w[lo:hi]
+        """Scenario, window rank, cell and window of ``e``'s inclusive listings, in window
+        order."""
+        _, s_by, bounds = self._inclusive()
+        s = s_by[bounds[e] : bounds[e + 1]].astype(np.int64)
+        w = s // self.n_cells
+        return s, self.rank[w], s % self.n_cells, w
 
     def with_inclusive(self, eids: np.ndarray) -> np.ndarray:
         """The EIDs of ``eids`` with at least one inclusive listing here."""
-        bounds = self._inclusive()[5]
+        bounds = self._inclusive()[2]
         eids = np.asarray(eids, np.int64)
         return eids[bounds[eids + 1] > bounds[eids]]
 

@@ -38,7 +38,7 @@ from typing import NamedTuple
 import numpy as np
 import pandas as pd
 
-from trackctl.evmatch.data import EData, VStore
+from trackctl.evmatch.data import EData, VSource, VStore
 from trackctl.evmatch.eindex import ECatalog, EIndex, local_index
 from trackctl.evmatch.engines import Engine
 from trackctl.logs.messages import EvMatch
@@ -291,7 +291,7 @@ def _targets_and_order(
 
 def match_ss(
     data: EData | EIndex,
-    vstore: VStore,
+    vstore: VSource,
     requested: Sequence[str],
     engine: Engine,
     params: MatchParams,
@@ -343,7 +343,7 @@ def match_ss(
     )
 
 
-def _names(cat: ECatalog, scenarios: Sequence[int], vstore: VStore) -> tuple[str, ...]:
+def _names(cat: ECatalog, scenarios: Sequence[int], vstore: VSource) -> tuple[str, ...]:
     """Evidence scenarios that had video, by name."""
     return tuple(cat.scenario_name(s) for s in scenarios if s not in vstore.missing)
 
@@ -357,7 +357,7 @@ def _unresolved(
 
 def _judge_shared(
     cat: ECatalog,
-    vstore: VStore,
+    vstore: VSource,
     engine: Engine,
     evidence: dict[int, list[int]],
     shared: dict[int, str],
@@ -385,7 +385,7 @@ def _extend_all(
     eids: Sequence[int],
     evidence: dict[int, list[int]],
     params: MatchParams,
-    vstore: VStore,
+    vstore: VSource,
 ) -> set[int]:
     """Give each EID more evidence (one batched question to the E index): every V-scenario
     already read where it is inclusive (no extra video to process), else the inclusive scenario
@@ -404,7 +404,7 @@ def _extend_all(
 
 def _refine_round(
     eindex: EIndex,
-    vstore: VStore,
+    vstore: VSource,
     engine: Engine,
     params: MatchParams,
     evidence: dict[int, list[int]],

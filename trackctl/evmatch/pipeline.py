@@ -9,8 +9,10 @@ from dataclasses import dataclass, field
 
 from trackctl.errors import IncompleteInputWarning, InputError
 from trackctl.evmatch.data import EData, VStore, load_e, load_ground_truth
-from trackctl.evmatch.engines import make_engine
+from trackctl.evmatch.eindex import ECatalog, EIndex
+from trackctl.evmatch.engines import SparkEngine, make_engine
 from trackctl.evmatch.matcher import AMBIGUOUS, MatchOutcome, MatchParams, match_edp, match_ss
+from trackctl.evmatch.spark import SparkVStore, spark_index
 from trackctl.logs import topics
 from trackctl.logs.messages import EvMatches, MetricReport
 from trackctl.logs.reader import LogReader
@@ -52,30 +54,49 @@ class EvMatchConfig:
 
 def match_log(
     reader: LogReader, config: EvMatchConfig, progress: Progress | None = None
-) -> tuple[MatchOutcome, EData, VStore, dict[str, float]]:
+) -> tuple[MatchOutcome, ECatalog, VStore | SparkVStore, dict[str, float]]:
     """Run the matcher over a log without writing anything (benchmarks use this directly)."""
     if config.engine not in ("local", "spark"):
         raise InputError(f"--engine {config.engine!r}: expected local or spark")
     t0 = time.perf_counter()
     # a cut log is indexed once, so that V-scenario fetches seek instead of rescanning it
     reader.reindex()
-    data = load_e(reader)
-    t1 = time.perf_counter()
-    requested = list(config.eids) if config.eids is not None else data.eids.tolist()
-    vstore = VStore(reader, data)
     engine = make_engine(config.engine, config.master)
+    vstore: VStore | SparkVStore
     try:
-        algo = match_ss if config.algorithm == Algorithm.SS else match_edp
-        outcome = algo(data, vstore, requested, engine, config.params, config.seed, progress)
+        data: ECatalog | EIndex
+        if isinstance(engine, SparkEngine) and config.algorithm == Algorithm.SS:
+            # the E table and the V-scenarios stay on the executors (trackctl.evmatch.spark)
+            data, _ = spark_index(reader, engine, config.seed)
+            catalog = data.catalog
+            vstore = SparkVStore(reader, catalog, engine)
+        else:
+            data = catalog = load_e(reader)
+            vstore = VStore(reader, catalog)
+        t1 = time.perf_counter()
+        requested = list(config.eids) if config.eids is not None else catalog.eids.tolist()
+        if config.algorithm == Algorithm.SS:
+            outcome = match_ss(
+                data, vstore, requested, engine, config.params, config.seed, progress
+            )
+        else:
+            assert isinstance(data, EData) and isinstance(vstore, VStore)
+            outcome = match_edp(
+                data, vstore, requested, engine, config.params, config.seed, progress
+            )
     finally:
+        if isinstance(data, EIndex):
+            data.close()
         engine.close()
         vstore.close()
-    _warn_incomplete(reader, data, vstore, outcome)
+    _warn_incomplete(reader, catalog, vstore, outcome)
     stages = {"seconds_load_e": t1 - t0, **outcome.stage_seconds}
-    return outcome, data, vstore, stages
+    return outcome, catalog, vstore, stages
 
 
-def _warn_incomplete(reader: LogReader, data: EData, vstore: VStore, outcome: MatchOutcome) -> None:
+def _warn_incomplete(
+    reader: LogReader, data: ECatalog, vstore: VStore | SparkVStore, outcome: MatchOutcome
+) -> None:
     """Say what the run had to do without: no EIDs at all, V-scenarios that were not there."""
     if not len(data.eids):
         warnings.warn(
@@ -140,7 +161,7 @@ def run(
         "v_scenarios_missing": len(vstore.missing),
         "v_topics_missing": len(vstore.missing_topics()),
         "v_scenarios_unique": outcome.v_scenarios_unique,
-        "e_scenarios_total": int(data.rows[["w", "cell"]].drop_duplicates().shape[0]),
+        "e_scenarios_total": data.e_scenarios,
         "eids_in_log": len(data.eids),
         "distinguished": outcome.distinguished,
         "split_iterations": outcome.split_iterations,

@@ -266,6 +266,11 @@ class LogReader:
         )
         self._stats_cache: dict[str, TopicInfo] | None = None
 
+    @property
+    def summary(self) -> Summary | None:
+        """The log's summary (rebuilt by :meth:`reindex` for a cut log), None when unindexed."""
+        return self._summary if self._indexed else None
+
     def reindex(self) -> bool:
         """Index a log that has no usable summary (a cut copy, an unfinished recording) once, so
         that topic and time-range reads seek instead of rescanning the file each time.
@@ -727,20 +732,25 @@ class IndexedWindowReader:
     fetches a few (topic, window) pieces out of a large log (EV-Matching's V-scenarios).
 
     Args:
-        reader: an open :class:`LogReader` (an indexed, not truncated, log).
+        reader: an open :class:`LogReader` (an indexed log, or a cut one after ``reindex``).
         cache_chunks: decompressed chunks kept for the next reads.
+        summary: the index to use instead of the reader's (a cut log's index rebuilt once by
+            the Spark driver and shipped to the executors).
 
     Raises:
         LogError: the log has no usable index (truncated or written without chunk indexes).
     """
 
-    def __init__(self, reader: LogReader, cache_chunks: int = 4) -> None:
+    def __init__(
+        self, reader: LogReader, cache_chunks: int = 4, summary: Summary | None = None
+    ) -> None:
         import numpy as np
 
-        if not reader._indexed or reader._summary is None or not reader._summary.chunk_indexes:
+        summary = summary or (reader._summary if reader._indexed else None)
+        if summary is None or not summary.chunk_indexes:
             raise LogError(f"{reader.path}: no chunk index, cannot read a topic window directly")
         self.path = reader.path
-        self._summary = reader._summary
+        self._summary = summary
         self._f = reader.path.open("rb")
         self._by_topic = {ch.topic: ch for ch in self._summary.channels.values()}
         self._chunks = sorted(self._summary.chunk_indexes, key=lambda c: c.message_start_time)

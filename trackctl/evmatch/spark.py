@@ -1,0 +1,383 @@
+"""EV-Matching on Apache Spark with the data work on the executors.
+
+The driver opens only the log's summary (or, for a cut log, rebuilds its index once and ships it).
+Everything that touches E-observations or V-scenarios runs in executor tasks that open the log
+themselves and read only the chunks they need through the MCAP chunk index:
+
+* **E shards**: the E chunks are cut into groups of consecutive windows; one task per group reads
+  its chunks and builds an :class:`~trackctl.evmatch.eindex.EShard` (integer-coded with the codes
+  the driver fixed from the EID, cell and window names the tasks reported). The shards stay
+  persisted on the executors; set splitting, evidence and refining questions are Spark jobs over
+  them (:class:`~trackctl.evmatch.eindex.EIndex`), and the driver receives only the answers.
+* **V votes**: VID filtering ships (EID, scenario) pairs grouped by cell to the executors; each
+  task reads its cells' V-scenarios for the asked windows (topic and time through the index) and
+  emits ``((EID, VID), 1)``; a ``reduceByKey`` sums them. The driver gets the counts and which
+  scenarios were read or missing, never the VIDs of a scenario.
+
+The log path must be readable at the same path on every executor (a local path on a one-machine
+cluster, or a shared filesystem such as NFS).
+"""
+
+from __future__ import annotations
+
+import operator
+import os
+from collections.abc import Collection, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from trackctl.errors import InputError, MissingTopicError
+from trackctl.evmatch.eindex import ECatalog, EIndex, EShard
+from trackctl.evmatch.engines import VOTE_COLUMNS, SparkEngine, _sorted_vote
+from trackctl.logs import topics
+from trackctl.logs.reader import LogReader
+
+__all__ = ["spark_index", "SparkVStore"]
+
+_WINDOWS_PER_SHARD = 2
+
+
+@dataclass(frozen=True)
+class _ChunkTask:
+    """What one executor task reads: a log's E chunks (file offsets) and how to decode them."""
+
+    path: str
+    offsets: tuple[int, ...]
+    channel_id: int
+    schema: tuple[str, str, str, bytes]  # name, message encoding, schema encoding, data
+
+
+def _read_e(task: _ChunkTask) -> Iterator[Any]:
+    """The E-observations in the task's chunks (executor side)."""
+    import struct
+
+    from mcap.records import Message
+
+    from trackctl.logs.codecs import codec_for
+    from trackctl.logs.recovery import ChunkError, decode_chunk
+
+    codec = codec_for(*task.schema)
+    with open(task.path, "rb") as f:
+        for offset in task.offsets:
+            f.seek(offset)
+            head = f.read(9)
+            (length,) = struct.unpack_from("<Q", head, 1)
+            try:
+                records = decode_chunk(f.read(length))
+            except ChunkError:
+                continue  # the driver's reader reports damaged chunks; a shard skips them too
+            for record in records:
+                if isinstance(record, Message) and record.channel_id == task.channel_id:
+                    yield codec.decode(record.data)
+
+
+def _names(task: _ChunkTask) -> tuple[set[str], set[str], set[int], set[int]]:
+    """EIDs, cells, window starts and window lengths of a task's E-observations."""
+    eids: set[str] = set()
+    cells: set[str] = set()
+    starts: set[int] = set()
+    lengths: set[int] = set()
+    for obs in _read_e(task):
+        eids.update(obs.eids)
+        cells.add(obs.cell)
+        starts.add(obs.t_ns)
+        lengths.add(obs.window_ns)
+    return eids, cells, starts, lengths
+
+
+def _build_shard(task: _ChunkTask, codes: Any, rank: np.ndarray) -> EShard:
+    """An E shard of the task's chunks with the driver's codes (executor side)."""
+    eid_code, cell_code, window_code = codes.value
+    w: list[int] = []
+    c: list[int] = []
+    e: list[int] = []
+    v: list[bool] = []
+    for obs in _read_e(task):
+        n = len(obs.eids)
+        w.extend([window_code[obs.t_ns]] * n)
+        c.extend([cell_code[obs.cell]] * n)
+        e.extend(eid_code[x] for x in obs.eids)
+        v.extend(obs.vague)
+    wa, ca, ea = (np.asarray(x, np.int64) for x in (w, c, e))
+    va = np.asarray(v, bool)
+    n_cells, n_eids = len(cell_code), len(eid_code)
+    # sort by (window, cell, EID); an EID listed twice in one scenario keeps its inclusive flag
+    key = (wa * max(n_cells, 1) + ca) * max(n_eids, 1) + ea
+    order = np.lexsort((va, key))
+    first = np.r_[True, key[order][1:] != key[order][:-1]] if len(key) else np.zeros(0, bool)
+    sel = order[first]
+    shard = EShard(
+        w=wa[sel].astype(np.int32),
+        cell=ca[sel].astype(np.int32),
+        eid=ea[sel].astype(np.int32),
+        vague=va[sel],
+        n_cells=n_cells,
+        n_eids=n_eids,
+        rank=rank,
+    )
+    shard._inclusive()  # built once here and persisted with the shard
+    return shard
+
+
+def _e_tasks(reader: LogReader, path: str) -> list[_ChunkTask]:
+    summary = reader.summary
+    channel = next(
+        (ch for ch in (summary.channels.values() if summary else ()) if ch.topic == topics.EV_E),
+        None,
+    )
+    if summary is None or channel is None:
+        raise MissingTopicError(
+            f"{reader.path}: topic {topics.EV_E} is missing; ev-match needs the E-scenarios"
+        )
+    schema = summary.schemas.get(channel.schema_id)
+    spec = (
+        schema.name if schema else "",
+        channel.message_encoding,
+        schema.encoding if schema else "",
+        schema.data if schema else b"",
+    )
+    chunks = sorted(
+        (ci for ci in summary.chunk_indexes if channel.id in ci.message_index_offsets),
+        key=lambda ci: (ci.message_start_time, ci.chunk_start_offset),
+    )
+    # groups of consecutive chunks covering about _WINDOWS_PER_SHARD distinct start times
+    groups: list[list[int]] = []
+    last_start: int | None = None
+    starts_in_group = 0
+    for ci in chunks:
+        new_start = ci.message_start_time != last_start
+        if not groups or (new_start and starts_in_group >= _WINDOWS_PER_SHARD):
+            groups.append([])
+            starts_in_group = 0
+        if new_start:
+            starts_in_group += 1
+            last_start = ci.message_start_time
+        groups[-1].append(ci.chunk_start_offset)
+    return [_ChunkTask(path, tuple(g), channel.id, spec) for g in groups]
+
+
+def spark_index(
+    reader: LogReader, engine: SparkEngine, order_seed: int
+) -> tuple[EIndex, np.ndarray]:
+    """Build the E index on the executors; returns it and the random window order.
+
+    Raises:
+        MissingTopicError: the log has no E-observations.
+        InputError: windows of different lengths, or the log has no index to read it by.
+    """
+    from pyspark import StorageLevel
+
+    from trackctl.evmatch.matcher import window_order
+
+    if not reader.reindex() and reader.summary is None:
+        raise InputError(f"{reader.path}: no chunk index; the Spark engine reads logs by chunk")
+    path = os.path.abspath(reader.path)
+    tasks = _e_tasks(reader, path)
+    sc = engine.sc
+    found = sc.parallelize(tasks, max(len(tasks), 1)).map(_names).collect()
+    eids = np.array(sorted(set().union(*(f[0] for f in found))), dtype=object)
+    cells = sorted(set().union(*(f[1] for f in found)))
+    starts = np.array(sorted(set().union(*(f[2] for f in found))), dtype=np.int64)
+    lengths = set().union(*(f[3] for f in found))
+    if len(lengths) > 1:
+        raise InputError(
+            f"{reader.path}: {topics.EV_E}: windows of {len(lengths)} lengths "
+            f"({', '.join(str(x) for x in sorted(lengths)[:3])} ns); EV-Matching needs one"
+        )
+    del found
+    order = window_order(len(starts), order_seed)
+    rank = np.empty(len(order), np.int64)
+    rank[order] = np.arange(len(order))
+    codes = sc.broadcast(
+        (
+            {str(e): i for i, e in enumerate(eids.tolist())},
+            {c: i for i, c in enumerate(cells)},
+            {int(t): i for i, t in enumerate(starts.tolist())},
+        )
+    )
+    shards = (
+        sc.parallelize(tasks, max(len(tasks), 1))
+        .map(lambda t: _build_shard(t, codes, rank))
+        .persist(StorageLevel.MEMORY_AND_DISK)
+    )
+    info = shards.map(lambda sh: (sh.windows.tolist(), len(np.unique(sh.w * sh.n_cells + sh.cell))))
+    per_shard = info.collect()
+    codes.unpersist()
+    holders: dict[int, list[int]] = {}
+    for i, (windows, _) in enumerate(per_shard):
+        for w in windows:
+            holders.setdefault(int(w), []).append(i)
+    catalog = ECatalog(
+        eids=eids,
+        cells=cells,
+        windows_ns=starts,
+        window_ns=int(next(iter(lengths), 0)),
+        e_scenarios=sum(n for _, n in per_shard),
+    )
+
+    def run(f: Any, window: int | None) -> list[Any]:
+        if window is None:
+            return shards.map(f).collect()
+        parts = holders.get(window, [])
+        if not parts:
+            return []
+        return sc.runJob(shards, lambda it: [f(sh) for sh in it], partitions=parts)
+
+    def close() -> None:
+        shards.unpersist()
+
+    return EIndex(catalog, run, rank, close=close), order
+
+
+# -- V-scenarios on the executors ---------------------------------------------------------------
+
+_V_CACHE: dict[tuple[str, int], tuple[str, ...] | None] = {}
+_V_CACHE_LIMIT = 500_000
+
+
+def _vote_cell_group(
+    path: str,
+    summary: Any,
+    cells: Sequence[str],
+    windows_ns: np.ndarray,
+    window_ns: int,
+    n_cells: int,
+    pairs: Iterable[tuple[int, int]],
+) -> Iterator[tuple[Any, Any]]:
+    """Executor side of one vote task: read the V-scenarios of its pairs' scenarios (cached in
+    the Python worker across rounds) and emit ``((eid, vid), 1)`` plus ``(("read"|"missing",
+    scenario), bytes)`` records."""
+    from trackctl.logs.reader import IndexedWindowReader
+
+    by_s: dict[int, list[int]] = {}
+    for e, s in pairs:
+        by_s.setdefault(s, []).append(e)
+    window_reader: IndexedWindowReader | None = None
+    reader: LogReader | None = None
+    try:
+        for s in sorted(by_s):
+            key = (path, s)
+            if key not in _V_CACHE:
+                if window_reader is None:
+                    reader = LogReader(path)
+                    window_reader = IndexedWindowReader(reader, summary=summary)
+                vids, size = _read_v(
+                    reader, window_reader, cells, windows_ns, window_ns, n_cells, s
+                )
+                if len(_V_CACHE) >= _V_CACHE_LIMIT:
+                    _V_CACHE.clear()
+                _V_CACHE[key] = vids
+                yield (("missing" if vids is None else "read", s), size)
+            vids = _V_CACHE[key]
+            if vids is None:
+                yield (("missing", s), 0)
+                continue
+            for e in by_s[s]:
+                for v in vids:
+                    yield ((e, v), 1)
+    finally:
+        if window_reader is not None:
+            window_reader.close()
+
+
+def _read_v(
+    reader: Any,
+    window_reader: Any,
+    cells: Sequence[str],
+    windows_ns: np.ndarray,
+    window_ns: int,
+    n_cells: int,
+    s: int,
+) -> tuple[tuple[str, ...] | None, int]:
+    w, c = divmod(s, n_cells)
+    topic = topics.ev_v(cells[c])
+    if not window_reader.has_topic(topic):
+        return None, 0
+    start = int(windows_ns[w])
+    raws = window_reader.read(topic, start, start + max(window_ns, 1))
+    vids: set[str] = set()
+    size = 0
+    ok = False
+    for raw in raws:
+        try:
+            scen = reader.codec(raw).decode(raw.data)
+        except Exception:  # noqa: BLE001 - the driver-side reader reports undecodable messages
+            continue
+        ok = True
+        vids.update(scen.vids)
+        size += len(raw.data)
+    return (tuple(sorted(vids)) if ok else None), size
+
+
+@dataclass
+class SparkVStore:
+    """V-scenarios read and voted on by the executors (the driver keeps ids and counts only).
+
+    Same interface as :class:`~trackctl.evmatch.data.VStore` for SS: ``vote``, ``known``,
+    ``missing``, ``reads``, ``bytes_read``, ``total``, ``missing_topics``.
+    """
+
+    reader: LogReader
+    data: ECatalog
+    engine: SparkEngine
+    read_ids: set[int] = field(default_factory=set)
+    missing: set[int] = field(default_factory=set)
+    reads: int = 0
+    bytes_read: int = 0
+
+    @property
+    def known(self) -> Collection[int]:
+        return self.read_ids
+
+    def total(self) -> int:
+        return sum(
+            info.count
+            for name, info in self.reader.topics().items()
+            if name.startswith(topics.EV_V_PREFIX)
+        )
+
+    def missing_topics(self) -> list[str]:
+        present = self.reader.topics()
+        return [n for n in (topics.ev_v(c) for c in self.data.cells) if n not in present]
+
+    def close(self) -> None:
+        pass
+
+    def vote(self, engine: Any, eid: np.ndarray, scenario: np.ndarray) -> pd.DataFrame:
+        sc, p = self.engine.sc, self.engine.partitions
+        if not len(eid):
+            return _sorted_vote(pd.DataFrame(columns=VOTE_COLUMNS))
+        cat = self.data
+        path = os.path.abspath(self.reader.path)
+        summary = None if not self.reader.truncated else self.reader.summary
+        args = (path, summary, cat.cells, cat.windows_ns, cat.window_ns, cat.n_cells)
+        n_cells = cat.n_cells
+        pairs = sc.parallelize(
+            list(zip(np.asarray(eid).tolist(), np.asarray(scenario).tolist(), strict=True)), p
+        )
+        # group by cell so that a task reads few topics; the log is opened once per task
+        out = (
+            pairs.keyBy(lambda es: es[1] % n_cells)
+            .partitionBy(p)
+            .values()
+            .mapPartitions(lambda it: _vote_cell_group(*args, it))
+            .reduceByKey(operator.add, p)
+            .collect()
+        )
+        counts = []
+        for key, value in out:
+            kind = key[0]
+            if kind in ("read", "missing"):
+                s = int(key[1])
+                if kind == "missing":
+                    self.missing.add(s)
+                elif s not in self.read_ids:
+                    self.read_ids.add(s)
+                    self.reads += 1
+                    self.bytes_read += value
+            else:
+                counts.append((int(key[0]), key[1], int(value)))
+        return _sorted_vote(pd.DataFrame(counts, columns=VOTE_COLUMNS))
