@@ -22,6 +22,7 @@ from trackctl.processing.base import Progress
 __all__ = ["Algorithm", "EvMatchConfig", "run", "match_log", "MATCHES_TOPIC"]
 
 MATCHES_TOPIC = topics.EV_MATCHES
+MATCHES_PER_MESSAGE = 10_000
 
 
 class Algorithm(enum.StrEnum):
@@ -138,10 +139,11 @@ def run(
     correct = sum(m.vid is not None and truth.get(m.eid) == m.vid for m in outcome.matches)
     requested = len(outcome.matches)
     end_ns = int(data.windows_ns[-1]) + data.window_ns if len(data.windows_ns) else 0
-    writer.write(
-        MATCHES_TOPIC,
-        EvMatches(t_ns=end_ns, algorithm=str(config.algorithm), matches=tuple(outcome.matches)),
-    )
+    # in messages of at most MATCHES_PER_MESSAGE, in request order (a city's million matches
+    # would otherwise be one message of hundreds of MB)
+    for first in range(0, max(len(outcome.matches), 1), MATCHES_PER_MESSAGE):
+        part = tuple(outcome.matches[first : first + MATCHES_PER_MESSAGE])
+        writer.write(MATCHES_TOPIC, EvMatches(end_ns, str(config.algorithm), part))
     v_total = vstore.total()
     metrics = {
         "system": "ev-matching",

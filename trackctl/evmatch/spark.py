@@ -74,18 +74,20 @@ def _read_e(task: _ChunkTask) -> Iterator[Any]:
                     yield codec.decode(record.data)
 
 
-def _names(task: _ChunkTask) -> tuple[set[str], set[str], set[int], set[int]]:
-    """EIDs, cells, window starts and window lengths of a task's E-observations."""
-    eids: set[str] = set()
-    cells: set[str] = set()
-    starts: set[int] = set()
-    lengths: set[int] = set()
+def _names(task: _ChunkTask) -> Iterator[tuple[str, Any]]:
+    """The EIDs, cells, window starts and window lengths of a task's E-observations, tagged
+    (``distinct`` then removes the repeats on the executors)."""
+    seen: set[tuple[str, Any]] = set()
     for obs in _read_e(task):
-        eids.update(obs.eids)
-        cells.add(obs.cell)
-        starts.add(obs.t_ns)
-        lengths.add(obs.window_ns)
-    return eids, cells, starts, lengths
+        for item in (("c", obs.cell), ("t", obs.t_ns), ("l", obs.window_ns)):
+            if item not in seen:
+                seen.add(item)
+                yield item
+        for e in obs.eids:
+            item = ("e", e)
+            if item not in seen:
+                seen.add(item)
+                yield item
 
 
 def _build_shard(task: _ChunkTask, codes: Any, rank: np.ndarray) -> EShard:
@@ -177,17 +179,20 @@ def spark_index(
     path = os.path.abspath(reader.path)
     tasks = _e_tasks(reader, path)
     sc = engine.sc
-    found = sc.parallelize(tasks, max(len(tasks), 1)).map(_names).collect()
-    eids = np.array(sorted(set().union(*(f[0] for f in found))), dtype=object)
-    cells = sorted(set().union(*(f[1] for f in found)))
-    starts = np.array(sorted(set().union(*(f[2] for f in found))), dtype=np.int64)
-    lengths = set().union(*(f[3] for f in found))
+    found: dict[str, list[Any]] = {"e": [], "c": [], "t": [], "l": []}
+    for kind, value in (
+        sc.parallelize(tasks, max(len(tasks), 1)).flatMap(_names).distinct().collect()
+    ):
+        found[kind].append(value)
+    eids = np.array(sorted(found.pop("e")), dtype=object)
+    cells = sorted(found["c"])
+    starts = np.array(sorted(found["t"]), dtype=np.int64)
+    lengths = sorted(found["l"])
     if len(lengths) > 1:
         raise InputError(
             f"{reader.path}: {topics.EV_E}: windows of {len(lengths)} lengths "
-            f"({', '.join(str(x) for x in sorted(lengths)[:3])} ns); EV-Matching needs one"
+            f"({', '.join(str(x) for x in lengths[:3])} ns); EV-Matching needs one"
         )
-    del found
     order = window_order(len(starts), order_seed)
     rank = np.empty(len(order), np.int64)
     rank[order] = np.arange(len(order))
@@ -214,7 +219,7 @@ def spark_index(
         eids=eids,
         cells=cells,
         windows_ns=starts,
-        window_ns=int(next(iter(lengths), 0)),
+        window_ns=int(lengths[0]) if lengths else 0,
         e_scenarios=sum(n for _, n in per_shard),
     )
 
