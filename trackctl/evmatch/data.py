@@ -82,28 +82,39 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
     c_remap[[cell_code[c] for c in cells]] = np.arange(len(cells), dtype=np.int32)
     n_rows = len(flat_e)
     lens = np.frombuffer(lengths, dtype=np.int64) if lengths else np.zeros(0, np.int64)
-    w = np.repeat(np.searchsorted(windows, t_arr), lens).astype(np.int32)
+    w = np.repeat(np.searchsorted(windows, t_arr).astype(np.int32), lens)
     c = np.repeat(
         c_remap[np.frombuffer(c_list, dtype=np.int32)] if c_list else np.zeros(0, np.int32), lens
-    ).astype(np.int32)
+    )
     e = e_remap[np.frombuffer(flat_e, dtype=np.int32)] if n_rows else np.zeros(0, np.int32)
     v = np.frombuffer(flat_v, dtype=np.int8).astype(bool) if n_rows else np.zeros(0, bool)
     del flat_e, flat_v
-    # sort by (window, cell, EID); an EID listed twice in one scenario keeps its inclusive flag
-    key = (w.astype(np.int64) * max(len(cells), 1) + c) * max(len(eids), 1) + e
-    order = np.lexsort((v, key))
-    key = key[order]
-    first = np.r_[True, key[1:] != key[:-1]] if n_rows else np.zeros(0, bool)
-    sel = order[first]
-    del key, order, first
+    # sort by (window, cell, EID); an EID listed twice in one scenario keeps its inclusive flag.
+    # The key is built in place: a city's E table has tens of millions of listings.
+    key = w.astype(np.int64)
+    key *= max(len(cells), 1)
+    key += c
+    key *= max(len(eids), 1)
+    key += e
+    if n_rows and bool(np.all(key[1:] > key[:-1])):
+        sel: np.ndarray | slice = slice(None)  # written in order, no repeats (the simulator)
+    else:
+        order = np.lexsort((v, key))
+        key = key[order]
+        first = np.r_[True, key[1:] != key[:-1]] if n_rows else np.zeros(0, bool)
+        sel = order[first]
+        del order, first
+    key //= max(len(eids), 1)  # the scenario of each (sorted) listing
+    n_scenarios = int(np.count_nonzero(key[1:] != key[:-1])) + 1 if n_rows else 0
+    del key
     rows = pd.DataFrame({"w": w[sel], "cell": c[sel], "eid": e[sel], "vague": v[sel]})
-    scen = rows["w"].to_numpy(np.int64) * max(len(cells), 1) + rows["cell"].to_numpy(np.int64)
+    del w, c, e, v
     return EData(
         eids=eids,
         cells=cells,
         windows_ns=windows,
         window_ns=int(window_ns or 0),
-        e_scenarios=int(len(np.unique(scen))),
+        e_scenarios=n_scenarios,
         rows=rows,
     )
 

@@ -93,22 +93,30 @@ class EShard:
 
     def _inclusive(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Inclusive listings as sorted keys (membership) and their scenarios grouped by EID in
-        window order (with each EID's bounds); 12 bytes per listing plus 8 per EID."""
+        window order (with each EID's bounds); 12 bytes per listing plus 8 per EID, built with a
+        few int64 temporaries (a city has tens of millions of listings)."""
         if self._inc is None:
-            keep = ~self.vague
-            w = self.w[keep].astype(np.int64)
-            c = self.cell[keep].astype(np.int64)
-            e = self.eid[keep].astype(np.int64)
-            s = w * self.n_cells + c
-            keys = np.sort(s * max(self.n_eids, 1) + e)
-            r = self.rank[w] if len(w) else w
-            by = np.lexsort((c, r, e))
+            keep = np.flatnonzero(~self.vague)
+            n_e = max(self.n_eids, 1)
+            e = self.eid[keep]
+            s = self.w[keep].astype(np.int64)
+            s *= self.n_cells
+            s += self.cell[keep]
+            keys = s * n_e
+            keys += e
+            keys.sort()
+            # group by EID, then window rank, then cell: one int64 key, one stable argsort
+            n_s = max(len(self.rank), 1) * max(self.n_cells, 1)
+            group = self.rank[s // max(self.n_cells, 1)] * max(self.n_cells, 1)
+            group += s % max(self.n_cells, 1)
+            group += e.astype(np.int64) * n_s
+            by = np.argsort(group, kind="stable")
+            del group
+            small = np.int32 if not len(s) or s.max() < 2**31 else np.int64
+            s_by = s[by].astype(small)
             bounds = np.searchsorted(e[by], np.arange(self.n_eids + 1))
-            self._inc = (
-                keys,
-                s[by].astype(np.int32 if len(s) and s.max() < 2**31 else np.int64),
-                bounds,
-            )
+            del by, s
+            self._inc = (keys, s_by, bounds)
         return self._inc
 
     def listing(self, w: int) -> tuple[np.ndarray, np.ndarray]:
