@@ -185,3 +185,36 @@ def test_split_sends_a_vague_eid_to_every_cell_it_is_listed_in() -> None:
     listing = pd.DataFrame({"eid": [0, 1, 1, 3], "cell": [5, 5, 6, 6]})
     out = LocalEngine().split(node, eid, listing)
     assert out.values.tolist() == [[0, -1, 2], [0, 5, 0], [0, 5, 1], [0, 6, 1], [1, 6, 3]]
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 4_000_000])
+def test_local_vote_equals_a_plain_count_whatever_the_chunk(
+    chunk: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import collections
+
+    import numpy as np
+
+    from trackctl.evmatch import engines
+
+    monkeypatch.setattr(engines, "VOTE_CHUNK", chunk)
+    rng = np.random.default_rng(chunk)
+    vids = {
+        int(s): tuple(sorted({f"v{x}" for x in rng.integers(0, 9, rng.integers(0, 5))}))
+        for s in range(40)
+    }
+    eid = rng.integers(0, 15, 300)
+    scen = rng.integers(0, 45, 300)  # scenarios 40..44 have no video: they do not vote
+    exclude = {"v3"}
+    got = LocalEngine().vote(eid, scen, vids, exclude).values.tolist()
+    want = []
+    for e in sorted(set(eid.tolist())):
+        c = collections.Counter(
+            v
+            for ee, s in zip(eid.tolist(), scen.tolist(), strict=True)
+            if ee == e
+            for v in vids.get(s, ())
+            if v not in exclude
+        )
+        want += [[e, v, n] for v, n in sorted(c.items(), key=lambda x: (-x[1], x[0]))[:2]]
+    assert got == want

@@ -36,10 +36,19 @@ def test_vote_step_is_identical(spark_session: object) -> None:
     eid = np.array([0, 0, 1, 1, 1])
     scen = np.array([10, 11, 10, 12, 13])
     vids = {10: ("a", "b"), 11: ("a",), 12: ("b", "c"), 13: ()}
-    a = SparkEngine("local[2]").vote(eid, scen, vids)
-    b = LocalEngine().vote(eid, scen, vids)
+    spark, local = SparkEngine("local[2]"), LocalEngine()
+    a, b = spark.vote(eid, scen, vids), local.vote(eid, scen, vids)
     pd.testing.assert_frame_equal(a, b)
-    assert b.values.tolist() == [[0, "a", 2], [0, "b", 1], [1, "b", 2], [1, "a", 1], [1, "c", 1]]
+    # the best VID and the runner-up per EID, ties to the smaller VID
+    assert b.values.tolist() == [[0, "a", 2], [0, "b", 1], [1, "b", 2], [1, "a", 1]]
+    every = [[0, "a", 2], [0, "b", 1], [1, "b", 2], [1, "a", 1], [1, "c", 1]]
+    a, b = spark.vote(eid, scen, vids, top=3), local.vote(eid, scen, vids, top=3)
+    pd.testing.assert_frame_equal(a, b)
+    assert b.values.tolist() == every
+    # VIDs already matched to other EIDs are left out before ranking
+    a, b = spark.vote(eid, scen, vids, {"b"}), local.vote(eid, scen, vids, {"b"})
+    pd.testing.assert_frame_equal(a, b)
+    assert b.values.tolist() == [[0, "a", 2], [1, "a", 1], [1, "c", 1]]
 
 
 def test_edp_on_spark_equals_local(spark_session: object, small_log: Path) -> None:

@@ -145,8 +145,15 @@ class VSource(Protocol):
         """Scenario ids read so far (with video)."""
         ...
 
-    def vote(self, engine: Engine, eid: np.ndarray, scenario: np.ndarray) -> pd.DataFrame:
-        """Per-EID VID counts over the given (EID, scenario) pairs (``Engine.vote`` columns)."""
+    def vote(
+        self,
+        engine: Engine,
+        eid: np.ndarray,
+        scenario: np.ndarray,
+        exclude: Collection[str] = (),
+    ) -> pd.DataFrame:
+        """Each EID's top VIDs (outside ``exclude``) over the given (EID, scenario) pairs
+        (``Engine.vote`` columns)."""
         ...
 
 
@@ -246,11 +253,18 @@ class VStore:
         """Scenario ids read so far (with video)."""
         return self.cache.keys()
 
-    def vote(self, engine: Engine, eid: np.ndarray, scenario: np.ndarray) -> pd.DataFrame:
+    def vote(
+        self,
+        engine: Engine,
+        eid: np.ndarray,
+        scenario: np.ndarray,
+        exclude: Collection[str] = (),
+    ) -> pd.DataFrame:
         """Read the scenarios' V-scenarios and count, per EID, the VIDs over its evidence
-        (``engine.vote``); scenarios without video do not vote."""
+        (``engine.vote``: its top VIDs outside ``exclude``); scenarios without video do not
+        vote."""
         vids = self.fetch(scenario.tolist())
-        return engine.vote(eid, scenario, vids)
+        return engine.vote(eid, scenario, vids, exclude)
 
     def missing_topics(self) -> list[str]:
         """V topics of cells listed in the E-observations that the log does not have."""

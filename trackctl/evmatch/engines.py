@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import operator
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -28,6 +28,8 @@ from trackctl.errors import InputError
 __all__ = ["Engine", "LocalEngine", "SparkEngine", "make_engine", "SPLIT_COLUMNS", "VOTE_COLUMNS"]
 
 SPLIT_COLUMNS = ["node", "cell", "eid"]
+TOP_VIDS = 2  # VID filtering needs the best VID and the runner-up
+VOTE_CHUNK = 4_000_000  # (EID, VID) rows counted at a time by the local engine
 VOTE_COLUMNS = ["eid", "vid", "count"]
 
 
@@ -45,10 +47,16 @@ class Engine(Protocol):
         ...
 
     def vote(
-        self, eid: np.ndarray, scenario: np.ndarray, vids: Mapping[int, Sequence[str]]
+        self,
+        eid: np.ndarray,
+        scenario: np.ndarray,
+        vids: Mapping[int, Sequence[str]],
+        exclude: Collection[str] = (),
+        top: int = TOP_VIDS,
     ) -> pd.DataFrame:
-        """Count, per EID, how many of its evidence scenarios show each VID: ``(eid, vid, count)``
-        sorted by eid, then count descending, then vid."""
+        """Count, per EID, how many of its evidence scenarios show each VID not in ``exclude``,
+        and keep the ``top`` VIDs per EID: ``(eid, vid, count)`` sorted by eid, then count
+        descending, then vid."""
         ...
 
     def edp_select(
@@ -64,6 +72,11 @@ class Engine(Protocol):
 
 def _sorted_split(df: pd.DataFrame) -> pd.DataFrame:
     return df.sort_values(SPLIT_COLUMNS, kind="stable").reset_index(drop=True)[SPLIT_COLUMNS]
+
+
+def top_votes(df: pd.DataFrame, top: int) -> pd.DataFrame:
+    """The first ``top`` rows per EID of a sorted vote table."""
+    return df.groupby("eid", sort=False).head(top).reset_index(drop=True)
 
 
 def _sorted_vote(df: pd.DataFrame) -> pd.DataFrame:
@@ -90,26 +103,74 @@ class LocalEngine:
         return _sorted_split(out)
 
     def vote(
-        self, eid: np.ndarray, scenario: np.ndarray, vids: Mapping[int, Sequence[str]]
+        self,
+        eid: np.ndarray,
+        scenario: np.ndarray,
+        vids: Mapping[int, Sequence[str]],
+        exclude: Collection[str] = (),
+        top: int = TOP_VIDS,
     ) -> pd.DataFrame:
-        ev = pd.DataFrame({"eid": np.asarray(eid, np.int64), "s": np.asarray(scenario, np.int64)})
-        keys = np.fromiter((s for s, v in vids.items() for _ in v), dtype=np.int64)
-        # VIDs as integer codes: the join has one row per (evidence scenario, VID) - millions in
-        # a city-size run - and strings there would cost ~60 bytes each
+        # VIDs as integer codes in name order, each scenario's VIDs as a range of one flat array
+        # (CSR); the (EID, VID) rows are counted a few million at a time, EIDs never split
+        # across chunks, and only each EID's top VIDs are kept: a city's evidence expands to
+        # tens of millions of rows
+        keys = np.fromiter(vids.keys(), dtype=np.int64, count=len(vids))
+        lens = np.fromiter((len(v) for v in vids.values()), dtype=np.int64, count=len(vids))
         codes, names = pd.factorize(
             np.array([x for v in vids.values() for x in v], dtype=object), sort=True
         )
-        vdf = pd.DataFrame({"s": keys, "v": codes.astype(np.int64)})
-        joined = ev.merge(vdf, on="s", how="inner")
-        n = max(len(names), 1)
-        key, count = np.unique(
-            joined["eid"].to_numpy() * n + joined["v"].to_numpy(), return_counts=True
-        )
-        del joined
-        counts = pd.DataFrame(
-            {"eid": key // n, "vid": np.asarray(names, dtype=object)[key % n], "count": count}
-        )
-        return _sorted_vote(counts)
+        names = np.asarray(names, dtype=object)
+        starts = np.r_[0, np.cumsum(lens)[:-1]] if len(lens) else lens
+        by_key = np.argsort(keys)
+        keys, lens, starts = keys[by_key], lens[by_key], starts[by_key]
+        drop = np.isin(names, list(exclude)) if len(exclude) else np.zeros(len(names), bool)
+        e = np.asarray(eid, np.int64)
+        sc = np.asarray(scenario, np.int64)
+        order = np.argsort(e, kind="stable")
+        e, sc = e[order], sc[order]
+        i = np.searchsorted(keys, sc)
+        found = (i < len(keys)) & (keys[np.minimum(i, max(len(keys) - 1, 0))] == sc)
+        e, i = e[found], i[found]
+        n_per = lens[i] if len(i) else np.zeros(0, np.int64)
+        parts = []
+        lo = 0
+        while lo < len(e):
+            # the chunk ends at an EID boundary once VOTE_CHUNK rows are reached
+            cum = np.cumsum(n_per[lo:])
+            hi = lo + int(np.searchsorted(cum, VOTE_CHUNK, side="right")) + 1
+            hi = min(max(hi, lo + 1), len(e))
+            while hi < len(e) and e[hi] == e[hi - 1]:
+                hi += 1
+            parts.append(self._count(e[lo:hi], starts[i[lo:hi]], n_per[lo:hi], codes, drop, top))
+            lo = hi
+        if not parts:
+            return _sorted_vote(pd.DataFrame(columns=VOTE_COLUMNS))
+        counts = pd.concat(parts, ignore_index=True)
+        counts["vid"] = names[counts["vid"].to_numpy(np.int64)]
+        return counts[VOTE_COLUMNS]
+
+    @staticmethod
+    def _count(
+        e: np.ndarray,
+        start: np.ndarray,
+        n: np.ndarray,
+        codes: np.ndarray,
+        drop: np.ndarray,
+        top: int,
+    ) -> pd.DataFrame:
+        """Top ``top`` VID codes per EID for pairs whose scenarios' VIDs are
+        ``codes[start:start+n]`` (code order = name order, so ties go to the smaller VID)."""
+        rep = np.repeat(e, n)
+        offsets = np.arange(len(rep)) - np.repeat(np.cumsum(n) - n, n)
+        v = codes[np.repeat(start, n) + offsets].astype(np.int64)
+        keep = ~drop[v]
+        rep, v = rep[keep], v[keep]
+        n_v = max(len(drop), 1)
+        key, count = np.unique(rep * n_v + v, return_counts=True)
+        ce, cv = key // n_v, key % n_v
+        order = np.lexsort((cv, -count, ce))
+        df = pd.DataFrame({"eid": ce[order], "vid": cv[order], "count": count[order]})
+        return top_votes(df, top)
 
     def edp_select(
         self, targets: Sequence[int], select: Callable[[int], list[int]]
@@ -195,7 +256,12 @@ class SparkEngine:
         return _sorted_split(df)
 
     def vote(
-        self, eid: np.ndarray, scenario: np.ndarray, vids: Mapping[int, Sequence[str]]
+        self,
+        eid: np.ndarray,
+        scenario: np.ndarray,
+        vids: Mapping[int, Sequence[str]],
+        exclude: Collection[str] = (),
+        top: int = TOP_VIDS,
     ) -> pd.DataFrame:
         sc, p = self.sc, self.partitions
         # the V-scenarios read are shipped to every task once (a map-side join): each task
@@ -204,12 +270,8 @@ class SparkEngine:
         ev = sc.parallelize(
             list(zip(np.asarray(eid).tolist(), np.asarray(scenario).tolist(), strict=True)), p
         )
-        counts = (
-            ev.flatMap(lambda es: [((es[0], v), 1) for v in table.value.get(es[1], ())])
-            .reduceByKey(operator.add, p)
-            .map(lambda kv: (kv[0][0], kv[0][1], kv[1]))
-            .collect()
-        )
+        pairs = ev.flatMap(lambda es: [((es[0], v), 1) for v in table.value.get(es[1], ())])
+        counts = top_per_eid(pairs, p, exclude, top)
         table.unpersist()
         return _sorted_vote(pd.DataFrame(counts, columns=VOTE_COLUMNS))
 
@@ -224,6 +286,25 @@ class SparkEngine:
     def close(self) -> None:
         if self._owned:
             self._session.stop()
+
+
+def top_per_eid(pairs: Any, partitions: int, exclude: Collection[str], top: int) -> list[Any]:
+    """``((eid, vid), 1)`` records summed, then each EID's ``top`` VIDs outside ``exclude``
+    (count descending, then VID), on the executors; returns ``(eid, vid, count)`` rows."""
+    banned = frozenset(exclude)
+
+    def best(item: tuple[int, Any]) -> list[tuple[int, str, int]]:
+        e, vc = item
+        ranked = sorted((v for v in vc if v[0] not in banned), key=lambda x: (-x[1], x[0]))
+        return [(e, v, c) for v, c in ranked[:top]]
+
+    return (
+        pairs.reduceByKey(operator.add, partitions)
+        .map(lambda kv: (kv[0][0], (kv[0][1], kv[1])))
+        .groupByKey(partitions)
+        .flatMap(best)
+        .collect()
+    )
 
 
 def make_engine(name: str, master: str | None = None) -> Engine:

@@ -420,7 +420,7 @@ def _refine_round(
     _extend_all(eindex, short, evidence, params, vstore)
     ev_e = np.array([e for e in pending for _ in evidence[e]], np.int64)
     ev_s = np.array([s for e in pending for s in evidence[e]], np.int64)
-    counts = vstore.vote(engine, ev_e, ev_s)
+    counts = vstore.vote(engine, ev_e, ev_s, taken)
     usable = {e: _usable(evidence[e], missing) for e in pending}
     verdicts = _judge_all(counts, usable, pending, taken, params)
     ok = sorted(

@@ -31,7 +31,13 @@ import pandas as pd
 
 from trackctl.errors import InputError, MissingTopicError
 from trackctl.evmatch.eindex import ECatalog, EIndex, EShard
-from trackctl.evmatch.engines import VOTE_COLUMNS, SparkEngine, _sorted_vote
+from trackctl.evmatch.engines import (
+    TOP_VIDS,
+    VOTE_COLUMNS,
+    SparkEngine,
+    _sorted_vote,
+    top_per_eid,
+)
 from trackctl.logs import topics
 from trackctl.logs.reader import LogReader
 
@@ -351,7 +357,13 @@ class SparkVStore:
     def close(self) -> None:
         pass
 
-    def vote(self, engine: Any, eid: np.ndarray, scenario: np.ndarray) -> pd.DataFrame:
+    def vote(
+        self,
+        engine: Any,
+        eid: np.ndarray,
+        scenario: np.ndarray,
+        exclude: Collection[str] = (),
+    ) -> pd.DataFrame:
         sc, p = self.engine.sc, self.engine.partitions
         if not len(eid):
             return _sorted_vote(pd.DataFrame(columns=VOTE_COLUMNS))
@@ -364,25 +376,26 @@ class SparkVStore:
             list(zip(np.asarray(eid).tolist(), np.asarray(scenario).tolist(), strict=True)), p
         )
         # group by cell so that a task reads few topics; the log is opened once per task
-        out = (
+        records = (
             pairs.keyBy(lambda es: es[1] % n_cells)
             .partitionBy(p)
             .values()
             .mapPartitions(lambda it: _vote_cell_group(*args, it))
+            .persist()
+        )
+        # which scenarios were read or missing (small), then the votes' top VIDs per EID
+        for (kind, s), size in (
+            records.filter(lambda kv: isinstance(kv[0][0], str))
             .reduceByKey(operator.add, p)
             .collect()
-        )
-        counts = []
-        for key, value in out:
-            kind = key[0]
-            if kind in ("read", "missing"):
-                s = int(key[1])
-                if kind == "missing":
-                    self.missing.add(s)
-                elif s not in self.read_ids:
-                    self.read_ids.add(s)
-                    self.reads += 1
-                    self.bytes_read += value
-            else:
-                counts.append((int(key[0]), key[1], int(value)))
+        ):
+            if kind == "missing":
+                self.missing.add(int(s))
+            elif int(s) not in self.read_ids:
+                self.read_ids.add(int(s))
+                self.reads += 1
+                self.bytes_read += size
+        votes = records.filter(lambda kv: not isinstance(kv[0][0], str))
+        counts = top_per_eid(votes, p, exclude, TOP_VIDS)
+        records.unpersist()
         return _sorted_vote(pd.DataFrame(counts, columns=VOTE_COLUMNS))
