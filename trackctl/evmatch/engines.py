@@ -123,7 +123,9 @@ class LocalEngine:
         starts = np.r_[0, np.cumsum(lens)[:-1]] if len(lens) else lens
         by_key = np.argsort(keys)
         keys, lens, starts = keys[by_key], lens[by_key], starts[by_key]
-        drop = np.isin(names, list(exclude)) if len(exclude) else np.zeros(len(names), bool)
+        # a set lookup per name: np.isin on object arrays compares every pair
+        banned = exclude if isinstance(exclude, set | frozenset) else set(exclude)
+        drop = np.fromiter((x in banned for x in names), bool, count=len(names))
         e = np.asarray(eid, np.int64)
         sc = np.asarray(scenario, np.int64)
         order = np.argsort(e, kind="stable")
