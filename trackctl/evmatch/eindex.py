@@ -16,7 +16,7 @@ Both therefore give the same answers, and the matches are identical whichever en
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Iterable, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -268,7 +268,7 @@ class EIndex:
 
     def extend(
         self,
-        requests: dict[int, list[int]],
+        requests: Mapping[int, Sequence[int]],
         read: Collection[int],
         missing: Collection[int],
         room: dict[int, int],

@@ -30,10 +30,12 @@ reads its own V-scenarios, so one read serves one EID.
 
 from __future__ import annotations
 
+import itertools
 import time
+from array import array
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import NamedTuple, overload
 
 import numpy as np
 import pandas as pd
@@ -67,11 +69,92 @@ class MatchParams:
     max_evidence: int = 12
 
 
+Evidence = dict[int, "array[int]"]
+"""Evidence scenarios per EID code, as compact arrays (a city has a million EIDs)."""
+
+
+class _Result(NamedTuple):
+    """One EID's outcome without its evidence names (built into an EvMatch on demand)."""
+
+    vid: str | None
+    confidence: float
+    reason: str
+    status: str
+    candidates: tuple[str, ...]
+
+
+class Matches(Sequence[EvMatch]):
+    """The matches in request order, each built on demand from a compact result and the EID's
+    evidence ids: a million EvMatch objects with their evidence names would need gigabytes."""
+
+    def __init__(
+        self,
+        cat: ECatalog,
+        requested: Sequence[str],
+        result: dict[int, _Result],
+        evidence: Evidence,
+        missing: Collection[int],
+    ) -> None:
+        self._cat = cat
+        self._requested = requested
+        self._codes = (
+            pd.Index(cat.eids).get_indexer(list(requested))
+            if len(requested)
+            else np.zeros(0, np.int64)
+        )
+        self._result = result
+        self._evidence = evidence
+        self._missing = missing
+
+    def __len__(self) -> int:
+        return len(self._requested)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Sequence) and list(self) == list(other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def _build(self, i: int) -> EvMatch:
+        e = int(self._codes[i])
+        if e < 0:
+            return EvMatch(self._requested[i], None, 0.0, (), REASON_UNKNOWN, "unresolved")
+        r = self._result[e]
+        names = tuple(
+            self._cat.scenario_name(s) for s in self._evidence.get(e, ()) if s not in self._missing
+        )
+        return EvMatch(
+            str(self._cat.eids[e]), r.vid, r.confidence, names, r.reason, r.status, r.candidates
+        )
+
+    @overload
+    def __getitem__(self, i: int) -> EvMatch: ...
+
+    @overload
+    def __getitem__(self, i: slice) -> list[EvMatch]: ...
+
+    def __getitem__(self, i: int | slice) -> EvMatch | list[EvMatch]:
+        if isinstance(i, slice):
+            return [self._build(j) for j in range(*i.indices(len(self)))]
+        if not -len(self) <= i < len(self):
+            raise IndexError(i)
+        return self._build(i % len(self))
+
+
+def _pairs(eids: Sequence[int], evidence: Evidence) -> tuple[np.ndarray, np.ndarray]:
+    """(EID, scenario) arrays of the EIDs' evidence, without a Python list per pair."""
+    lens = np.fromiter((len(evidence[e]) for e in eids), np.int64, count=len(eids))
+    ev_e = np.repeat(np.asarray(eids, np.int64), lens)
+    ev_s = np.fromiter(
+        itertools.chain.from_iterable(evidence[e] for e in eids), np.int64, count=int(lens.sum())
+    )
+    return ev_e, ev_s
+
+
 @dataclass
 class MatchOutcome:
     """Matches (one per requested EID, in request order) plus the work it took."""
 
-    matches: list[EvMatch]
+    matches: Sequence[EvMatch]
     v_scenarios_read: int = 0
     v_scenarios_unique: int = 0
     v_bytes_read: int = 0
@@ -115,7 +198,7 @@ def _set_split(
     order: np.ndarray,
     engine: Engine,
     progress: Callable[[int, int | None], None] | None,
-) -> tuple[dict[int, list[int]], set[int], int]:
+) -> tuple[Evidence, set[int], int]:
     """EID set splitting; returns evidence per target, the distinguished targets, iterations."""
     cat = eindex.catalog
     n_e = len(cat.eids)
@@ -124,7 +207,7 @@ def _set_split(
     node = np.zeros(n_e, np.int64)
     eid = np.arange(n_e, dtype=np.int64)
     paths: dict[int, tuple[int, ...]] = {0: ()}
-    evidence: dict[int, list[int]] = {}
+    evidence: Evidence = {}
     distinguished: set[int] = set()
     best_copy: dict[int, list[int]] = {}
     iterations = 0
@@ -151,7 +234,7 @@ def _set_split(
             ev = found[(g, e)]
             prev = evidence.get(e)
             if prev is None or len(ev) > len(prev):
-                evidence[e] = ev
+                evidence[e] = array("q", ev)
     return evidence, distinguished, iterations
 
 
@@ -188,7 +271,7 @@ def _settle(
     paths: dict[int, tuple[int, ...]],
     pending: np.ndarray,
     eindex: EIndex,
-    evidence: dict[int, list[int]],
+    evidence: Evidence,
     distinguished: set[int],
     best_copy: dict[int, list[int]],
 ) -> tuple[np.ndarray, np.ndarray, dict[int, tuple[int, ...]]]:
@@ -206,7 +289,7 @@ def _settle(
                     best_copy[e] = ev
             done = np.unique(eid[alone])
             for e in done.tolist():
-                evidence[e] = best_copy.pop(e)
+                evidence[e] = array("q", best_copy.pop(e))
                 distinguished.add(e)
             pending[done] = False
             keep_rows = ~np.isin(eid, done)
@@ -309,19 +392,20 @@ def match_ss(
     eindex = data if isinstance(data, EIndex) else local_index(data, data.rows, _rank(order))
     evidence, distinguished, iterations = _set_split(eindex, targets, order, engine, progress)
     t1 = time.perf_counter()
-    result: dict[int, EvMatch] = {}
+    result: dict[int, _Result] = {}
     shared = eindex.multi_located()
     have_inclusive = eindex.with_inclusive(targets)
     pending: list[int] = []
     for e in targets.tolist():
-        evidence[e] = evidence.get(e, [])
+        evidence[e] = evidence.get(e, array("q"))
         if not evidence[e] and e not in have_inclusive:
-            result[e] = _unresolved(cat, e, (), REASON_NO_INCLUSIVE)
+            result[e] = _unresolved(REASON_NO_INCLUSIVE)
         elif e not in shared:
             pending.append(e)
     mine = [e for e in targets.tolist() if e in shared and e not in result]
-    evidence.update(eindex.first_inclusive(mine, params.max_evidence))
-    result.update(_judge_shared(cat, vstore, engine, evidence, shared, mine))
+    for e, first in eindex.first_inclusive(mine, params.max_evidence).items():
+        evidence[e] = array("q", first)
+    result.update(_judge_shared(vstore, engine, evidence, shared, mine))
     rounds = 0
     taken: set[str] = set()
     while pending:
@@ -330,9 +414,8 @@ def match_ss(
         if progress is not None:
             progress(len(result), len(targets))
     t2 = time.perf_counter()
-    matches = _in_request_order(cat, requested, result)
     return MatchOutcome(
-        matches=matches,
+        matches=Matches(cat, requested, result, evidence, vstore.missing),
         v_scenarios_read=vstore.reads,
         v_scenarios_unique=vstore.reads,
         v_bytes_read=vstore.bytes_read,
@@ -343,47 +426,36 @@ def match_ss(
     )
 
 
-def _names(cat: ECatalog, scenarios: Sequence[int], vstore: VSource) -> tuple[str, ...]:
-    """Evidence scenarios that had video, by name."""
-    return tuple(cat.scenario_name(s) for s in scenarios if s not in vstore.missing)
-
-
-def _unresolved(
-    cat: ECatalog, e: int, names: tuple[str, ...], why: str, candidates: tuple[str, ...] = ()
-) -> EvMatch:
+def _unresolved(why: str, candidates: tuple[str, ...] = ()) -> _Result:
     status = AMBIGUOUS if why.startswith(AMBIGUOUS) else "unresolved"
-    return EvMatch(str(cat.eids[e]), None, 0.0, names, why, status, candidates)
+    return _Result(None, 0.0, why, status, candidates)
 
 
 def _judge_shared(
-    cat: ECatalog,
     vstore: VSource,
     engine: Engine,
-    evidence: dict[int, list[int]],
+    evidence: Evidence,
     shared: dict[int, str],
     mine: list[int],
-) -> dict[int, EvMatch]:
+) -> dict[int, _Result]:
     """EIDs carried by several devices: ``ambiguous``, with the VIDs their evidence shows most."""
     if not mine:
         return {}
-    ev_e = np.array([e for e in mine for _ in evidence[e]], np.int64)
-    ev_s = np.array([s for e in mine for s in evidence[e]], np.int64)
+    ev_e, ev_s = _pairs(mine, evidence)
     ranked = _ranked(vstore.vote(engine, ev_e, ev_s))
     out = {}
     for e in mine:
         top = ranked.get(e, [])
         shown = ", ".join(f"{v} in {c}" for v, c in top)
         why = f"{AMBIGUOUS}: {shared[e]}" + (f"; candidates {shown}" if shown else "")
-        out[e] = _unresolved(
-            cat, e, _names(cat, evidence[e], vstore), why, tuple(v for v, _ in top)
-        )
+        out[e] = _unresolved(why, tuple(v for v, _ in top))
     return out
 
 
 def _extend_all(
     eindex: EIndex,
     eids: Sequence[int],
-    evidence: dict[int, list[int]],
+    evidence: Evidence,
     params: MatchParams,
     vstore: VSource,
 ) -> set[int]:
@@ -407,20 +479,19 @@ def _refine_round(
     vstore: VSource,
     engine: Engine,
     params: MatchParams,
-    evidence: dict[int, list[int]],
+    evidence: Evidence,
     pending: list[int],
     taken: set[str],
-    result: dict[int, EvMatch],
+    result: dict[int, _Result],
 ) -> list[int]:
     """One round of VID filtering and matching refining; returns the EIDs still pending."""
-    cat = eindex.catalog
     missing = vstore.missing
     # add one scenario to EIDs short of evidence before filtering (free of a V read if shared)
     short = [e for e in pending if _usable(evidence[e], missing) < params.min_evidence]
     _extend_all(eindex, short, evidence, params, vstore)
-    ev_e = np.array([e for e in pending for _ in evidence[e]], np.int64)
-    ev_s = np.array([s for e in pending for s in evidence[e]], np.int64)
+    ev_e, ev_s = _pairs(pending, evidence)
     counts = vstore.vote(engine, ev_e, ev_s, taken)
+    del ev_e, ev_s
     usable = {e: _usable(evidence[e], missing) for e in pending}
     verdicts = _judge_all(counts, usable, pending, taken, params)
     ok = sorted(
@@ -435,11 +506,9 @@ def _refine_round(
             still.append(e)  # the VID went to a stronger claim this round; re-judge next round
             continue
         claimed.add(v.vid)
-        result[e] = EvMatch(
-            str(cat.eids[e]),
+        result[e] = _Result(
             v.vid,
             _confidence(v.votes, v.second_votes, usable[e]),
-            _names(cat, evidence[e], vstore),
             "",
             "matched",
             (v.vid,) if v.second is None else (v.vid, v.second),
@@ -453,18 +522,8 @@ def _refine_round(
             continue
         v = verdicts[e]
         cands = tuple(x for x in (v.vid, v.second) if x is not None)
-        result[e] = _unresolved(cat, e, _names(cat, evidence[e], vstore), v.why, cands)
+        result[e] = _unresolved(v.why, cands)
     return sorted(still)
-
-
-def _in_request_order(
-    cat: ECatalog, requested: Sequence[str], result: dict[int, EvMatch]
-) -> list[EvMatch]:
-    idx = pd.Index(cat.eids).get_indexer(list(requested)) if len(requested) else []
-    return [
-        result[int(i)] if i >= 0 else EvMatch(name, None, 0.0, (), REASON_UNKNOWN, "unresolved")
-        for name, i in zip(requested, idx, strict=True)
-    ]
 
 
 def _usable(scenarios: Sequence[int], missing: Collection[int]) -> int:
@@ -527,39 +586,34 @@ def match_edp(
 
     chosen_all = engine.edp_select(targets.tolist(), select)
     t1 = time.perf_counter()
-    ev_e = np.array([e for e, ch in zip(targets.tolist(), chosen_all, strict=True) for _ in ch])
-    ev_s = np.array([s for ch in chosen_all for s in ch], np.int64)
-    ranked = _ranked(vstore.vote(engine, ev_e.astype(np.int64), ev_s))
-    result: dict[int, EvMatch] = {}
+    evidence: Evidence = {
+        e: array("q", ch) for e, ch in zip(targets.tolist(), chosen_all, strict=True)
+    }
+    ev_e, ev_s = _pairs(targets.tolist(), evidence)
+    ranked = _ranked(vstore.vote(engine, ev_e, ev_s))
+    result: dict[int, _Result] = {}
     reads = 0
     nbytes = 0
     for e, ch in zip(targets.tolist(), chosen_all, strict=True):
         # each EID task reads its own V-scenarios (no sharing across EIDs)
         reads += len(ch)
         nbytes += sum(vstore.sizes.get(s, 0) for s in ch)
-        names = _names(data, ch, vstore)
+        n = _usable(ch, vstore.missing)
         r = ranked.get(e, [])
         if not ch:
-            result[e] = _unresolved(data, e, (), "no E-scenario lists it")
+            result[e] = _unresolved("no E-scenario lists it")
         elif not r:
-            result[e] = _unresolved(data, e, names, f"no VID in its {len(names)} V-scenarios")
+            result[e] = _unresolved(f"no VID in its {n} V-scenarios")
         else:
             c2 = r[1][1] if len(r) > 1 else 0
-            result[e] = EvMatch(
-                str(data.eids[e]),
-                r[0][0],
-                _confidence(r[0][1], c2, len(names)),
-                names,
-                "",
-                "matched",
-                tuple(v for v, _ in r),
+            result[e] = _Result(
+                r[0][0], _confidence(r[0][1], c2, n), "", "matched", tuple(v for v, _ in r)
             )
     if progress is not None:
         progress(len(targets), len(targets))
     t2 = time.perf_counter()
-    matches = _in_request_order(data, requested, result)
     return MatchOutcome(
-        matches=matches,
+        matches=Matches(data, requested, result, evidence, vstore.missing),
         v_scenarios_read=reads,
         v_scenarios_unique=vstore.reads,
         v_bytes_read=nbytes,
