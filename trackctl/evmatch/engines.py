@@ -224,18 +224,9 @@ class SparkEngine:
         sc, p = self.sc, self.partitions
         # Preprocess output: the partition's sets ("P", node) and the window's scenarios
         # ("S", cell), each an EID set with a set id. Map: emit (eid, set id) for every member.
-        part = sc.parallelize(
-            list(zip(np.asarray(eid).tolist(), np.asarray(node).tolist(), strict=True)), p
-        ).map(lambda r: (r[0], ("P", r[1])))
-        scen = sc.parallelize(
-            list(
-                zip(
-                    listing["eid"].astype(int).tolist(),
-                    listing["cell"].astype(int).tolist(),
-                    strict=True,
-                )
-            ),
-            p,
+        part = pairs_rdd(sc, eid, node, p).map(lambda r: (r[0], ("P", r[1])))
+        scen = pairs_rdd(
+            sc, listing["eid"].to_numpy(np.int64), listing["cell"].to_numpy(np.int64), p
         ).map(lambda r: (r[0], ("S", r[1])))
 
         def reduce_eid(item: tuple[int, Any]) -> list[tuple[tuple[int, int], int]]:
@@ -252,10 +243,8 @@ class SparkEngine:
             .flatMap(reduce_eid)
             .groupByKey(p)  # Merge: (set ids, EIDs) -> one set of the new partition
             .flatMap(lambda kv: [(kv[0][0], kv[0][1], e) for e in kv[1]])
-            .collect()
         )
-        df = pd.DataFrame(merged, columns=SPLIT_COLUMNS, dtype=np.int64)
-        return _sorted_split(df)
+        return _sorted_split(collect_columns(merged, SPLIT_COLUMNS, (np.int64,) * 3))
 
     def vote(
         self,
@@ -269,13 +258,11 @@ class SparkEngine:
         # the V-scenarios read are shipped to every task once (a map-side join): each task
         # compares the VIDs of its EIDs' scenarios, parallel across EIDs (§3.2.4 C)
         table = sc.broadcast({int(s): tuple(v) for s, v in vids.items()})
-        ev = sc.parallelize(
-            list(zip(np.asarray(eid).tolist(), np.asarray(scenario).tolist(), strict=True)), p
-        )
+        ev = pairs_rdd(sc, eid, scenario, p)
         pairs = ev.flatMap(lambda es: [((es[0], v), 1) for v in table.value.get(es[1], ())])
         counts = top_per_eid(pairs, p, exclude, top)
         table.unpersist()
-        return _sorted_vote(pd.DataFrame(counts, columns=VOTE_COLUMNS))
+        return _sorted_vote(counts)
 
     def edp_select(
         self, targets: Sequence[int], select: Callable[[int], list[int]]
@@ -290,9 +277,36 @@ class SparkEngine:
             self._session.stop()
 
 
-def top_per_eid(pairs: Any, partitions: int, exclude: Collection[str], top: int) -> list[Any]:
+def pairs_rdd(sc: Any, a: np.ndarray, b: np.ndarray, partitions: int) -> Any:
+    """An RDD of ``(int, int)`` pairs shipped as numpy blocks (a Python tuple per pair on the
+    driver would cost ~100 bytes each: a city's evidence has millions)."""
+    block = np.stack([np.asarray(a, np.int64), np.asarray(b, np.int64)], axis=1)
+    parts = np.array_split(block, max(partitions, 1)) if len(block) else [block]
+    return sc.parallelize(parts, len(parts)).flatMap(
+        lambda arr: zip(arr[:, 0].tolist(), arr[:, 1].tolist(), strict=True)
+    )
+
+
+def collect_columns(rdd: Any, columns: Sequence[str], dtypes: Sequence[Any]) -> pd.DataFrame:
+    """Collect an RDD of tuples as one numpy column block per partition (not a list of tuples
+    on the driver)."""
+
+    def block(it: Any) -> list[list[np.ndarray]]:
+        rows = list(it)
+        return [[np.array([r[i] for r in rows], dtype=dt) for i, dt in enumerate(dtypes)]]
+
+    blocks = rdd.mapPartitions(block).collect()
+    return pd.DataFrame(
+        {
+            name: np.concatenate([b[i] for b in blocks]) if blocks else np.zeros(0, dt)
+            for i, (name, dt) in enumerate(zip(columns, dtypes, strict=True))
+        }
+    )
+
+
+def top_per_eid(pairs: Any, partitions: int, exclude: Collection[str], top: int) -> pd.DataFrame:
     """``((eid, vid), 1)`` records summed, then each EID's ``top`` VIDs outside ``exclude``
-    (count descending, then VID), on the executors; returns ``(eid, vid, count)`` rows."""
+    (count descending, then VID), on the executors; returns ``(eid, vid, count)`` columns."""
     banned = frozenset(exclude)
 
     def best(item: tuple[int, Any]) -> list[tuple[int, str, int]]:
@@ -300,13 +314,13 @@ def top_per_eid(pairs: Any, partitions: int, exclude: Collection[str], top: int)
         ranked = sorted((v for v in vc if v[0] not in banned), key=lambda x: (-x[1], x[0]))
         return [(e, v, c) for v, c in ranked[:top]]
 
-    return (
+    ranked = (
         pairs.reduceByKey(operator.add, partitions)
         .map(lambda kv: (kv[0][0], (kv[0][1], kv[1])))
         .groupByKey(partitions)
         .flatMap(best)
-        .collect()
     )
+    return collect_columns(ranked, VOTE_COLUMNS, (np.int64, object, np.int64))
 
 
 def make_engine(name: str, master: str | None = None) -> Engine:

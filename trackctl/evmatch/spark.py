@@ -36,6 +36,7 @@ from trackctl.evmatch.engines import (
     VOTE_COLUMNS,
     SparkEngine,
     _sorted_vote,
+    pairs_rdd,
     top_per_eid,
 )
 from trackctl.logs import topics
@@ -372,9 +373,7 @@ class SparkVStore:
         summary = None if not self.reader.truncated else self.reader.summary
         args = (path, summary, cat.cells, cat.windows_ns, cat.window_ns, cat.n_cells)
         n_cells = cat.n_cells
-        pairs = sc.parallelize(
-            list(zip(np.asarray(eid).tolist(), np.asarray(scenario).tolist(), strict=True)), p
-        )
+        pairs = pairs_rdd(sc, eid, scenario, p)
         # group by cell so that a task reads few topics; the log is opened once per task
         records = (
             pairs.keyBy(lambda es: es[1] % n_cells)
@@ -398,4 +397,4 @@ class SparkVStore:
         votes = records.filter(lambda kv: not isinstance(kv[0][0], str))
         counts = top_per_eid(votes, p, exclude, TOP_VIDS)
         records.unpersist()
-        return _sorted_vote(pd.DataFrame(counts, columns=VOTE_COLUMNS))
+        return _sorted_vote(counts)
