@@ -187,6 +187,15 @@ class EShard:
             out[int(e)] = (free, (int(gap[i]), -int(r[i]), -int(c[i]), int(s[i])))
         return out
 
+    def inclusive_window_counts(self, eids: np.ndarray) -> dict[int, int]:
+        """Windows of this shard in which each EID of ``eids`` is inclusive."""
+        out = {}
+        for e in np.asarray(eids).tolist():
+            w = self._of(int(e))[3]
+            if len(w):
+                out[int(e)] = len(np.unique(w))
+        return out
+
     def multi_counts(self) -> pd.DataFrame:
         """Per EID: windows here where it is inclusive in 2+ cells (``multi``); only EIDs with
         ``multi`` > 0."""
@@ -205,9 +214,10 @@ class EShard:
         )
 
 
-# A runner applies a function to every shard (or the shards holding one window) and returns the
-# partial answers; the EIndex combines them.
-Runner = Callable[[Callable[[EShard], Any], int | None], list[Any]]
+# A runner calls one EShard method with the given arguments on every shard (or on the shards
+# holding one window) and returns the partial answers; the EIndex combines them. The Spark
+# runner broadcasts the arguments (they can be millions of ids) instead of closing over them.
+Runner = Callable[[str, tuple[Any, ...], int | None], list[Any]]
 
 
 class EIndex:
@@ -215,8 +225,9 @@ class EIndex:
 
     Args:
         catalog: names and codes.
-        run: applies a function to the shards: ``run(f, window)`` returns ``[f(shard), ...]`` for
-            every shard, or for the shard holding ``window`` when it is not None.
+        run: calls a shard method on the shards: ``run(name, args, window)`` returns
+            ``[shard.name(*args), ...]`` for every shard, or for the shards holding ``window``
+            when it is not None.
         rank: each window's rank in the random window order.
         close: releases the shards (the Spark engine unpersists its RDD).
     """
@@ -238,7 +249,7 @@ class EIndex:
             self._close()
 
     def listing(self, w: int) -> tuple[np.ndarray, np.ndarray]:
-        parts = self._run(lambda sh: sh.listing(w), w)
+        parts = self._run("listing", (w,), w)
         eid = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int64)
         cell = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int64)
         return eid, cell
@@ -248,20 +259,20 @@ class EIndex:
         if not len(e):
             return np.zeros(0, bool)
         out = np.zeros(len(e), bool)
-        for part in self._run(lambda sh: sh.inclusive_mask(e, s), None):
+        for part in self._run("inclusive_mask", (e, s), None):
             out |= part
         return out
 
     def with_inclusive(self, eids: np.ndarray) -> set[int]:
         eids = np.asarray(eids, np.int64)
         found: set[int] = set()
-        for part in self._run(lambda sh: sh.with_inclusive(eids), None):
+        for part in self._run("with_inclusive", (eids,), None):
             found.update(part.tolist())
         return found
 
     def first_inclusive(self, eids: Sequence[int], k: int) -> dict[int, list[int]]:
         merged: dict[int, list[Pick]] = {}
-        for part in self._run(lambda sh: sh.first_inclusive(eids, k), None):
+        for part in self._run("first_inclusive", (eids, k), None):
             for e, picks in part.items():
                 merged.setdefault(e, []).extend(picks)
         return {e: [p[2] for p in sorted(picks)[:k]] for e, picks in merged.items()}
@@ -281,7 +292,7 @@ class EIndex:
         items = list(requests.items())
         frees: dict[int, list[Pick]] = {}
         best: dict[int, tuple[int, int, int, int]] = {}
-        for part in self._run(lambda sh: sh.extend_candidates(items, read, missing), None):
+        for part in self._run("extend_candidates", (items, read, missing), None):
             for e, (free, b) in part.items():
                 frees.setdefault(e, []).extend(free)
                 if b is not None and (e not in best or b > best[e]):
@@ -300,7 +311,7 @@ class EIndex:
         >= ``min_share`` of the windows it is inclusive in is carried by several devices (a
         cloned or colliding MAC, an IMSI shared by two people). Returns EID code -> the reason.
         """
-        parts = [p for p in self._run(lambda sh: sh.multi_counts(), None) if len(p)]
+        parts = [p for p in self._run("multi_counts", (), None) if len(p)]
         if not parts:
             return {}
         multi = pd.concat(parts).groupby("eid")["multi"].sum()
@@ -321,20 +332,10 @@ class EIndex:
 
     def _inclusive_windows(self, eids: np.ndarray) -> dict[int, int]:
         counts: dict[int, int] = {}
-        for part in self._run(lambda sh: _window_counts(sh, eids), None):
+        for part in self._run("inclusive_window_counts", (eids,), None):
             for e, n in part.items():
                 counts[e] = counts.get(e, 0) + n
         return counts
-
-
-def _window_counts(shard: EShard, eids: np.ndarray) -> dict[int, int]:
-    """Windows of this shard in which each EID of ``eids`` is inclusive."""
-    out = {}
-    for e in eids.tolist():
-        w = shard._of(int(e))[3]
-        if len(w):
-            out[int(e)] = len(np.unique(w))
-    return out
 
 
 def local_index(catalog: ECatalog, rows: pd.DataFrame, rank: np.ndarray) -> EIndex:
@@ -348,4 +349,4 @@ def local_index(catalog: ECatalog, rows: pd.DataFrame, rank: np.ndarray) -> EInd
         n_eids=len(catalog.eids),
         rank=rank,
     )
-    return EIndex(catalog, lambda f, _w: [f(shard)], rank)
+    return EIndex(catalog, lambda name, args, _w: [getattr(shard, name)(*args)], rank)

@@ -230,13 +230,21 @@ def spark_index(
         e_scenarios=sum(n for _, n in per_shard),
     )
 
-    def run(f: Any, window: int | None) -> list[Any]:
-        if window is None:
-            return shards.map(f).collect()
-        parts = holders.get(window, [])
-        if not parts:
-            return []
-        return sc.runJob(shards, lambda it: [f(sh) for sh in it], partitions=parts)
+    def run(name: str, args: tuple[Any, ...], window: int | None) -> list[Any]:
+        shipped = sc.broadcast(args)
+
+        def call(shard: EShard) -> Any:
+            return getattr(shard, name)(*shipped.value)
+
+        try:
+            if window is None:
+                return shards.map(call).collect()
+            parts = holders.get(window, [])
+            if not parts:
+                return []
+            return sc.runJob(shards, lambda it: [call(sh) for sh in it], partitions=parts)
+        finally:
+            shipped.unpersist()
 
     def close() -> None:
         shards.unpersist()
