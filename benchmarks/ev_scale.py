@@ -26,6 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
+SPARK_HEAP = "3g"
+
 
 def child(log: str, out: str, engine: str) -> None:
     """Run ev-match in this process; print the report plus this process's peak RSS."""
@@ -41,6 +43,8 @@ def child(log: str, out: str, engine: str) -> None:
         # started here so that it outlives the run and its JVM's peak can be read
         session = (
             SparkSession.builder.master("local[2]")
+            # local mode: one JVM is driver and executors; the cached E shards need the heap
+            .config("spark.driver.memory", SPARK_HEAP)
             .config("spark.ui.enabled", "false")
             .config("spark.ui.showConsoleProgress", "false")
             .getOrCreate()

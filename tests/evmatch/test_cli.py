@@ -113,6 +113,8 @@ def test_bad_options_exit_2(ev_sample: Path, tmp_path: Path) -> None:
         (["--algorithm", "xx"], "expected ss or edp"),
         (["--engine", "gpu"], "expected local or spark"),
         (["--master", "local[2]"], "--master is for --engine spark"),
+        (["--spark-conf", "spark.driver.memory=2g"], "--spark-conf is for --engine spark"),
+        (["--engine", "spark", "--spark-conf", "memory=2g"], "expected spark.KEY=VALUE"),
         (["--all", "--eids", str(ev_sample)], "give one of them"),
     ):
         res = runner.invoke(app, ["ev-match", str(ev_sample), "--out", out, *args])

@@ -51,6 +51,14 @@ def ev_match(
     master: Annotated[
         str | None, typer.Option(help="Spark master: local[N] or a cluster URL.")
     ] = None,
+    spark_conf: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--spark-conf",
+            help="Spark property KEY=VALUE for a new session, e.g. spark.driver.memory=4g "
+            "(repeatable).",
+        ),
+    ] = None,
     seed: Annotated[int, typer.Option(help="Order of the random windows.")] = 0,
     margin: Annotated[int, typer.Option(help="Votes the best VID must lead the runner-up by.")] = 1,
     max_evidence: Annotated[
@@ -77,6 +85,14 @@ def ev_match(
         raise InputError(f"--engine {engine!r}: expected local or spark")
     if master is not None and engine != "spark":
         raise InputError("--master is for --engine spark")
+    if spark_conf and engine != "spark":
+        raise InputError("--spark-conf is for --engine spark")
+    conf = []
+    for item in spark_conf or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip().startswith("spark."):
+            raise InputError(f"--spark-conf {item!r}: expected spark.KEY=VALUE")
+        conf.append((key.strip(), value.strip()))
     if margin < 1 or max_evidence < 1:
         raise InputError("--margin and --max-evidence must be >= 1")
     requested = _read_eids(eids) if eids is not None else None
@@ -89,6 +105,7 @@ def ev_match(
         algorithm=algo,
         engine=engine,
         master=master,
+        spark_conf=tuple(conf),
         seed=seed,
         params=MatchParams(margin=margin, max_evidence=max_evidence),
     )

@@ -124,12 +124,15 @@ class EShard:
         lo, hi = np.searchsorted(self.w, [w, w + 1])
         return self.eid[lo:hi].astype(np.int64), self.cell[lo:hi].astype(np.int64)
 
-    def inclusive_mask(self, e: np.ndarray, s: np.ndarray) -> np.ndarray:
-        """Whether each (EID, scenario) pair is an inclusive listing of this shard."""
+    def inclusive_hits(self, e: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Positions of the (EID, scenario) pairs that are inclusive listings of this shard
+        (sparse: a shard holds few of the windows asked about)."""
         keys = self._inclusive()[0]
+        if not len(keys):
+            return np.zeros(0, np.int64)
         k = np.asarray(s, np.int64) * max(self.n_eids, 1) + np.asarray(e, np.int64)
         i = np.searchsorted(keys, k)
-        return (i < len(keys)) & (keys[np.minimum(i, len(keys) - 1)] == k) if len(keys) else k < 0
+        return np.flatnonzero(keys[np.minimum(i, len(keys) - 1)] == k)
 
     def _of(self, e: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Scenario, window rank, cell and window of ``e``'s inclusive listings, in window
@@ -259,8 +262,8 @@ class EIndex:
         if not len(e):
             return np.zeros(0, bool)
         out = np.zeros(len(e), bool)
-        for part in self._run("inclusive_mask", (e, s), None):
-            out |= part
+        for hits in self._run("inclusive_hits", (e, s), None):
+            out[hits] = True
         return out
 
     def with_inclusive(self, eids: np.ndarray) -> set[int]:

@@ -189,11 +189,18 @@ class SparkEngine:
     Args:
         master: Spark master URL (``local[N]`` or a cluster URL).
         partitions: RDD partitions per step (default: the context's default parallelism).
+        conf: Spark properties for a new session (``spark.driver.memory``, ...), as
+            ``spark-submit --conf`` takes them.
     """
 
     name = "spark"
 
-    def __init__(self, master: str = "local[2]", partitions: int | None = None) -> None:
+    def __init__(
+        self,
+        master: str = "local[2]",
+        partitions: int | None = None,
+        conf: Mapping[str, str] | None = None,
+    ) -> None:
         with warnings.catch_warnings():
             # pyspark warns about pandas >= 3 for its pandas API, which trackctl does not use
             warnings.filterwarnings("ignore", message=".*pandas >= 3.*")
@@ -208,13 +215,15 @@ class SparkEngine:
                 self._session = active
                 self._owned = False
             else:
-                self._session = (
+                builder = (
                     SparkSession.builder.master(master)
                     .appName("trackctl-ev-match")
                     .config("spark.ui.enabled", "false")
                     .config("spark.ui.showConsoleProgress", "false")
-                    .getOrCreate()
                 )
+                for key, value in (conf or {}).items():
+                    builder = builder.config(key, value)
+                self._session = builder.getOrCreate()
                 self._owned = True
         self.sc = self._session.sparkContext
         self.sc.setLogLevel("ERROR")
@@ -323,8 +332,10 @@ def top_per_eid(pairs: Any, partitions: int, exclude: Collection[str], top: int)
     return collect_columns(ranked, VOTE_COLUMNS, (np.int64, object, np.int64))
 
 
-def make_engine(name: str, master: str | None = None) -> Engine:
-    """``local`` or ``spark`` (with ``master``, default ``local[2]``).
+def make_engine(
+    name: str, master: str | None = None, conf: Mapping[str, str] | None = None
+) -> Engine:
+    """``local`` or ``spark`` (with ``master``, default ``local[2]``, and Spark ``conf``).
 
     Raises:
         InputError: unknown engine, or pyspark missing.
@@ -332,5 +343,5 @@ def make_engine(name: str, master: str | None = None) -> Engine:
     if name == "local":
         return LocalEngine()
     if name == "spark":
-        return SparkEngine(master or "local[2]")
+        return SparkEngine(master or "local[2]", conf=conf)
     raise InputError(f"--engine {name!r}: expected local or spark")

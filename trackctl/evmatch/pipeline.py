@@ -41,6 +41,7 @@ class EvMatchConfig:
         algorithm: ss or edp.
         engine: local (pandas) or spark (pyspark).
         master: Spark master URL for the spark engine.
+        spark_conf: Spark properties for a new session (``spark.driver.memory``, ...).
         seed: order of the random windows (same seed, same matches).
         params: acceptance rule and refining limit.
     """
@@ -49,6 +50,7 @@ class EvMatchConfig:
     algorithm: Algorithm = Algorithm.SS
     engine: str = "local"
     master: str | None = None
+    spark_conf: tuple[tuple[str, str], ...] = ()
     seed: int = 0
     params: MatchParams = field(default_factory=MatchParams)
 
@@ -62,7 +64,7 @@ def match_log(
     t0 = time.perf_counter()
     # a cut log is indexed once, so that V-scenario fetches seek instead of rescanning it
     reader.reindex()
-    engine = make_engine(config.engine, config.master)
+    engine = make_engine(config.engine, config.master, dict(config.spark_conf))
     vstore: VStore | SparkVStore
     try:
         data: ECatalog | EIndex

@@ -44,7 +44,7 @@ from trackctl.logs.reader import LogReader
 
 __all__ = ["spark_index", "SparkVStore"]
 
-_WINDOWS_PER_SHARD = 2
+_WINDOWS_PER_SHARD = 1
 
 
 @dataclass(frozen=True)
