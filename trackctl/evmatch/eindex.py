@@ -159,15 +159,16 @@ class EShard:
 
     def extend_candidates(
         self,
-        requests: Sequence[tuple[int, Sequence[int]]],
+        requests: Sequence[tuple[int, Sequence[int], int]],
         read: Collection[int],
         missing: Collection[int],
-    ) -> dict[int, tuple[list[Pick], tuple[int, int, int, int] | None]]:
-        """For each (EID, evidence) request: the fresh inclusive scenarios here already read (in
-        window order), and the best fresh one to read next: farthest in windows from the
-        evidence, the earlier in window order on ties, as ``(gap, -rank, -cell, scenario)``."""
-        out: dict[int, tuple[list[Pick], tuple[int, int, int, int] | None]] = {}
-        for e, evidence in requests:
+    ) -> dict[int, tuple[int, list[Pick], tuple[int, int, int, int]]]:
+        """For each (EID, evidence, room) request: the fresh inclusive scenarios here already
+        read (in window order, at most ``room``), and the best fresh one to read next: farthest
+        in windows from the evidence, the earlier in window order on ties, as
+        ``(gap, -rank, -cell, scenario)``. Merged across shards by :func:`merge_extend`."""
+        out: dict[int, tuple[int, list[Pick], tuple[int, int, int, int]]] = {}
+        for e, evidence, room in requests:
             s, r, c, w = self._of(int(e))
             if not len(s):
                 continue
@@ -187,7 +188,7 @@ class EShard:
             else:
                 gap = np.zeros(len(s), np.int64)
             i = int(np.argmax(gap))  # the first maximum: earliest in window order
-            out[int(e)] = (free, (int(gap[i]), -int(r[i]), -int(c[i]), int(s[i])))
+            out[int(e)] = (room, free[:room], (int(gap[i]), -int(r[i]), -int(c[i]), int(s[i])))
         return out
 
     def inclusive_window_counts(self, eids: np.ndarray) -> dict[int, int]:
@@ -221,6 +222,30 @@ class EShard:
 # holding one window) and returns the partial answers; the EIndex combines them. The Spark
 # runner broadcasts the arguments (they can be millions of ids) instead of closing over them.
 Runner = Callable[[str, tuple[Any, ...], int | None], list[Any]]
+# A pair runner calls a shard method that answers per key (EID), merges the answers of all
+# shards per key with ``merge`` and turns each into a list of ints with ``finish``; it returns
+# the (key, int) pairs as two arrays. On Spark the merging runs on the executors (reduceByKey),
+# so the driver receives one short answer per EID, not one per shard and EID.
+PairRunner = Callable[
+    [str, tuple[Any, ...], Callable[[Any, Any], Any], Callable[[Any], list[int]]],
+    tuple[np.ndarray, np.ndarray],
+]
+
+
+def merge_extend(
+    a: tuple[int, list[Pick], tuple[int, int, int, int]],
+    b: tuple[int, list[Pick], tuple[int, int, int, int]],
+) -> tuple[int, list[Pick], tuple[int, int, int, int]]:
+    """Two shards' refining candidates for one EID: the read ones in window order (at most
+    ``room``), and the better next one."""
+    room = a[0]
+    return room, sorted(a[1] + b[1])[:room], max(a[2], b[2])
+
+
+def finish_extend(v: tuple[int, list[Pick], tuple[int, int, int, int]]) -> list[int]:
+    """The scenarios refining adds: the already-read ones if any, else the best next one."""
+    room, free, best = v
+    return [p[2] for p in sorted(free)[:room]] if free else [best[3]]
 
 
 class EIndex:
@@ -241,11 +266,31 @@ class EIndex:
         run: Runner,
         rank: np.ndarray,
         close: Callable[[], None] | None = None,
+        run_pairs: PairRunner | None = None,
     ) -> None:
         self.catalog = catalog
         self._run = run
         self.rank = rank
         self._close = close
+        self._run_pairs = run_pairs or self._pairs_here
+
+    def _pairs_here(
+        self,
+        name: str,
+        args: tuple[Any, ...],
+        merge: Callable[[Any, Any], Any],
+        finish: Callable[[Any], list[int]],
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Keyed answers merged and finished in this process (the local engine)."""
+        merged: dict[int, Any] = {}
+        for part in self._run(name, args, None):
+            for key, value in part.items():
+                merged[key] = merge(merged[key], value) if key in merged else value
+        pairs = [(k, x) for k, v in merged.items() for x in finish(v)]
+        return (
+            np.array([k for k, _ in pairs], np.int64),
+            np.array([x for _, x in pairs], np.int64),
+        )
 
     def close(self) -> None:
         if self._close is not None:
@@ -292,18 +337,13 @@ class EIndex:
         the best one to read next. EIDs with nothing fresh are left out."""
         if not requests:
             return {}
-        items = list(requests.items())
-        frees: dict[int, list[Pick]] = {}
-        best: dict[int, tuple[int, int, int, int]] = {}
-        for part in self._run("extend_candidates", (items, read, missing), None):
-            for e, (free, b) in part.items():
-                frees.setdefault(e, []).extend(free)
-                if b is not None and (e not in best or b > best[e]):
-                    best[e] = b
+        items = [(e, ev, room[e]) for e, ev in requests.items()]
+        e_arr, s_arr = self._run_pairs(
+            "extend_candidates", (items, read, missing), merge_extend, finish_extend
+        )
         out: dict[int, list[int]] = {}
-        for e in best:
-            free = sorted(frees.get(e, []))
-            out[e] = [p[2] for p in free[: room[e]]] if free else [best[e][3]]
+        for e, x in zip(e_arr.tolist(), s_arr.tolist(), strict=True):
+            out.setdefault(e, []).append(x)
         return out
 
     def multi_located(self, min_windows: int = 2, min_share: float = 0.25) -> dict[int, str]:

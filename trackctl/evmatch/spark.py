@@ -36,6 +36,7 @@ from trackctl.evmatch.engines import (
     VOTE_COLUMNS,
     SparkEngine,
     _sorted_vote,
+    collect_columns,
     pairs_rdd,
     top_per_eid,
 )
@@ -246,10 +247,29 @@ def spark_index(
         finally:
             shipped.unpersist()
 
+    def run_pairs(
+        name: str, args: tuple[Any, ...], merge: Any, finish: Any
+    ) -> tuple[np.ndarray, np.ndarray]:
+        shipped = sc.broadcast(args)
+
+        def call(shard: EShard) -> Any:
+            return list(getattr(shard, name)(*shipped.value).items())
+
+        try:
+            pairs = (
+                shards.flatMap(call)
+                .reduceByKey(merge, engine.partitions)
+                .flatMap(lambda kv: [(kv[0], x) for x in finish(kv[1])])
+            )
+            got = collect_columns(pairs, ["key", "value"], (np.int64, np.int64))
+        finally:
+            shipped.unpersist()
+        return got["key"].to_numpy(np.int64), got["value"].to_numpy(np.int64)
+
     def close() -> None:
         shards.unpersist()
 
-    return EIndex(catalog, run, rank, close=close), order
+    return EIndex(catalog, run, rank, close=close, run_pairs=run_pairs), order
 
 
 # -- V-scenarios on the executors ---------------------------------------------------------------
