@@ -306,46 +306,58 @@ def _settle(
     return node, eid, paths
 
 
-class _Verdict(NamedTuple):
-    """VID filtering's judgement of one EID: best free VID and count, runner-up and count, and
-    why the result is not acceptable ('' when it is)."""
+class _Judgement:
+    """VID filtering's judgement of the pending EIDs, as arrays aligned with ``eids`` (a city
+    judges a million EIDs a round): best free VID and votes, runner-up and votes, evidence with
+    video, and a code for why the result is not acceptable (0 when it is); the reason's text is
+    made only for the EIDs that end unresolved."""
 
-    vid: str | None
-    votes: int
-    second: str | None
-    second_votes: int
-    why: str
+    OK, NO_FREE, FEW, TIE, WEAK = range(5)
 
+    def __init__(
+        self, counts: pd.DataFrame, eids: np.ndarray, usable: np.ndarray, params: MatchParams
+    ) -> None:
+        ce = counts["eid"].to_numpy(np.int64)
+        cv = counts["vid"].to_numpy(object)
+        cc = counts["count"].to_numpy(np.int64)
+        n = len(eids)
+        self.eids, self.n, self.params = eids, usable, params
+        self.v1 = np.full(n, None, object)
+        self.v2 = np.full(n, None, object)
+        self.c1 = np.zeros(n, np.int64)
+        self.c2 = np.zeros(n, np.int64)
+        found = np.zeros(n, bool)
+        if len(ce):
+            first = np.flatnonzero(np.r_[True, ce[1:] != ce[:-1]])
+            pos = np.minimum(np.searchsorted(ce[first], eids), len(first) - 1)
+            found = ce[first][pos] == eids
+            i1 = first[pos]
+            i2 = np.minimum(i1 + 1, len(ce) - 1)
+            second = found & (i1 + 1 < len(ce)) & (ce[i2] == eids)
+            self.v1[found], self.c1[found] = cv[i1[found]], cc[i1[found]]
+            self.v2[second], self.c2[second] = cv[i2[second]], cc[i2[second]]
+        code = np.full(n, self.OK, np.int64)
+        code[self.c1 < params.support * usable] = self.WEAK
+        code[self.c1 - self.c2 < params.margin] = self.TIE
+        code[usable < params.min_evidence] = self.FEW
+        code[~found] = self.NO_FREE
+        self.code = code
 
-def _judge_all(
-    counts: pd.DataFrame,
-    usable: dict[int, int],
-    pending: Sequence[int],
-    taken: set[str],
-    params: MatchParams,
-) -> dict[int, _Verdict]:
-    """Judge every pending EID. ``counts`` is sorted by eid, count desc, vid; ``usable`` is the
-    number of each EID's evidence scenarios that have a V-scenario (missing ones do not vote)."""
-    if taken and len(counts):
-        counts = counts[~counts["vid"].isin(taken)]
-    best = _ranked(counts)
-    out: dict[int, _Verdict] = {}
-    for e in pending:
-        n = usable[e]
-        free = best.get(e, [])
-        if not free:
-            out[e] = _Verdict(None, 0, None, 0, f"no free VID in its {n} V-scenarios")
-            continue
-        (v1, c1), (v2, c2) = free[0], (free[1] if len(free) > 1 else (None, 0))
-        why = ""
-        if n < params.min_evidence:
-            why = f"only {n} evidence scenario(s) with video (need {params.min_evidence})"
-        elif c1 - c2 < params.margin:
-            why = f"{AMBIGUOUS} after {n} scenarios: {v1} in {c1}, {v2 or '-'} in {c2}"
-        elif c1 < params.support * n:
-            why = f"weak: best VID {v1} in only {c1} of {n} scenarios"
-        out[e] = _Verdict(v1, c1, v2, c2, why)
-    return out
+    def why(self, i: int) -> str:
+        n, v1, c1 = int(self.n[i]), self.v1[i], int(self.c1[i])
+        v2, c2, code = self.v2[i], int(self.c2[i]), self.code[i]
+        if code == self.NO_FREE:
+            return f"no free VID in its {n} V-scenarios"
+        if code == self.FEW:
+            return f"only {n} evidence scenario(s) with video (need {self.params.min_evidence})"
+        if code == self.TIE:
+            return f"{AMBIGUOUS} after {n} scenarios: {v1} in {c1}, {v2 or '-'} in {c2}"
+        if code == self.WEAK:
+            return f"weak: best VID {v1} in only {c1} of {n} scenarios"
+        return ""
+
+    def candidates(self, i: int) -> tuple[str, ...]:
+        return tuple(str(x) for x in (self.v1[i], self.v2[i]) if x is not None)
 
 
 def _ranked(counts: pd.DataFrame) -> dict[int, list[tuple[str, int]]]:
@@ -492,37 +504,32 @@ def _refine_round(
     ev_e, ev_s = _pairs(pending, evidence)
     counts = vstore.vote(engine, ev_e, ev_s, taken)
     del ev_e, ev_s
-    usable = {e: _usable(evidence[e], missing) for e in pending}
-    verdicts = _judge_all(counts, usable, pending, taken, params)
-    ok = sorted(
-        (e for e in pending if not verdicts[e].why),
-        key=lambda e: (-(verdicts[e].votes - verdicts[e].second_votes), -verdicts[e].votes, e),
-    )
+    eids = np.asarray(pending, np.int64)
+    usable = np.fromiter((_usable(evidence[e], missing) for e in pending), np.int64, len(pending))
+    j = _Judgement(counts, eids, usable, params)
+    del counts
+    ok = np.flatnonzero(j.code == _Judgement.OK)
+    ok = ok[np.lexsort((eids[ok], -j.c1[ok], -(j.c1[ok] - j.c2[ok])))]
     still: list[int] = []
     claimed: set[str] = set()
-    for e in ok:
-        v = verdicts[e]
-        if v.vid in claimed or v.vid is None:
+    for i in ok.tolist():
+        e, vid, v2 = int(eids[i]), j.v1[i], j.v2[i]
+        if vid in claimed:
             still.append(e)  # the VID went to a stronger claim this round; re-judge next round
             continue
-        claimed.add(v.vid)
-        result[e] = _Result(
-            v.vid,
-            _confidence(v.votes, v.second_votes, usable[e]),
-            "",
-            "matched",
-            (v.vid,) if v.second is None else (v.vid, v.second),
-        )
+        claimed.add(vid)
+        conf = _confidence(int(j.c1[i]), int(j.c2[i]), int(usable[i]))
+        result[e] = _Result(vid, conf, "", "matched", (vid,) if v2 is None else (vid, v2))
     taken |= claimed
-    rest = [e for e in pending if e not in result and e not in still]
-    grown = _extend_all(eindex, rest, evidence, params, vstore)
-    for e in rest:
+    waiting = set(still)
+    rest = [i for i, e in enumerate(pending) if e not in result and e not in waiting]
+    grown = _extend_all(eindex, [pending[i] for i in rest], evidence, params, vstore)
+    for i in rest:
+        e = pending[i]
         if e in grown:
             still.append(e)
-            continue
-        v = verdicts[e]
-        cands = tuple(x for x in (v.vid, v.second) if x is not None)
-        result[e] = _unresolved(v.why, cands)
+        else:
+            result[e] = _unresolved(j.why(i), j.candidates(i))
     return sorted(still)
 
 
