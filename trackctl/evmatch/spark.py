@@ -100,7 +100,8 @@ def _names(task: _ChunkTask) -> Iterator[tuple[str, Any]]:
 
 def _build_shard(task: _ChunkTask, codes: Any, rank: np.ndarray) -> EShard:
     """An E shard of the task's chunks with the driver's codes (executor side)."""
-    eid_code, cell_code, window_code = codes.value
+    eid_names, cell_code, window_code = codes.value
+    eid_code = {str(name): i for i, name in enumerate(eid_names.tolist())}
     w: list[int] = []
     c: list[int] = []
     e: list[int] = []
@@ -187,12 +188,20 @@ def spark_index(
     path = os.path.abspath(reader.path)
     tasks = _e_tasks(reader, path)
     sc = engine.sc
-    found: dict[str, list[Any]] = {"e": [], "c": [], "t": [], "l": []}
-    for kind, value in (
-        sc.parallelize(tasks, max(len(tasks), 1)).flatMap(_names).distinct().collect()
-    ):
+    names = sc.parallelize(tasks, max(len(tasks), 1)).flatMap(_names).distinct().persist()
+    # the EIDs come back as one array per partition, not a Python tuple each
+    blocks = (
+        names.filter(lambda kv: kv[0] == "e")
+        .map(lambda kv: kv[1])
+        .mapPartitions(lambda it: [np.array(list(it), dtype=object)])
+        .collect()
+    )
+    found: dict[str, list[Any]] = {"c": [], "t": [], "l": []}
+    for kind, value in names.filter(lambda kv: kv[0] != "e").collect():
         found[kind].append(value)
-    eids = np.array(sorted(found.pop("e")), dtype=object)
+    names.unpersist()
+    eids = np.unique(np.concatenate(blocks)) if blocks else np.zeros(0, object)
+    del blocks
     cells = sorted(found["c"])
     starts = np.array(sorted(found["t"]), dtype=np.int64)
     lengths = sorted(found["l"])
@@ -204,9 +213,10 @@ def spark_index(
     order = window_order(len(starts), order_seed)
     rank = np.empty(len(order), np.int64)
     rank[order] = np.arange(len(order))
+    # the sorted EID names go out as they are; each task makes its own name -> code map
     codes = sc.broadcast(
         (
-            {str(e): i for i, e in enumerate(eids.tolist())},
+            eids,
             {c: i for i, c in enumerate(cells)},
             {int(t): i for i, t in enumerate(starts.tolist())},
         )
