@@ -37,9 +37,13 @@ def copy_log(
     Returns:
         The number of messages copied.
     """
+    wanted = None
+    if skip_topics:
+        # read only the kept topics: chunks holding none of them are not even decompressed
+        wanted = [t for t in reader.topics() if t not in skip_topics]
     total = reader.message_count
     n = 0
-    for raw in reader.raw():
+    for raw in reader.raw(wanted) if wanted is None or wanted else ():
         if raw.topic in skip_topics:
             continue
         writer.write_raw(raw)

@@ -93,6 +93,7 @@ def run_processors(
         warnings.simplefilter("ignore")
         source = LogReader(input_path)  # fail early on a bad input, before creating anything
     if out_path is None:
+        del source
         with tempfile.TemporaryDirectory(prefix="trackctl-") as tmp:
             return run_processors(
                 input_path, Path(tmp) / "out.mcap", chain, progress, outputs_only=True
@@ -111,6 +112,7 @@ def run_processors(
             warnings.simplefilter("ignore")
             skip_topics = set(source.topics())
             skip_metadata = set(source.metadata())
+    del source  # a big log's summary is large; the processor's reader parses its own
     reports: list[MetricReport] = []
     current = input_path
     temps: list[Path] = []
