@@ -9,10 +9,12 @@ themselves and read only the chunks they need through the MCAP chunk index:
   the driver fixed from the EID, cell and window names the tasks reported). The shards stay
   persisted on the executors; set splitting, evidence and refining questions are Spark jobs over
   them (:class:`~trackctl.evmatch.eindex.EIndex`), and the driver receives only the answers.
-* **V votes**: VID filtering ships (EID, scenario) pairs grouped by cell to the executors; each
-  task reads its cells' V-scenarios for the asked windows (topic and time through the index) and
-  emits ``((EID, VID), 1)``; a ``reduceByKey`` sums them. The driver gets the counts and which
-  scenarios were read or missing, never the VIDs of a scenario.
+* **V votes**: VID filtering ships the (EID, scenario) evidence pairs cut by EID to the
+  executors; each task reads the V-scenarios its EIDs need (topic and time through the index,
+  cached in the Python worker across rounds), counts its EIDs' VIDs with the local engine's
+  vectorised vote and returns only each EID's best two VIDs. The driver gets those and which
+  scenarios were read or missing, never the VIDs of a scenario; no (EID, VID) record goes
+  through a shuffle (a city's evidence has tens of millions).
 
 The log path must be readable at the same path on every executor (a local path on a one-machine
 cluster, or a shared filesystem such as NFS).
@@ -20,9 +22,8 @@ cluster, or a shared filesystem such as NFS).
 
 from __future__ import annotations
 
-import operator
 import os
-from collections.abc import Collection, Iterable, Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,8 +38,6 @@ from trackctl.evmatch.engines import (
     SparkEngine,
     _sorted_vote,
     collect_columns,
-    pairs_rdd,
-    top_per_eid,
 )
 from trackctl.logs import topics
 from trackctl.logs.reader import LogReader
@@ -288,49 +287,61 @@ _V_CACHE: dict[tuple[str, int], tuple[str, ...] | None] = {}
 _V_CACHE_LIMIT = 500_000
 
 
-def _vote_cell_group(
+def _vote_eid_block(
     path: str,
     summary: Any,
     cells: Sequence[str],
     windows_ns: np.ndarray,
     window_ns: int,
     n_cells: int,
-    pairs: Iterable[tuple[int, int]],
-) -> Iterator[tuple[Any, Any]]:
-    """Executor side of one vote task: read the V-scenarios of its pairs' scenarios (cached in
-    the Python worker across rounds) and emit ``((eid, vid), 1)`` plus ``(("read"|"missing",
-    scenario), bytes)`` records."""
+    banned: Any,
+    block: tuple[np.ndarray, np.ndarray],
+) -> list[tuple[str, Any]]:
+    """Executor side of one vote task: all evidence pairs of some EIDs. Reads the V-scenarios
+    they need (cached in the Python worker across rounds and tasks), counts each EID's VIDs with
+    the local engine's vectorised vote, and returns its top VIDs plus which scenarios it read
+    (first read in this worker, with their bytes) or found missing. Only the top VIDs per EID
+    leave the task: no (EID, VID) record goes through a shuffle."""
+    from trackctl.evmatch.engines import LocalEngine
     from trackctl.logs.reader import IndexedWindowReader
 
-    by_s: dict[int, list[int]] = {}
-    for e, s in pairs:
-        by_s.setdefault(s, []).append(e)
+    e_arr, s_arr = block
     window_reader: IndexedWindowReader | None = None
     reader: LogReader | None = None
+    seen: list[tuple[str, int, int]] = []
+    vids: dict[int, tuple[str, ...]] = {}
     try:
-        for s in sorted(by_s):
+        for s in np.unique(s_arr).tolist():
             key = (path, s)
             if key not in _V_CACHE:
                 if window_reader is None:
                     reader = LogReader(path)
                     window_reader = IndexedWindowReader(reader, summary=summary)
-                vids, size = _read_v(
-                    reader, window_reader, cells, windows_ns, window_ns, n_cells, s
-                )
+                got, size = _read_v(reader, window_reader, cells, windows_ns, window_ns, n_cells, s)
                 if len(_V_CACHE) >= _V_CACHE_LIMIT:
                     _V_CACHE.clear()
-                _V_CACHE[key] = vids
-                yield (("missing" if vids is None else "read", s), size)
-            vids = _V_CACHE[key]
-            if vids is None:
-                yield (("missing", s), 0)
-                continue
-            for e in by_s[s]:
-                for v in vids:
-                    yield ((e, v), 1)
+                _V_CACHE[key] = got
+                seen.append(("missing" if got is None else "read", s, size))
+            cached = _V_CACHE[key]
+            if cached is None:
+                seen.append(("missing", s, 0))
+            else:
+                vids[s] = cached
     finally:
         if window_reader is not None:
             window_reader.close()
+    counts = LocalEngine().vote(e_arr, s_arr, vids, banned.value, TOP_VIDS)
+    return [
+        ("seen", seen),
+        (
+            "top",
+            (
+                counts["eid"].to_numpy(np.int64),
+                counts["vid"].to_numpy(object),
+                counts["count"].to_numpy(np.int64),
+            ),
+        ),
+    ]
 
 
 def _read_v(
@@ -410,29 +421,36 @@ class SparkVStore:
         path = os.path.abspath(self.reader.path)
         summary = None if not self.reader.truncated else self.reader.summary
         args = (path, summary, cat.cells, cat.windows_ns, cat.window_ns, cat.n_cells)
-        n_cells = cat.n_cells
-        pairs = pairs_rdd(sc, eid, scenario, p)
-        # group by cell so that a task reads few topics; the log is opened once per task
-        records = (
-            pairs.keyBy(lambda es: es[1] % n_cells)
-            .partitionBy(p)
-            .values()
-            .mapPartitions(lambda it: _vote_cell_group(*args, it))
-            .persist()
+        # the evidence pairs cut by EID on the driver (numpy, no shuffle): each task holds all
+        # the evidence of its EIDs and ranks their VIDs itself
+        e_all, s_all = np.asarray(eid, np.int64), np.asarray(scenario, np.int64)
+        blocks = [(e_all[e_all % p == i], s_all[e_all % p == i]) for i in range(p)]
+        banned = sc.broadcast(frozenset(exclude))
+        try:
+            parts = (
+                sc.parallelize(blocks, p)
+                .flatMap(lambda block: _vote_eid_block(*args, banned, block))
+                .collect()
+            )
+        finally:
+            banned.unpersist()
+        tops = []
+        for kind, value in parts:
+            if kind == "top":
+                tops.append(value)
+                continue
+            for what, s, size in value:
+                if what == "missing":
+                    self.missing.add(int(s))
+                elif int(s) not in self.read_ids:
+                    self.read_ids.add(int(s))
+                    self.reads += 1
+                    self.bytes_read += size
+        counts = pd.DataFrame(
+            {
+                "eid": np.concatenate([t[0] for t in tops]),
+                "vid": np.concatenate([t[1] for t in tops]),
+                "count": np.concatenate([t[2] for t in tops]),
+            }
         )
-        # which scenarios were read or missing (small), then the votes' top VIDs per EID
-        for (kind, s), size in (
-            records.filter(lambda kv: isinstance(kv[0][0], str))
-            .reduceByKey(operator.add, p)
-            .collect()
-        ):
-            if kind == "missing":
-                self.missing.add(int(s))
-            elif int(s) not in self.read_ids:
-                self.read_ids.add(int(s))
-                self.reads += 1
-                self.bytes_read += size
-        votes = records.filter(lambda kv: not isinstance(kv[0][0], str))
-        counts = top_per_eid(votes, p, exclude, TOP_VIDS)
-        records.unpersist()
         return _sorted_vote(counts)
