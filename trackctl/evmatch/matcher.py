@@ -175,20 +175,78 @@ def _rank(order: np.ndarray) -> np.ndarray:
     return rank
 
 
+def _ranges(starts: np.ndarray, lens: np.ndarray) -> np.ndarray:
+    """Concatenated ``arange(starts[i], starts[i] + lens[i])`` for every i, without a loop."""
+    total = int(lens.sum())
+    if not total:
+        return np.zeros(0, np.int64)
+    before = np.cumsum(lens) - lens
+    return np.repeat(np.asarray(starts, np.int64) - before, lens) + np.arange(total)
+
+
+@dataclass(frozen=True)
+class _Paths:
+    """Each set's path of splitting scenarios, as one flat array with offsets (CSR): a city has
+    a million sets with a dozen scenarios each, too many for a tuple per set."""
+
+    start: np.ndarray  # int64, one more than there are sets
+    flat: np.ndarray  # scenario ids, int32 when they fit
+
+    @classmethod
+    def root(cls, n_scenarios: int) -> _Paths:
+        dtype = np.int32 if n_scenarios < 2**31 else np.int64
+        return cls(np.zeros(2, np.int64), np.zeros(0, dtype))
+
+    def lens(self, sets: np.ndarray) -> np.ndarray:
+        return self.start[sets + 1] - self.start[sets]
+
+    def child(self, parent: np.ndarray, append: np.ndarray | None = None) -> _Paths:
+        """New sets, set i being ``parent[i]``'s path plus ``append[i]`` when that is >= 0."""
+        parent = np.asarray(parent, np.int64)
+        plen = self.lens(parent)
+        extra = np.zeros(len(parent), np.int64) if append is None else (append >= 0)
+        start = np.zeros(len(parent) + 1, np.int64)
+        np.cumsum(plen + extra, out=start[1:])
+        flat = np.empty(int(start[-1]), self.flat.dtype)
+        flat[_ranges(start[:-1], plen)] = self.flat[_ranges(self.start[parent], plen)]
+        if append is not None:
+            grow = np.flatnonzero(extra)
+            flat[start[grow] + plen[grow]] = append[grow]
+        return _Paths(start, flat)
+
+    def members(self, sets: np.ndarray) -> np.ndarray:
+        """The scenarios of the given sets' paths, concatenated."""
+        return self.flat[_ranges(self.start[sets], self.lens(sets))].astype(np.int64)
+
+
 def _path_evidence(
-    eindex: EIndex, pairs: list[tuple[int, int]], paths: dict[int, tuple[int, ...]]
-) -> dict[tuple[int, int], list[int]]:
-    """For each (set, EID) pair: the scenarios of the set's path where the EID is inclusive
-    (one batched question to the E index)."""
-    flat_e = [e for g, e in pairs for _ in paths[g]]
-    flat_s = [x for g, _ in pairs for x in paths[g]]
-    mask = eindex.inclusive_mask(np.array(flat_e, np.int64), np.array(flat_s, np.int64)).tolist()
-    out: dict[tuple[int, int], list[int]] = {}
-    i = 0
-    for g, e in pairs:
-        n = len(paths[g])
-        out[(g, e)] = [x for x, ok in zip(paths[g], mask[i : i + n], strict=True) if ok]
-        i += n
+    eindex: EIndex, sets: np.ndarray, eids: np.ndarray, paths: _Paths
+) -> tuple[np.ndarray, np.ndarray]:
+    """For each (set, EID) pair: the scenarios of the set's path where the EID is inclusive (one
+    batched question to the E index), as per-pair counts and the scenarios concatenated."""
+    lens = paths.lens(sets)
+    flat_s = paths.members(sets)
+    pair = np.repeat(np.arange(len(sets)), lens)
+    mask = eindex.inclusive_mask(np.asarray(eids, np.int64)[pair], flat_s)
+    return np.bincount(pair[mask], minlength=len(sets)), flat_s[mask]
+
+
+def _longest_per_eid(
+    eids: np.ndarray, counts: np.ndarray, flat: np.ndarray
+) -> dict[int, array[int]]:
+    """Each EID's longest evidence among its copies (the first copy on ties)."""
+    if not len(eids):
+        return {}
+    starts = np.cumsum(counts) - counts
+    order = np.lexsort((np.arange(len(eids)), -counts, eids))
+    first = order[np.r_[True, eids[order][1:] != eids[order][:-1]]]
+    out: dict[int, array[int]] = {}
+    for e, a, n in zip(
+        eids[first].tolist(), starts[first].tolist(), counts[first].tolist(), strict=True
+    ):
+        ev = array("q")
+        ev.frombytes(flat[a : a + n].astype(np.int64).tobytes())
+        out[e] = ev
     return out
 
 
@@ -206,10 +264,9 @@ def _set_split(
     pending[targets] = True
     node = np.zeros(n_e, np.int64)
     eid = np.arange(n_e, dtype=np.int64)
-    paths: dict[int, tuple[int, ...]] = {0: ()}
+    paths = _Paths.root(len(cat.windows_ns) * cat.n_cells)
     evidence: Evidence = {}
     distinguished: set[int] = set()
-    best_copy: dict[int, list[int]] = {}
     iterations = 0
     for w in order:
         if not pending.any():
@@ -220,27 +277,23 @@ def _set_split(
         useful = np.unique(lw_cell[pending[lw_eid]])
         keep = np.isin(lw_cell, useful)
         listing = pd.DataFrame({"eid": lw_eid[keep], "cell": lw_cell[keep]})
+        del lw_eid, lw_cell, keep
         split = _split_sets(engine.split(node, eid, listing), node, paths, int(w), cat.n_cells)
         if split is None:
             break
-        node, eid, paths = _settle(*split, pending, eindex, evidence, distinguished, best_copy)
+        node, eid, paths = _settle(*split, pending, eindex, evidence, distinguished)
         if progress is not None:
             progress(int((~pending[targets]).sum()), len(targets))
     # targets never alone: their best copy's evidence (refining may still resolve them)
-    left = [(g, e) for g, e in zip(node.tolist(), eid.tolist(), strict=True) if pending[e]]
-    found = _path_evidence(eindex, left, paths)
-    for g, e in left:
-        if pending[e]:
-            ev = found[(g, e)]
-            prev = evidence.get(e)
-            if prev is None or len(ev) > len(prev):
-                evidence[e] = array("q", ev)
+    left = pending[eid]
+    counts, flat = _path_evidence(eindex, node[left], eid[left], paths)
+    evidence.update(_longest_per_eid(eid[left], counts, flat))
     return evidence, distinguished, iterations
 
 
 def _split_sets(
-    out: pd.DataFrame, node: np.ndarray, paths: dict[int, tuple[int, ...]], w: int, n_cells: int
-) -> tuple[np.ndarray, np.ndarray, dict[int, tuple[int, ...]]] | None:
+    out: pd.DataFrame, node: np.ndarray, paths: _Paths, w: int, n_cells: int
+) -> tuple[np.ndarray, np.ndarray, _Paths] | None:
     """The engine's split as dense set ids, EIDs and each set's path of splitting scenarios
     (a set that did not change keeps its parent's path); None when nothing is left."""
     o_node = out["node"].to_numpy(np.int64)
@@ -255,44 +308,33 @@ def _split_sets(
     g_first = np.flatnonzero(start)
     g_parent = o_node[g_first]
     g_cell = o_cell[g_first]
-    changed = gsize != parent_size[g_parent]
-    new_paths: dict[int, tuple[int, ...]] = {}
-    for g in range(len(gsize)):
-        p = paths[int(g_parent[g])]
-        if changed[g] and g_cell[g] >= 0:
-            p = (*p, w * n_cells + int(g_cell[g]))
-        new_paths[g] = p
-    return gid, o_eid, new_paths
+    changed = (gsize != parent_size[g_parent]) & (g_cell >= 0)
+    append = np.where(changed, w * n_cells + g_cell, -1)
+    return gid, o_eid, paths.child(g_parent, append)
 
 
 def _settle(
     node: np.ndarray,
     eid: np.ndarray,
-    paths: dict[int, tuple[int, ...]],
+    paths: _Paths,
     pending: np.ndarray,
     eindex: EIndex,
     evidence: Evidence,
     distinguished: set[int],
-    best_copy: dict[int, list[int]],
-) -> tuple[np.ndarray, np.ndarray, dict[int, tuple[int, ...]]]:
+) -> tuple[np.ndarray, np.ndarray, _Paths]:
     """Take out the targets alone in a set (distinguished, with their path's inclusive
-    scenarios as evidence); dropping them may leave others alone, so repeat."""
+    scenarios as evidence; an EID alone in several sets keeps its longest); dropping them may
+    leave others alone, so repeat."""
     while True:
         alone = (np.bincount(node)[node] == 1) & pending[eid] if len(node) else node > 0
         if alone.any():
-            pairs = list(zip(node[alone].tolist(), eid[alone].tolist(), strict=True))
-            found = _path_evidence(eindex, pairs, paths)
-            for g, e in pairs:
-                ev = found[(g, e)]
-                prev = best_copy.get(e)
-                if prev is None or len(ev) > len(prev):
-                    best_copy[e] = ev
-            done = np.unique(eid[alone])
-            for e in done.tolist():
-                evidence[e] = array("q", best_copy.pop(e))
-                distinguished.add(e)
-            pending[done] = False
-            keep_rows = ~np.isin(eid, done)
+            counts, flat = _path_evidence(eindex, node[alone], eid[alone], paths)
+            done = _longest_per_eid(eid[alone], counts, flat)
+            evidence.update(done)
+            distinguished.update(done)
+            done_ids = np.fromiter(done, np.int64, len(done))
+            pending[done_ids] = False
+            keep_rows = ~_rows_in(eid, done_ids, len(pending))
             node, eid = node[keep_rows], eid[keep_rows]
         if len(node):
             # drop sets with no EID left to distinguish; renumber densely (order kept)
@@ -300,10 +342,17 @@ def _settle(
             keep_rows = has_pending[node]
             node, eid = node[keep_rows], eid[keep_rows]
             uniq, node = np.unique(node, return_inverse=True)
-            paths = {i: paths[int(g)] for i, g in enumerate(uniq)}
+            paths = paths.child(uniq)
         if not alone.any() or not len(node):
             break
     return node, eid, paths
+
+
+def _rows_in(eid: np.ndarray, done: np.ndarray, n_eids: int) -> np.ndarray:
+    """Rows whose EID is in ``done`` (a dense lookup: ``np.isin`` sorts both sides)."""
+    flag = np.zeros(n_eids, bool)
+    flag[done] = True
+    return flag[eid]
 
 
 class _Judgement:

@@ -25,13 +25,11 @@ from typing import IO, Any
 from mcap.opcode import Opcode
 from mcap.records import (
     Attachment,
-    AttachmentIndex,
     Channel,
     ChunkIndex,
     Message,
     MessageIndex,
     Metadata,
-    MetadataIndex,
     Schema,
     Statistics,
 )
@@ -55,6 +53,7 @@ from trackctl.logs.recovery import (
     rebuild_index,
     scan_damaged,
 )
+from trackctl.logs.summary import has_any_channel, parse_summary
 
 
 def one_line_reason(err: BaseException) -> str:
@@ -174,7 +173,7 @@ def _read_layout(f: IO[bytes], size: int) -> _Layout | None:
         if crc != summary_crc:
             return _Layout(None, data_end, "summary CRC mismatch")
     try:
-        summary = _parse_summary(section + footer)
+        summary = parse_summary(section + footer)
     except Exception as err:  # noqa: BLE001 - mcap raises struct/unicode/EOF errors
         return _Layout(None, data_end, f"summary does not parse ({type(err).__name__})")
     for ci in summary.chunk_indexes:
@@ -185,24 +184,6 @@ def _read_layout(f: IO[bytes], size: int) -> _Layout | None:
         ):
             return _Layout(None, data_end, "a chunk index points outside the data section")
     return _Layout(summary, data_end, "")
-
-
-def _parse_summary(section: bytes) -> Summary:
-    summary = Summary()
-    for record in StreamReader(io.BytesIO(section), skip_magic=True).records:
-        if isinstance(record, Statistics):
-            summary.statistics = record
-        elif isinstance(record, Schema):
-            summary.schemas[record.id] = record
-        elif isinstance(record, Channel):
-            summary.channels[record.id] = record
-        elif isinstance(record, ChunkIndex):
-            summary.chunk_indexes.append(record)
-        elif isinstance(record, MetadataIndex):
-            summary.metadata_indexes.append(record)
-        elif isinstance(record, AttachmentIndex):
-            summary.attachment_indexes.append(record)
-    return summary
 
 
 class LogReader:
@@ -365,7 +346,10 @@ class LogReader:
                 for ci in self._summary.chunk_indexes
                 if (start_ns is None or ci.message_end_time >= start_ns)
                 and (end_ns is None or ci.message_start_time < end_ns)
-                and (not ci.message_index_offsets or channels.keys() & ci.message_index_offsets)
+                and (
+                    not ci.message_index_offsets
+                    or has_any_channel(ci.message_index_offsets, channels)
+                )
             ),
             key=lambda ci: (ci.message_start_time, ci.chunk_start_offset),
         )
