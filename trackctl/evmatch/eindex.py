@@ -311,11 +311,12 @@ class EIndex:
             out[hits] = True
         return out
 
-    def with_inclusive(self, eids: np.ndarray) -> set[int]:
+    def with_inclusive(self, eids: np.ndarray) -> np.ndarray:
+        """A mask over all EID codes: True for those of ``eids`` with an inclusive listing."""
         eids = np.asarray(eids, np.int64)
-        found: set[int] = set()
+        found = np.zeros(len(self.catalog.eids), bool)
         for part in self._run("with_inclusive", (eids,), None):
-            found.update(part.tolist())
+            found[part] = True
         return found
 
     def first_inclusive(self, eids: Sequence[int], k: int) -> dict[int, list[int]]:

@@ -73,6 +73,11 @@ Evidence = dict[int, "array[int]"]
 """Evidence scenarios per EID code, as compact arrays (a city has a million EIDs)."""
 
 
+def _evidence_type(cat: ECatalog) -> str:
+    """The ``array`` type code of evidence: 4-byte ids when every scenario id fits."""
+    return "i" if len(cat.windows_ns) * max(cat.n_cells, 1) < 2**31 else "q"
+
+
 class _Result(NamedTuple):
     """One EID's outcome without its evidence names (built into an EvMatch on demand)."""
 
@@ -83,6 +88,57 @@ class _Result(NamedTuple):
     candidates: tuple[str, ...]
 
 
+class _Results:
+    """Outcomes by EID code as arrays (a city resolves a million EIDs; a tuple each would take
+    ~200 bytes): status, best VID, runner-up and confidence, plus the reason and candidates of
+    the few EIDs left unmatched."""
+
+    _STATUS = ("", "matched", AMBIGUOUS, "unresolved")
+
+    def __init__(self, n_eids: int) -> None:
+        self.status = np.zeros(n_eids, np.int8)
+        self.vid = np.full(n_eids, None, object)
+        self.runner_up = np.full(n_eids, None, object)
+        self.confidence = np.zeros(n_eids, np.float64)
+        self._other: dict[int, tuple[str, tuple[str, ...]]] = {}
+        self._count = 0
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __contains__(self, e: object) -> bool:
+        return isinstance(e, (int, np.integer)) and bool(self.status[int(e)])
+
+    def __setitem__(self, e: int, r: _Result) -> None:
+        if not self.status[e]:
+            self._count += 1
+        self.status[e] = self._STATUS.index(r.status)
+        self.confidence[e] = r.confidence
+        if r.status == "matched":
+            self.vid[e] = r.vid
+            self.runner_up[e] = r.candidates[1] if len(r.candidates) > 1 else None
+            self._other.pop(e, None)
+        else:
+            self.vid[e] = r.vid
+            self._other[e] = (r.reason, r.candidates)
+
+    def update(self, results: dict[int, _Result]) -> None:
+        for e, r in results.items():
+            self[e] = r
+
+    def __getitem__(self, e: int) -> _Result:
+        status = int(self.status[e])
+        if not status:
+            raise KeyError(e)
+        vid = self.vid[e]
+        if status == 1:
+            v2 = self.runner_up[e]
+            cands: tuple[str, ...] = (vid,) if v2 is None else (vid, v2)
+            return _Result(vid, float(self.confidence[e]), "", "matched", cands)
+        reason, other = self._other[e]
+        return _Result(vid, float(self.confidence[e]), reason, self._STATUS[status], other)
+
+
 class Matches(Sequence[EvMatch]):
     """The matches in request order, each built on demand from a compact result and the EID's
     evidence ids: a million EvMatch objects with their evidence names would need gigabytes."""
@@ -91,7 +147,7 @@ class Matches(Sequence[EvMatch]):
         self,
         cat: ECatalog,
         requested: Sequence[str],
-        result: dict[int, _Result],
+        result: _Results,
         evidence: Evidence,
         missing: Collection[int],
     ) -> None:
@@ -141,12 +197,15 @@ class Matches(Sequence[EvMatch]):
 
 
 def _pairs(eids: Sequence[int], evidence: Evidence) -> tuple[np.ndarray, np.ndarray]:
-    """(EID, scenario) arrays of the EIDs' evidence, without a Python list per pair."""
+    """(EID, scenario) arrays of the EIDs' evidence, without a Python list per pair; int32 when
+    the ids fit (a city's first refining round has ten million pairs)."""
     lens = np.fromiter((len(evidence[e]) for e in eids), np.int64, count=len(eids))
-    ev_e = np.repeat(np.asarray(eids, np.int64), lens)
-    ev_s = np.fromiter(
-        itertools.chain.from_iterable(evidence[e] for e in eids), np.int64, count=int(lens.sum())
-    )
+    total = int(lens.sum())
+    top = max((max(evidence[e], default=0) for e in eids), default=0)
+    s_type = np.int32 if top < 2**31 else np.int64
+    e_type = np.int32 if max(eids, default=0) < 2**31 else np.int64
+    ev_e = np.repeat(np.asarray(eids, e_type), lens)
+    ev_s = np.fromiter(itertools.chain.from_iterable(evidence[e] for e in eids), s_type, total)
     return ev_e, ev_s
 
 
@@ -232,7 +291,7 @@ def _path_evidence(
 
 
 def _longest_per_eid(
-    eids: np.ndarray, counts: np.ndarray, flat: np.ndarray
+    eids: np.ndarray, counts: np.ndarray, flat: np.ndarray, typecode: str
 ) -> dict[int, array[int]]:
     """Each EID's longest evidence among its copies (the first copy on ties)."""
     if not len(eids):
@@ -241,11 +300,12 @@ def _longest_per_eid(
     order = np.lexsort((np.arange(len(eids)), -counts, eids))
     first = order[np.r_[True, eids[order][1:] != eids[order][:-1]]]
     out: dict[int, array[int]] = {}
+    as_type = np.int32 if array(typecode).itemsize == 4 else np.int64
     for e, a, n in zip(
         eids[first].tolist(), starts[first].tolist(), counts[first].tolist(), strict=True
     ):
-        ev = array("q")
-        ev.frombytes(flat[a : a + n].astype(np.int64).tobytes())
+        ev = array(typecode)
+        ev.frombytes(flat[a : a + n].astype(as_type).tobytes())
         out[e] = ev
     return out
 
@@ -256,8 +316,9 @@ def _set_split(
     order: np.ndarray,
     engine: Engine,
     progress: Callable[[int, int | None], None] | None,
-) -> tuple[Evidence, set[int], int]:
-    """EID set splitting; returns evidence per target, the distinguished targets, iterations."""
+) -> tuple[Evidence, int, int]:
+    """EID set splitting; returns evidence per target, how many targets were distinguished (alone
+    in a set), iterations."""
     cat = eindex.catalog
     n_e = len(cat.eids)
     pending = np.zeros(n_e, bool)
@@ -266,7 +327,6 @@ def _set_split(
     eid = np.arange(n_e, dtype=np.int64)
     paths = _Paths.root(len(cat.windows_ns) * cat.n_cells)
     evidence: Evidence = {}
-    distinguished: set[int] = set()
     iterations = 0
     for w in order:
         if not pending.any():
@@ -281,13 +341,14 @@ def _set_split(
         split = _split_sets(engine.split(node, eid, listing), node, paths, int(w), cat.n_cells)
         if split is None:
             break
-        node, eid, paths = _settle(*split, pending, eindex, evidence, distinguished)
+        node, eid, paths = _settle(*split, pending, eindex, evidence)
         if progress is not None:
             progress(int((~pending[targets]).sum()), len(targets))
+    distinguished = int((~pending[targets]).sum())
     # targets never alone: their best copy's evidence (refining may still resolve them)
     left = pending[eid]
     counts, flat = _path_evidence(eindex, node[left], eid[left], paths)
-    evidence.update(_longest_per_eid(eid[left], counts, flat))
+    evidence.update(_longest_per_eid(eid[left], counts, flat, _evidence_type(cat)))
     return evidence, distinguished, iterations
 
 
@@ -320,7 +381,6 @@ def _settle(
     pending: np.ndarray,
     eindex: EIndex,
     evidence: Evidence,
-    distinguished: set[int],
 ) -> tuple[np.ndarray, np.ndarray, _Paths]:
     """Take out the targets alone in a set (distinguished, with their path's inclusive
     scenarios as evidence; an EID alone in several sets keeps its longest); dropping them may
@@ -329,9 +389,8 @@ def _settle(
         alone = (np.bincount(node)[node] == 1) & pending[eid] if len(node) else node > 0
         if alone.any():
             counts, flat = _path_evidence(eindex, node[alone], eid[alone], paths)
-            done = _longest_per_eid(eid[alone], counts, flat)
+            done = _longest_per_eid(eid[alone], counts, flat, _evidence_type(eindex.catalog))
             evidence.update(done)
-            distinguished.update(done)
             done_ids = np.fromiter(done, np.int64, len(done))
             pending[done_ids] = False
             keep_rows = ~_rows_in(eid, done_ids, len(pending))
@@ -453,19 +512,20 @@ def match_ss(
     eindex = data if isinstance(data, EIndex) else local_index(data, data.rows, _rank(order))
     evidence, distinguished, iterations = _set_split(eindex, targets, order, engine, progress)
     t1 = time.perf_counter()
-    result: dict[int, _Result] = {}
+    result = _Results(len(cat.eids))
+    typecode = _evidence_type(cat)
     shared = eindex.multi_located()
     have_inclusive = eindex.with_inclusive(targets)
     pending: list[int] = []
     for e in targets.tolist():
-        evidence[e] = evidence.get(e, array("q"))
-        if not evidence[e] and e not in have_inclusive:
+        evidence[e] = evidence.get(e, array(typecode))
+        if not evidence[e] and not have_inclusive[e]:
             result[e] = _unresolved(REASON_NO_INCLUSIVE)
         elif e not in shared:
             pending.append(e)
     mine = [e for e in targets.tolist() if e in shared and e not in result]
     for e, first in eindex.first_inclusive(mine, params.max_evidence).items():
-        evidence[e] = array("q", first)
+        evidence[e] = array(typecode, first)
     result.update(_judge_shared(vstore, engine, evidence, shared, mine))
     rounds = 0
     taken: set[str] = set()
@@ -482,7 +542,7 @@ def match_ss(
         v_bytes_read=vstore.bytes_read,
         split_iterations=iterations,
         refine_rounds=rounds,
-        distinguished=len(distinguished),
+        distinguished=distinguished,
         stage_seconds={"seconds_split": t1 - t0, "seconds_filter": t2 - t1},
     )
 
@@ -543,7 +603,7 @@ def _refine_round(
     evidence: Evidence,
     pending: list[int],
     taken: set[str],
-    result: dict[int, _Result],
+    result: _Results,
 ) -> list[int]:
     """One round of VID filtering and matching refining; returns the EIDs still pending."""
     missing = vstore.missing
@@ -643,11 +703,12 @@ def match_edp(
     chosen_all = engine.edp_select(targets.tolist(), select)
     t1 = time.perf_counter()
     evidence: Evidence = {
-        e: array("q", ch) for e, ch in zip(targets.tolist(), chosen_all, strict=True)
+        e: array(_evidence_type(data), ch)
+        for e, ch in zip(targets.tolist(), chosen_all, strict=True)
     }
     ev_e, ev_s = _pairs(targets.tolist(), evidence)
     ranked = _ranked(vstore.vote(engine, ev_e, ev_s))
-    result: dict[int, _Result] = {}
+    result = _Results(len(data.eids))
     reads = 0
     nbytes = 0
     for e, ch in zip(targets.tolist(), chosen_all, strict=True):

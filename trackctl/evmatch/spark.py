@@ -423,8 +423,13 @@ class SparkVStore:
         args = (path, summary, cat.cells, cat.windows_ns, cat.window_ns, cat.n_cells)
         # the evidence pairs cut by EID on the driver (numpy, no shuffle): each task holds all
         # the evidence of its EIDs and ranks their VIDs itself
-        e_all, s_all = np.asarray(eid, np.int64), np.asarray(scenario, np.int64)
-        blocks = [(e_all[e_all % p == i], s_all[e_all % p == i]) for i in range(p)]
+        by_task = np.argsort(np.asarray(eid) % p, kind="stable")
+        e_all, s_all = np.asarray(eid)[by_task], np.asarray(scenario)[by_task]
+        del by_task
+        bounds = np.r_[0, np.cumsum(np.bincount(e_all % p, minlength=p))]
+        blocks = [
+            (e_all[bounds[i] : bounds[i + 1]], s_all[bounds[i] : bounds[i + 1]]) for i in range(p)
+        ]
         banned = sc.broadcast(frozenset(exclude))
         try:
             parts = (
