@@ -19,6 +19,7 @@ from trackctl.logs import (
     Vec3,
     WheelOdometry,
 )
+from trackctl.logs.copy import filter_log
 from trackctl.processing import get_processor, processors, run_processors
 from trackctl.processing.builtin import DeadReckoningProcessor
 
@@ -64,16 +65,39 @@ def _straight_log(path: Path, with_metadata: bool) -> None:
             )
 
 
-def test_dead_reckoning_uses_log_geometry_and_ground_truth_start(tmp_path: Path) -> None:
+def test_dead_reckoning_uses_log_geometry_and_reads_truth_only_to_score(tmp_path: Path) -> None:
     src, out = tmp_path / "in.mcap", tmp_path / "out.mcap"
     _straight_log(src, with_metadata=True)
     (report,) = run_processors(src, out, [DeadReckoningProcessor()])
     assert report.metrics["path_m"] == pytest.approx(1.0)
+    # scored after aligning the start with the truth's first pose (1, 2)
     assert report.metrics["error_m_max"] == pytest.approx(0.0, abs=1e-9)
     poses = [m.message for m in LogReader(out).messages(["/robot/r1/dead_reckoning"])]
     assert len(poses) == 11
-    assert (poses[-1].pose.position.x, poses[-1].pose.position.y) == pytest.approx((2.0, 2.0))
-    assert poses[-1].frame_id == "world"
+    # the poses are in the robot's odometry frame: the truth does not move them
+    assert (poses[-1].pose.position.x, poses[-1].pose.position.y) == pytest.approx((1.0, 0.0))
+    assert poses[-1].frame_id == "r1/odom"
+    without = tmp_path / "no-truth.mcap"
+    filter_log(src, without, exclude=("/ground_truth",))
+    (bare,) = run_processors(without, tmp_path / "bare.mcap", [DeadReckoningProcessor()])
+    assert bare.metrics["error_m_mean"] is None
+    again = [
+        m.message for m in LogReader(tmp_path / "bare.mcap").messages(["/robot/r1/dead_reckoning"])
+    ]
+    assert again == poses
+
+
+def test_dead_reckoning_alignment_turns_with_the_true_heading(tmp_path: Path) -> None:
+    """A robot driving +y in the world drives +x in its odometry frame: no error once aligned."""
+    src = tmp_path / "in.mcap"
+    with LogWriter(src) as w:
+        for k in range(11):
+            t = k * 100_000_000
+            w.write("/robot/r1/odom", WheelOdometry(t, "robot/r1", 200 * k, 200 * k))
+            truth = GroundTruthEntity("r1", Vec3(5.0, 0.1 * k, 0.0), yaw_rad=math.pi / 2)
+            w.write("/ground_truth", GroundTruth(t, (truth,)))
+    (report,) = run_processors(src, tmp_path / "o.mcap", [DeadReckoningProcessor()])
+    assert report.metrics["error_m_max"] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_dead_reckoning_default_geometry_differs(tmp_path: Path) -> None:

@@ -95,3 +95,15 @@ def test_simulate_smirror_subprocess(tmp_path: Path) -> None:
     assert counts["/robot/r1/odom"] == 75 and counts["/node0/image"] == 6
     bad = CliRunner().invoke(app, ["simulate", "smirror", "--out", str(out), "--paths", "9"])
     assert bad.exit_code == 2 and "paths must be 1..4" in bad.output
+
+
+def test_cli_start_pose(smirror_log: Path) -> None:
+    runner = CliRunner()
+    known = runner.invoke(app, ["smirror", str(smirror_log), "--json", "-q", "--start", "1,2,0"])
+    assert known.exit_code == 0, known.output
+    assert json.loads(known.stdout.splitlines()[0])["localized_share"] == 1.0
+    found = runner.invoke(app, ["smirror", str(smirror_log), "--json", "-q"])
+    assert json.loads(found.stdout.splitlines()[0])["localized_share"] < 1.0
+    bad = runner.invoke(app, ["smirror", str(smirror_log), "--start", "1,2"])
+    assert bad.exit_code == 2
+    assert "--start '1,2': expected X,Y,YAW" in bad.output

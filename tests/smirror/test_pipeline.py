@@ -10,7 +10,8 @@ import pytest
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 
 from trackctl.errors import MissingTopicError
-from trackctl.logs import LogReader, LogWriter
+from trackctl.logs import LogReader, LogWriter, topics
+from trackctl.logs.copy import filter_log
 from trackctl.logs.messages import MirrorTransmission
 from trackctl.processing import run_processors
 from trackctl.smirror import (
@@ -19,6 +20,7 @@ from trackctl.smirror import (
     error_by_range,
     localize,
     pose_topic,
+    run_detailed,
     sent_topic,
 )
 
@@ -94,8 +96,14 @@ def test_outputs_poses_and_transmissions(smirror_log: Path, tmp_path: Path) -> N
     present = reader.topics()
     assert present[pose_topic("r1")].schema_name == "foxglove.PoseInFrame"
     assert present[sent_topic("node1")].schema_name == MirrorTransmission.SCHEMA
-    poses = [m.message for m in reader.messages([pose_topic("r1")])]
-    assert isinstance(poses[0], PoseInFrame) and len(poses) == present["/robot/r1/odom"].count
+    poses = [m for m in reader.messages([pose_topic("r1")])]
+    assert isinstance(poses[0].message, PoseInFrame)
+    # a pose for every odometry sample from the first fix on, none before (start unknown)
+    odom = [m.log_time_ns for m in reader.messages(["/robot/r1/odom"])]
+    assert 0 < len(poses) < len(odom)
+    assert [m.log_time_ns for m in poses] == odom[-len(poses) :]
+    first_fix_ns = reader.start_ns + report.metrics["first_fix_s"] * 1e9
+    assert poses[0].log_time_ns == pytest.approx(first_fix_ns, abs=1e6)
     sent = [
         m.message for m in reader.messages([sent_topic(n) for n in ("node0", "node1", "node2")])
     ]
@@ -147,3 +155,42 @@ def test_missing_odometry_names_the_topic(smirror_log: Path, tmp_path: Path) -> 
     _copy_without(smirror_log, no_odom, drop="/robot/r1/odom")
     with pytest.raises(MissingTopicError, match=r"/robot/r1/odom is missing.*'r1'"):
         localize(LogReader(no_odom), SmirrorConfig())
+
+
+def test_poses_do_not_depend_on_the_ground_truth(smirror_log: Path, tmp_path: Path) -> None:
+    """The robot finds itself through the nodes: the same poses with and without the truth."""
+    without = tmp_path / "no-truth.mcap"
+    filter_log(smirror_log, without, exclude=(topics.GROUND_TRUTH,))
+    runs = {}
+    for name, log in (("with", smirror_log), ("without", without)):
+        out = tmp_path / f"{name}.mcap"
+        (report,) = run_processors(log, out, [SmirrorProcessor()], outputs_only=True)
+        poses = [(r.log_time_ns, bytes(r.data)) for r in LogReader(out).raw([pose_topic("r1")])]
+        runs[name] = (report.metrics, poses)
+    (m_with, p_with), (m_without, p_without) = runs["with"], runs["without"]
+    assert p_with and p_with == p_without
+    # scored against the truth only when it is there; the truth-free figures are the same
+    assert m_with["error_m_mean"] is not None and m_without["error_m_mean"] is None
+    assert m_with["unlocalized_samples"] > 0 and m_without["samples"] == 0
+    for key in ("localized_share", "first_fix_s", "fixes_per_min", "nis_mean", "fixes_used"):
+        assert m_with[key] == m_without[key] and m_with[key] is not None
+    assert 0.5 < m_without["localized_share"] < 1.0
+
+
+def test_finding_itself_costs_little_against_a_known_start(smirror_log: Path) -> None:
+    """A known start (a dock, ``--start``) localizes from the first odometry sample; a robot that
+    finds itself through the nodes is as accurate once it has its first fix."""
+    reader = LogReader(smirror_log)
+    truth = next(iter(reader.messages([topics.GROUND_TRUTH]))).message
+    start = next(e for e in truth.entities if e.entity_id == "r1")
+    pose = (start.position_m.x, start.position_m.y, float(start.yaw_rad or 0.0))
+    known, res_known = run_detailed(LogReader(smirror_log), None, SmirrorConfig(start=pose))
+    found, res_found = run_detailed(LogReader(smirror_log), None, SmirrorConfig())
+    assert known.metrics["localized_share"] == 1.0
+    assert known.metrics["unlocalized_samples"] == 0
+    assert found.metrics["first_fix_s"] < 5.0
+    # the same samples (from the first fix on): within 3 cm of the run that knew its start
+    tail = np.isin(res_known.t_s, res_found.t_s)
+    assert tail.sum() == len(res_found.t_s) > 0.8 * len(res_known.t_s)
+    err_known = float(np.mean(np.asarray(res_known.error_m)[tail]))
+    assert float(np.mean(res_found.error_m)) <= err_known + 0.03

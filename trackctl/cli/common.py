@@ -93,6 +93,24 @@ def parse_choice(enum_cls: type[E], value: str, option: str) -> E:
         raise InputError(f"{option} {value!r}: expected {expected}") from None
 
 
+def parse_pose(value: str, option: str) -> tuple[float, float, float]:
+    """``X,Y,YAW`` (metres, metres, radians) as three finite floats.
+
+    Raises:
+        InputError: not three finite numbers.
+    """
+    import math
+
+    parts = [p.strip() for p in value.split(",")]
+    try:
+        nums = tuple(float(p) for p in parts)
+    except ValueError:
+        nums = ()
+    if len(nums) != 3 or not all(math.isfinite(x) for x in nums):
+        raise InputError(f"{option} {value!r}: expected X,Y,YAW (m, m, rad), e.g. 1.5,2.0,0.0")
+    return nums[0], nums[1], nums[2]
+
+
 def print_json(obj: Any) -> None:
     """Print exactly one JSON object on stdout."""
     sys.stdout.write(json.dumps(obj, separators=(",", ":"), default=str) + "\n")

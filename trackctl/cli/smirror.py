@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import parse_choice, print_json, stderr
+from trackctl.cli.common import parse_choice, parse_pose, print_json, stderr
 from trackctl.cli.process import run_system
 
 
@@ -41,6 +41,14 @@ def smirror(
     link_kbps: Annotated[
         float, typer.Option("--link-kbps", help="Unicast link throughput, kB/s.")
     ] = 1000.0,
+    start: Annotated[
+        str | None,
+        typer.Option(
+            help="The robot's known start pose X,Y,YAW (m, m, rad; world frame), e.g. a dock. "
+            "Default: unknown; the robot asks every node until one sees its LEDs, and has no "
+            "pose until then."
+        ),
+    ] = None,
     plot: Annotated[
         Path | None, typer.Option(help="Write the paper's figures (PNG) to this directory.")
     ] = None,
@@ -63,6 +71,7 @@ def smirror(
             requesters=requesters,
             robot=robot,
             link_kBps=link_kbps,
+            start=None if start is None else parse_pose(start, "--start"),
         )
     except ValueError as err:
         raise InputError(str(err)) from None

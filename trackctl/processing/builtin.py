@@ -162,9 +162,10 @@ class DeadReckoningConfig:
 class DeadReckoningProcessor:
     """Wheel-odometry dead reckoning of every ``/robot/<NAME>/odom`` topic.
 
-    Writes ``/robot/<NAME>/dead_reckoning`` (foxglove.PoseInFrame, frame ``world``). The start pose
-    is the robot's first ground-truth pose when the log has one (``/ground_truth`` entity NAME),
-    else the origin; against ground truth it reports the position error, which grows with
+    Writes ``/robot/<NAME>/dead_reckoning`` (foxglove.PoseInFrame) in the robot's odometry frame
+    ``<NAME>/odom``: the robot starts at its origin, heading +x (REP 105). Against ground truth
+    it reports the position error after aligning the start (the first truth sample's pose, as
+    evo's ``--align_origin`` does); the truth never moves the poses. The error grows with
     distance because nothing corrects the drift (S-Mirror and BridgeLoc add the fixes).
     Wheel geometry comes from metadata ``robot/<NAME>`` (``ticks_per_m``, ``wheel_base_m``) when
     present, else from the configuration.
@@ -187,25 +188,26 @@ class DeadReckoningProcessor:
             reader.require([topics.odom("<NAME>")], self.name, "wheel odometry to integrate")
         robots = {t.split("/")[2]: t for t in odom_topics}
         has_truth = topics.GROUND_TRUTH in reader.topics()
-        starts = self._start_poses(reader, set(robots)) if has_truth else {}
+        align: dict[str, _Align] = {}
         metadata = reader.metadata()
         errors = _ErrorStats()
         path_m = 0.0
         poses = 0
         state: dict[str, tuple[float, float, float, int, WheelOdometry]] = {}
         # Ground-truth samples wait (a few at a time) for the dead-reckoned poses around them.
-        pending: dict[str, list[tuple[int, float, float]]] = {name: [] for name in robots}
+        pending: dict[str, list[tuple[int, float, float, float | None]]] = {name: [] for name in robots}
         stream = reader.messages(odom_topics + ([topics.GROUND_TRUTH] if has_truth else []))
         for msg in stream:
             if msg.topic == topics.GROUND_TRUTH:
                 for ent in msg.message.entities:
                     if ent.entity_id not in pending:
                         continue
-                    gt = (msg.log_time_ns, ent.position_m.x, ent.position_m.y)
+                    gt = (msg.log_time_ns, ent.position_m.x, ent.position_m.y, ent.yaw_rad)
                     latest = state.get(ent.entity_id)
                     if latest is not None and latest[3] >= msg.log_time_ns:
                         # same stamp as the pose already integrated (log-time order)
-                        errors.add(math.hypot(latest[0] - gt[1], latest[1] - gt[2]))
+                        pose = (latest[3], latest[0], latest[1], latest[2])
+                        self._score([gt], None, pose, errors, align, ent.entity_id)
                     else:
                         pending[ent.entity_id].append(gt)
                 continue
@@ -213,18 +215,18 @@ class DeadReckoningProcessor:
             odo: WheelOdometry = msg.message
             prev = state.get(name)
             if prev is None:
-                x, y, yaw = starts.get(name, (0.0, 0.0, 0.0))
+                x, y, yaw = 0.0, 0.0, 0.0
                 pending[name] = [g for g in pending[name] if g[0] >= msg.log_time_ns]
             else:
                 x, y, yaw, t_prev, last = prev
                 ds, dyaw = self._motion(name, last, odo, (msg.log_time_ns - t_prev) / 1e9, metadata)
                 path_m += abs(ds)
                 x, y, yaw = integrate_step(x, y, yaw, ds, dyaw)
-            self._score(pending[name], prev, (msg.log_time_ns, x, y), errors)
+            self._score(pending[name], prev, (msg.log_time_ns, x, y, yaw), errors, align, name)
             state[name] = (x, y, yaw, msg.log_time_ns, odo)
             writer.write(
                 f"/robot/{name}/dead_reckoning",
-                pose_in_frame(msg.log_time_ns, x, y, yaw),
+                pose_in_frame(msg.log_time_ns, x, y, yaw, frame_id=f"{name}/odom"),
                 msg.log_time_ns,
             )
             poses += 1
@@ -273,33 +275,51 @@ class DeadReckoningProcessor:
 
     @staticmethod
     def _score(
-        waiting: list[tuple[int, float, float]],
+        waiting: list[tuple[int, float, float, float | None]],
         prev: tuple[float, float, float, int, WheelOdometry] | None,
-        now: tuple[int, float, float],
+        now: tuple[int, float, float, float],
         errors: _ErrorStats,
+        align: dict[str, _Align],
+        name: str,
     ) -> None:
-        """Score ground-truth samples that fall between the previous and the current pose."""
-        t1, x1, y1 = now
+        """Score ground-truth samples that fall between the previous and the current pose (the
+        first one fixes the alignment of the odometry frame to the world)."""
+        t1, x1, y1, yaw1 = now
         while waiting and waiting[0][0] <= t1:
-            t_gt, gx, gy = waiting.pop(0)
+            t_gt, gx, gy, gyaw = waiting.pop(0)
             if prev is None or t1 == prev[3]:
-                x, y = x1, y1
+                x, y, yaw = x1, y1, yaw1
             else:
                 a = (t_gt - prev[3]) / (t1 - prev[3])
                 x, y = prev[0] + a * (x1 - prev[0]), prev[1] + a * (y1 - prev[1])
-            errors.add(math.hypot(x - gx, y - gy))
+                yaw = prev[2] + a * (yaw1 - prev[2])
+            if name not in align:
+                align[name] = _Align.fixing(x, y, yaw, gx, gy, gyaw)
+            wx, wy = align[name].apply(x, y)
+            errors.add(math.hypot(wx - gx, wy - gy))
 
-    @staticmethod
-    def _start_poses(reader: LogReader, names: set[str]) -> dict[str, tuple[float, float, float]]:
-        """First ground-truth pose of each robot (stops reading once all are found)."""
-        out: dict[str, tuple[float, float, float]] = {}
-        for msg in reader.messages([topics.GROUND_TRUTH]):
-            for ent in msg.message.entities:
-                if ent.entity_id in names and ent.entity_id not in out:
-                    out[ent.entity_id] = (ent.position_m.x, ent.position_m.y, ent.yaw_rad or 0.0)
-            if len(out) == len(names):
-                break
-        return out
+
+@dataclass(frozen=True)
+class _Align:
+    """The rigid 2-D transform from a robot's odometry frame to the world (metrics only)."""
+
+    c: float
+    s: float
+    tx: float
+    ty: float
+
+    @classmethod
+    def fixing(
+        cls, x: float, y: float, yaw: float, gx: float, gy: float, gyaw: float | None
+    ) -> _Align:
+        """The transform taking the pose (x, y, yaw) onto the truth (gx, gy, gyaw); without a
+        true heading, a translation."""
+        rot = 0.0 if gyaw is None else gyaw - yaw
+        c, s = math.cos(rot), math.sin(rot)
+        return cls(c, s, gx - (c * x - s * y), gy - (s * x + c * y))
+
+    def apply(self, x: float, y: float) -> tuple[float, float]:
+        return self.c * x - self.s * y + self.tx, self.s * x + self.c * y + self.ty
 
 
 @dataclass

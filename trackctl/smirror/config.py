@@ -61,6 +61,9 @@ class SmirrorConfig:
     margin_px: int = 8
     seed: int = 0
     """Seeds the queue positions and broadcast losses."""
+    start: tuple[float, float, float] | None = None
+    """The robot's start pose (x m, y m, yaw rad, world frame) when it is known (a dock); None:
+    unknown, the robot asks every node for images until one of them shows its LEDs."""
 
     def __post_init__(self) -> None:
         if self.broadcast_threshold < 1:
@@ -100,3 +103,13 @@ class SmirrorResult:
     requesters: int = 1
     duration_s: float = 0.0
     robot: str = ""
+    localized_s: float = 0.0
+    """Odometry time during which the robot had a pose (from its start pose or first fix)."""
+    odometry_s: float = 0.0
+    """Odometry time in all."""
+    first_fix_s: float | None = None
+    """Log time (s from the first message) when the robot first had a pose."""
+    unlocalized_samples: int = 0
+    """Ground-truth samples at which the robot had no pose yet (not scored as errors)."""
+    nis: list[float] = field(default_factory=list)
+    """Normalized innovation squared of each fix fused (3 dof; mean ~3 when consistent)."""

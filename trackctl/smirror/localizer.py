@@ -142,7 +142,7 @@ class Localizer:
 
     def _estimate(self, t_ns: int) -> tuple[float, float, float] | None:
         if self.site.use_odom:
-            return None if self.filt is None else self.filt.pose
+            return None if self.filt is None or not self.filt.localized else self.filt.pose
         while self.central and self.central[0][0] <= t_ns:
             self.central_pose = self.central.pop(0)[1]
         if self.central_pose is None:
@@ -152,6 +152,7 @@ class Localizer:
     def _score(self, t_ns: int, gx: float, gy: float) -> None:
         est = self._estimate(t_ns)
         if est is None:
+            self.res.unlocalized_samples += 1
             return
         res, cfg = self.res, self.cfg
         cov = self.site.cover.covering((gx, gy))
@@ -175,13 +176,21 @@ class Localizer:
     def _on_odometry(self, t_ns: int, odo: WheelOdometry) -> None:
         started = time.perf_counter()
         if self.filt is None:
+            # a known start (a dock) or none: dead reckoning from a placeholder until a fix
+            known = self.site.start is not None
             x, y, yaw = self.site.start or (0.0, 0.0, 0.0)
-            self.filt = PoseFilter(x, y, yaw, t_ns, self.cfg.filter)
+            self.filt = PoseFilter(x, y, yaw, t_ns, self.cfg.filter, localized=known)
         else:
+            was = self.filt.localized
+            dt = (t_ns - self.filt.t_ns) / 1e9
             self._dead_reckon(self.filt, t_ns, odo)
+            self.res.odometry_s += dt
+            self.res.localized_s += dt if was else 0.0
         self.dr_ms.append((time.perf_counter() - started) * 1e3)
         self.last_odo = odo
-        if self.writer is not None:
+        if self.filt.localized and self.res.first_fix_s is None and self.t_first is not None:
+            self.res.first_fix_s = (t_ns - self.t_first) / 1e9
+        if self.writer is not None and self.filt.localized:
             x, y, yaw = self.filt.pose
             self.writer.write(self.pose_out, pose_in_frame(t_ns, x, y, yaw), t_ns)
         while self.gt_wait and self.gt_wait[0][0] <= t_ns:
@@ -191,7 +200,10 @@ class Localizer:
         """Apply the fixes that have arrived, then the wheel motion since the last sample."""
         while self.pending and self.pending[0][0] <= t_ns:
             _, ready, sp, sy = self.pending.pop(0)
+            filt.last_nis = None
             self.res.fixes_used += filt.apply_fix(ready, sp, sy)
+            if filt.last_nis is not None:
+                self.res.nis.append(filt.last_nis)
         last = self.last_odo
         assert last is not None
         if (
@@ -250,7 +262,9 @@ class Localizer:
         node, res, cfg = self.site.nodes[name], self.res, self.cfg
         mask = node.sense(frame)
         ours = False
-        if self.filt is not None:
+        if self.filt is not None and not self.filt.localized:
+            ours = True  # lost: the robot asks every node until one shows its LEDs
+        elif self.filt is not None:
             x, y, _ = self.filt.pose
             cov = self.site.cover.covering((x, y))
             ours = cov is not None and cov[0] == name

@@ -150,7 +150,25 @@ def report_metrics(
         "broadcast_lost": res.broadcast_lost,
         "decode_failures": res.decode_failures,
         "duration_s": round(res.duration_s, 3),
+        # figures that need no ground truth
+        "localized_share": None
+        if central or res.odometry_s <= 0
+        else round(res.localized_s / res.odometry_s, 4),
+        "first_fix_s": None if res.first_fix_s is None else round(res.first_fix_s, 3),
+        "fixes_per_min": None
+        if res.duration_s <= 0
+        else round(res.fixes_used / (res.duration_s / 60), 3),
+        "nis_mean": None if not res.nis else round(float(np.mean(res.nis)), 3),
+        "nis_within_95": None
+        if not res.nis
+        else round(float(np.mean(np.asarray(res.nis) <= NIS_95_3DOF)), 4),
+        "unlocalized_samples": res.unlocalized_samples,
     }
+
+
+NIS_95_3DOF = 7.815
+"""95% quantile of chi-square with 3 degrees of freedom: a consistent filter has ~95% of its fixes'
+NIS below it."""
 
 
 def _max_bin(err: np.ndarray, rng: np.ndarray) -> float | None:

@@ -151,8 +151,19 @@ class FilterConfig:
 class PoseFilter:
     """Dead reckoning + LED fixes, with rewind for late fixes (keeps a few seconds of history)."""
 
-    def __init__(self, x: float, y: float, yaw: float, t_ns: int, cfg: FilterConfig) -> None:
+    def __init__(
+        self,
+        x: float,
+        y: float,
+        yaw: float,
+        t_ns: int,
+        cfg: FilterConfig,
+        localized: bool = True,
+    ) -> None:
         self.cfg = cfg
+        self.localized = localized
+        """False until the first fix when the start is unknown: the state is then a placeholder
+        (dead reckoning from nowhere) and the first fix sets it, at the fix's time."""
         self.ekf = _DiffDriveEKF(dim_x=3, dim_z=3)
         self.ekf.x = np.array([[x], [y], [yaw]])
         self.ekf.P = np.diag([0.05**2, 0.05**2, 0.05**2])
@@ -164,6 +175,8 @@ class PoseFilter:
         )
         self._hist.append((t_ns, self.ekf.x.copy(), self.ekf.P.copy(), (0.0, 0.0)))
         self.rejects = 0
+        self.last_nis: float | None = None
+        """Normalized innovation squared of the last fix that was tested against the state."""
 
     @property
     def pose(self) -> tuple[float, float, float]:
@@ -216,10 +229,16 @@ class PoseFilter:
         self.ekf.x, self.ekf.P = x0.copy(), p0.copy()
         z = np.array([[fix.x_m], [fix.y_m], [fix.yaw_rad]])
         r = np.diag([sigma_pos**2, sigma_pos**2, sigma_yaw**2])
+        if not self.localized:
+            # the first fix of an unknown start: the pose is the fix, its covariance the fix's
+            self.localized = True
+            self._replay(idx, t0, z, r, later)
+            return True
         y = z - self.ekf.x
         y[2, 0] = wrap(float(y[2, 0]))
         s = self.ekf.P + r
         d2 = float((y.T @ np.linalg.solve(s, y))[0, 0])
+        self.last_nis = d2
         if d2 > self.cfg.gate_chi2 and self.rejects < self.cfg.max_rejects:
             self.rejects += 1
             self.ekf.x, self.ekf.P = saved
@@ -239,10 +258,22 @@ class PoseFilter:
             ),
         )
         self.ekf.x[2, 0] = wrap(float(self.ekf.x[2, 0]))
-        # replay the odometry since the image was taken
+        self._replay(idx, t0, self.ekf.x.copy(), self.ekf.P.copy(), later)
+        return True
+
+    def _replay(
+        self,
+        idx: int,
+        t0: int,
+        x: np.ndarray,
+        p: np.ndarray,
+        later: list[tuple[int, np.ndarray, np.ndarray, tuple[float, float]]],
+    ) -> None:
+        """Set the state at history entry ``idx`` and replay the odometry since then."""
+        self.ekf.x, self.ekf.P = x.copy(), p.copy()
+        self.ekf.x[2, 0] = wrap(float(self.ekf.x[2, 0]))
         while len(self._hist) > idx + 1:
             self._hist.pop()
         self._hist[idx] = (t0, self.ekf.x.copy(), self.ekf.P.copy(), self._hist[idx][3])
         for t, _, _, (ds, dyaw) in later:
             self.step(t, ds, dyaw)
-        return True

@@ -17,7 +17,6 @@ from trackctl.geometry.odometry import DiffDrive
 from trackctl.logs import topics
 from trackctl.logs.messages import CameraModel, WheelOdometry
 from trackctl.logs.reader import LogReader
-from trackctl.processing.builtin import DeadReckoningProcessor
 from trackctl.smirror.config import Mode, SmirrorConfig
 from trackctl.smirror.node import MirrorNode
 from trackctl.smirror.robot import LedConfig
@@ -139,7 +138,7 @@ class Site:
     nodes: dict[str, MirrorNode]
     cover: Coverage
     start: tuple[float, float, float] | None
-    """The robot's start pose from the ground truth (None: the origin)."""
+    """The robot's known start pose (``--start``, a dock); None: unknown, found by the nodes."""
 
     @property
     def image_topics(self) -> list[str]:
@@ -181,8 +180,6 @@ def load_site(reader: LogReader, cfg: SmirrorConfig) -> Site:
     plan = floorplan(reader)
     cams = {n: PinholeCamera(m) for n, m in models.items()}
     nodes = {n: MirrorNode(m, cfg.node) for n, m in models.items()}
-    has_truth = topics.GROUND_TRUTH in present
-    start = DeadReckoningProcessor._start_poses(reader, {robot}).get(robot) if has_truth else None
     return Site(
         models=models,
         robot=robot,
@@ -194,5 +191,5 @@ def load_site(reader: LogReader, cfg: SmirrorConfig) -> Site:
         cams=cams,
         nodes=nodes,
         cover=Coverage(cams, plan, cfg, led.led_height_m),
-        start=start,
+        start=cfg.start,
     )
