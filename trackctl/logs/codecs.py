@@ -8,7 +8,8 @@ Two families are registered:
   ``foxglove-schemas-protobuf`` so Foxglove and Lichtblick render them unchanged.
 
 Channels of foreign logs with a schema no codec knows still decode: protobuf ones through the
-descriptor set the log carries (mcap-protobuf-support), JSON ones as plain dicts.
+descriptor set the log carries (mcap-protobuf-support), ROS 2 CDR ones through the message
+definition it carries (:mod:`trackctl.logs.ros2`), JSON ones as plain dicts.
 
 Adding a message type touches one schema file and one :func:`register` call.
 """
@@ -283,6 +284,10 @@ def codec_for(
         return PlainJsonCodec(schema_name, schema_data or b"", schema_encoding or "jsonschema")
     if message_encoding == "protobuf" and schema_data:
         return _dynamic_codec(message_encoding, schema_name, schema_data)
+    if message_encoding == "cdr" and schema_encoding in (None, "ros2msg") and schema_data:
+        from trackctl.logs.ros2 import ros2_codec  # rosbags loads only for ROS 2 logs
+
+        return ros2_codec(schema_name, schema_data)
     known = ", ".join(sorted(name for _, name in _REGISTRY))
     raise UnknownSchemaError(
         f"unknown schema {schema_name!r} with encoding {message_encoding!r} (known: {known})"
