@@ -6,7 +6,7 @@ import signal
 import sys
 from collections import Counter
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.markup import escape
@@ -59,6 +59,24 @@ def record(
             "/NAME/camera_model.",
         ),
     ] = None,
+    ros2: Annotated[
+        Path | None,
+        typer.Option(
+            "--ros2",
+            metavar="BAG",
+            help="ROS 2 bag (rosbag2 directory, .mcap or .db3): odometry, IMU, images, "
+            "camera_info and tf mapped by message type (table printed).",
+        ),
+    ] = None,
+    ros2_map: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--map",
+            metavar="ROS_TOPIC=ROLE:NAME",
+            help="Override the ROS 2 mapping of one topic: ROLE is odometry, imu, image, "
+            "camera_info, tf or ignore, e.g. --map /odom=odometry:r1.",
+        ),
+    ] = None,
     fps: Annotated[
         float | None,
         typer.Option(help="Frame rate of image folders (overrides a video's own rate)."),
@@ -102,7 +120,10 @@ def record(
         record_live,
     )
 
+    plan = _ros2_plan(ros2, ros2_map, quiet or json_out)
     cfg = RecordConfig(
+        ros2=ros2,
+        ros2_plan=plan,
         imu=parse_named(imu or [], "--imu"),
         rssi=tuple(rssi or ()),
         odom=parse_named(odom or [], "--odom"),
@@ -117,13 +138,16 @@ def record(
     if stdin and udp is not None:
         raise InputError("--stdin and --udp are exclusive; record one live source at a time")
     if cfg.empty and not stdin and udp is None:
-        raise InputError("nothing to record: give --imu/--rssi/--odom/--video, --stdin or --udp")
+        raise InputError(
+            "nothing to record: give --imu/--rssi/--odom/--video/--ros2, --stdin or --udp"
+        )
     inputs = [
         *cfg.imu.values(),
         *cfg.rssi,
         *cfg.odom.values(),
         *cfg.video.values(),
         *cfg.calib.values(),
+        *([ros2] if ros2 is not None else []),
     ]
     counts: Counter[str] = Counter()
     rejected = 0
@@ -248,3 +272,36 @@ def filter_cmd(
             f"wrote {result.messages} messages on {len(result.kept_topics)} topics to "
             f"{result.out}; dropped {', '.join(result.dropped_topics) or 'nothing'}"
         )
+
+
+def _ros2_plan(bag: Path | None, maps: list[str] | None, quiet: bool) -> tuple[Any, ...]:
+    """The ROS 2 topic plan (printed unless quiet); empty without a bag."""
+    if maps and bag is None:
+        raise InputError("--map needs --ros2 BAG")
+    if bag is None:
+        return ()
+    from trackctl.ingest.ros2 import parse_maps, plan_ros2
+
+    plan = tuple(plan_ros2(bag, parse_maps(maps or [])))
+    if not quiet:
+        _print_plan(bag, plan)
+    return plan
+
+
+def _print_plan(bag: Path, plan: tuple[Any, ...]) -> None:
+    """The ROS 2 topic mapping as a table on stderr."""
+    from rich.table import Table
+
+    table = Table(title=f"{escape(str(bag))}: ROS 2 topics", title_justify="left")
+    for col in ("ROS topic", "type", "count", "role", "trackctl topic(s)", "by"):
+        table.add_column(col)
+    for p in plan:
+        table.add_row(
+            escape(p.ros_topic),
+            escape(p.ros_type),
+            str(p.count),
+            p.role,
+            escape(", ".join(p.targets)) or "-",
+            escape(p.why),
+        )
+    stderr.print(table)

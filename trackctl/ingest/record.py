@@ -15,6 +15,7 @@ from typing import Any
 
 from trackctl.errors import InputError, TrackctlError
 from trackctl.ingest.calibration import read_calibration, to_foxglove_calibration
+from trackctl.ingest.ros2 import TopicPlan, read_ros2
 from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv, seconds_to_ns
 from trackctl.ingest.video import read_frames
 from trackctl.logs import topics
@@ -46,11 +47,15 @@ class RecordConfig:
     jpeg_quality: int = 90
     time_unit: str = "s"
     """Unit of the CSV files' ``t_s`` column: s, ms, us or ns."""
+    ros2: Path | None = None
+    """A ROS 2 bag (directory or .mcap/.db3) to convert with ``ros2_plan``."""
+    ros2_plan: tuple[TopicPlan, ...] = ()
+    """What becomes of each of the bag's topics (:func:`~trackctl.ingest.ros2.plan_ros2`)."""
 
     @property
     def empty(self) -> bool:
         """True when no file source is given."""
-        return not (self.imu or self.rssi or self.odom or self.video or self.calib)
+        return not (self.imu or self.rssi or self.odom or self.video or self.calib or self.ros2)
 
 
 def parse_named(values: Iterable[str], option: str) -> dict[str, Path]:
@@ -134,6 +139,9 @@ def record_files(
         order += 1
     for name, path in cfg.video.items():
         streams.append(_frames(path, name, cfg, order))
+        order += 1
+    if cfg.ros2 is not None:
+        streams.append(read_ros2(cfg.ros2, cfg.ros2_plan, order))
         order += 1
     n = 0
     # heapq.merge keeps one pending message per source: memory does not grow with the files.

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from trackctl.errors import InputError, MissingTopicError
+from trackctl.errors import IncompleteInputWarning, InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.geometry.floorplan import FloorPlan, line_of_sight
 from trackctl.geometry.odometry import DiffDrive
@@ -110,6 +111,39 @@ def floorplan(reader: LogReader) -> FloorPlan | None:
         raise InputError(f"{reader.path}: metadata smirror/floorplan is malformed: {err}") from err
 
 
+_ROBOT_KEYS = ("led_height_m", "led_front_m", "led_back_m", "ticks_per_m", "wheel_base_m")
+
+
+def _warn_defaults(
+    reader: LogReader,
+    robot: str,
+    rmd: Mapping[str, str],
+    led: LedConfig,
+    drive: DiffDrive,
+    plan: FloorPlan | None,
+) -> None:
+    """One warning naming every site value the log does not give and the default used."""
+    values = {
+        "led_height_m": led.led_height_m,
+        "led_front_m": led.led_front_m,
+        "led_back_m": led.led_back_m,
+        "ticks_per_m": drive.ticks_per_m,
+        "wheel_base_m": drive.wheel_base_m,
+    }
+    missing = [f"{k}={values[k]:g}" for k in _ROBOT_KEYS if k not in rmd]
+    parts = []
+    if missing:
+        parts.append(f"robot/{robot} {', '.join(missing)}")
+    if plan is None:
+        parts.append("no smirror/floorplan (walls do not block the nodes' views)")
+    if parts:
+        warnings.warn(
+            f"{reader.path}: site defaults used: {'; '.join(parts)}",
+            IncompleteInputWarning,
+            stacklevel=3,
+        )
+
+
 def metadata_float(values: Mapping[str, str], key: str, default: float, where: str) -> float:
     """A finite number from a metadata record, ``default`` when the key is absent."""
     if key not in values:
@@ -178,6 +212,7 @@ def load_site(reader: LogReader, cfg: SmirrorConfig) -> Site:
     )
     n_req = cfg.requesters or int(metadata.get("smirror/requesters", {}).get("count", 1))
     plan = floorplan(reader)
+    _warn_defaults(reader, robot, rmd, led, drive, plan)
     cams = {n: PinholeCamera(m) for n, m in models.items()}
     nodes = {n: MirrorNode(m, cfg.node) for n, m in models.items()}
     return Site(

@@ -1,0 +1,169 @@
+"""Write ROS 2 bags with rosbags (as a robot would record them) from trackctl logs, for tests."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from trackctl.geometry.odometry import DiffDrive
+from trackctl.logs import LogReader
+from trackctl.logs.messages import CameraModel, WheelOdometry
+
+TS = get_typestore(Stores.ROS2_HUMBLE)
+T = TS.types
+
+
+def _time(ns: int) -> Any:
+    return T["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def _header(ns: int, frame: str) -> Any:
+    return T["std_msgs/msg/Header"](stamp=_time(ns), frame_id=frame)
+
+
+def _vec(x: float, y: float, z: float) -> Any:
+    return T["geometry_msgs/msg/Vector3"](x=x, y=y, z=z)
+
+
+def _quat(x: float, y: float, z: float, w: float) -> Any:
+    return T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)
+
+
+def _yaw_quat(yaw: float) -> Any:
+    return _quat(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
+
+
+def _camera_info(model: CameraModel, frame: str) -> Any:
+    k = np.array([model.fx_px, 0, model.cx_px, 0, model.fy_px, model.cy_px, 0, 0, 1], float)
+    p = np.array(
+        [model.fx_px, 0, model.cx_px, 0, 0, model.fy_px, model.cy_px, 0, 0, 0, 1, 0], float
+    )
+    d = np.array(model.distortion or (0.0,) * 5, float)
+    roi = T["sensor_msgs/msg/RegionOfInterest"](
+        x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+    )
+    return T["sensor_msgs/msg/CameraInfo"](
+        header=_header(model.t_ns, frame),
+        height=model.height_px,
+        width=model.width_px,
+        distortion_model="plumb_bob",
+        d=d,
+        k=k,
+        r=np.eye(3).ravel(),
+        p=p,
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+    )
+
+
+def _static_tf(model: CameraModel, frame: str) -> Any:
+    pose = model.world_from_camera
+    assert pose is not None
+    tr, q = pose.translation, pose.rotation
+    tf = T["geometry_msgs/msg/TransformStamped"](
+        header=_header(0, "world"),
+        child_frame_id=frame,
+        transform=T["geometry_msgs/msg/Transform"](
+            translation=_vec(tr.x, tr.y, tr.z), rotation=_quat(q.x, q.y, q.z, q.w)
+        ),
+    )
+    return T["tf2_msgs/msg/TFMessage"](transforms=[tf])
+
+
+def smirror_log_to_bag(log: Path, bag: Path, storage: StoragePlugin = StoragePlugin.MCAP) -> None:
+    """A ROS 2 bag of an S-Mirror log's robot and nodes: ``/r1/odom`` (nav_msgs/Odometry: the
+    velocities that reproduce the wheel ticks over each interval, and the integrated pose),
+    ``/r1/imu``, ``/NODE/image/compressed``, ``/NODE/camera_info`` and ``/tf_static`` (world to
+    each camera's optical frame)."""
+    reader = LogReader(log)
+    md = reader.metadata().get("robot/r1", {})
+    drive = DiffDrive(float(md.get("ticks_per_m", 2000)), float(md.get("wheel_base_m", 0.3)))
+    odo: list[tuple[int, WheelOdometry]] = [
+        (m.log_time_ns, m.message) for m in reader.messages(["/robot/r1/odom"])
+    ]
+    nodes = sorted(t.split("/")[1] for t in reader.topics() if t.endswith("/camera_model"))
+    with Writer(bag, version=8, storage_plugin=storage) as w:
+        c_odom = w.add_connection("/r1/odom", "nav_msgs/msg/Odometry", typestore=TS)
+        c_imu = w.add_connection("/r1/imu", "sensor_msgs/msg/Imu", typestore=TS)
+        c_tf = w.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=TS)
+        c_img = {
+            n: w.add_connection(
+                f"/{n}/image/compressed", "sensor_msgs/msg/CompressedImage", typestore=TS
+            )
+            for n in nodes
+        }
+        c_info = {
+            n: w.add_connection(f"/{n}/camera_info", "sensor_msgs/msg/CameraInfo", typestore=TS)
+            for n in nodes
+        }
+        for m in reader.messages([f"/{n}/camera_model" for n in nodes]):
+            name = m.message.camera
+            frame = f"{name}_optical"
+            w.write(
+                c_tf, m.log_time_ns, TS.serialize_cdr(_static_tf(m.message, frame), c_tf.msgtype)
+            )
+            info = _camera_info(m.message, frame)
+            w.write(c_info[name], m.log_time_ns, TS.serialize_cdr(info, c_info[name].msgtype))
+        frames = iter(reader.messages([f"/{n}/image" for n in nodes]))
+        pending = next(frames, None)
+        x = y = yaw = 0.0
+        zero36 = np.zeros(36)
+        for i, (t_ns, o) in enumerate(odo):
+            while pending is not None and pending.log_time_ns <= t_ns:
+                name = pending.topic.split("/")[1]
+                img = T["sensor_msgs/msg/CompressedImage"](
+                    header=_header(pending.log_time_ns, f"{name}_optical"),
+                    format="jpeg",
+                    data=np.frombuffer(pending.message.data, np.uint8),
+                )
+                w.write(
+                    c_img[name], pending.log_time_ns, TS.serialize_cdr(img, c_img[name].msgtype)
+                )
+                pending = next(frames, None)
+            v = omega = 0.0
+            if i + 1 < len(odo):
+                t2, o2 = odo[i + 1]
+                dt = (t2 - t_ns) / 1e9
+                ds, dyaw = drive.motion_from_ticks(
+                    o2.left_ticks - o.left_ticks, o2.right_ticks - o.right_ticks
+                )
+                v, omega = ds / dt, dyaw / dt
+            msg = T["nav_msgs/msg/Odometry"](
+                header=_header(t_ns, "odom"),
+                child_frame_id="base_link",
+                pose=T["geometry_msgs/msg/PoseWithCovariance"](
+                    pose=T["geometry_msgs/msg/Pose"](
+                        position=T["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                        orientation=_yaw_quat(yaw),
+                    ),
+                    covariance=zero36,
+                ),
+                twist=T["geometry_msgs/msg/TwistWithCovariance"](
+                    twist=T["geometry_msgs/msg/Twist"](
+                        linear=_vec(v, 0.0, 0.0), angular=_vec(0.0, 0.0, omega)
+                    ),
+                    covariance=zero36,
+                ),
+            )
+            w.write(c_odom, t_ns, TS.serialize_cdr(msg, c_odom.msgtype))
+            imu = T["sensor_msgs/msg/Imu"](
+                header=_header(t_ns, "imu_link"),
+                orientation=_yaw_quat(yaw),
+                orientation_covariance=np.zeros(9),
+                angular_velocity=_vec(0.0, 0.0, omega),
+                angular_velocity_covariance=np.zeros(9),
+                linear_acceleration=_vec(0.0, 0.0, 9.81),
+                linear_acceleration_covariance=np.zeros(9),
+            )
+            w.write(c_imu, t_ns, TS.serialize_cdr(imu, c_imu.msgtype))
+            if i + 1 < len(odo):
+                dt = (odo[i + 1][0] - t_ns) / 1e9
+                x += v * dt * math.cos(yaw + omega * dt / 2)
+                y += v * dt * math.sin(yaw + omega * dt / 2)
+                yaw += omega * dt
