@@ -195,7 +195,9 @@ class DeadReckoningProcessor:
         poses = 0
         state: dict[str, tuple[float, float, float, int, WheelOdometry]] = {}
         # Ground-truth samples wait (a few at a time) for the dead-reckoned poses around them.
-        pending: dict[str, list[tuple[int, float, float, float | None]]] = {name: [] for name in robots}
+        pending: dict[str, list[tuple[int, float, float, float | None]]] = {
+            name: [] for name in robots
+        }
         stream = reader.messages(odom_topics + ([topics.GROUND_TRUTH] if has_truth else []))
         for msg in stream:
             if msg.topic == topics.GROUND_TRUTH:
