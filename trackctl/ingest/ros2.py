@@ -106,19 +106,14 @@ class TopicPlan:
         if self.role == "odometry":
             return (topics.odom(self.name),)
         if self.role == "imu":
-            return (robot_imu(self.name),)
+            return (topics.robot_imu(self.name),)
         if self.role == "image":
             return (topics.image(self.name),)
         if self.role == "camera_info":
             return (topics.calibration(self.name), topics.camera_model(self.name))
         if self.role == "tf":
-            return ("/tf_static" if self.ros_topic.endswith("tf_static") else "/tf",)
+            return (topics.TF_STATIC if self.ros_topic.endswith("tf_static") else topics.TF,)
         return ()
-
-
-def robot_imu(name: str) -> str:
-    """A robot's inertial samples: ``/robot/NAME/imu`` (trackctl.Imu)."""
-    return f"/robot/{name}/imu"
 
 
 def parse_maps(values: Sequence[str]) -> dict[str, tuple[str, str]]:
@@ -407,7 +402,7 @@ def read_ros2(bag: Path, plans: Sequence[TopicPlan], order: int = 0) -> Iterator
     reader = _open(bag)
     try:
         # rosbags reads every connection when given none: ask only for what exists
-        statics = [c for c in reader.connections if c.topic == "/tf_static"]
+        statics = [c for c in reader.connections if c.topic == topics.TF_STATIC]
         for conn, _, raw in reader.messages(connections=statics) if statics else ():
             tree.add(reader.deserialize(raw, conn.msgtype))
         wanted = [c for c in reader.connections if c.topic in by_topic]
@@ -426,7 +421,7 @@ def read_ros2(bag: Path, plans: Sequence[TopicPlan], order: int = 0) -> Iterator
             if plan.role == "odometry":
                 yield (log_ns, order, topics.odom(name), _odometry(msg, name, t_ns))
             elif plan.role == "imu":
-                yield (log_ns, order, robot_imu(name), _imu(msg, name, t_ns))
+                yield (log_ns, order, topics.robot_imu(name), _imu(msg, name, t_ns))
             elif plan.role == "image":
                 if conn.msgtype.endswith("CompressedImage"):
                     yield (log_ns, order, topics.image(name), _compressed(msg, name, t_ns))

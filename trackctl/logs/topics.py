@@ -28,6 +28,16 @@ def imu(phone: str) -> str:
     return f"/phone/{phone}/imu"
 
 
+def robot_imu(robot: str) -> str:
+    """IMU of a robot: ``/robot/NAME/imu`` (trackctl.Imu)."""
+    return f"/robot/{robot}/imu"
+
+
+TF = "/tf"
+TF_STATIC = "/tf_static"
+"""Transforms (foxglove.FrameTransforms), dynamic and static, as ROS names them."""
+
+
 def odom(robot: str) -> str:
     """Wheel odometry of a robot: ``/robot/NAME/odom`` (trackctl.WheelOdometry)."""
     return f"/robot/{robot}/odom"
