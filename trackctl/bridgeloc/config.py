@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -51,3 +52,5 @@ class BridgeLocConfig:
     ir_threshold: int = 235
     ir_min_area_px: int = 2
     ekf: EkfConfig = field(default_factory=EkfConfig)
+    site: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
+    """Site records laid over the log's metadata (``--site``: :mod:`trackctl.ingest.site`)."""

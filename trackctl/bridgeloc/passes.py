@@ -132,7 +132,7 @@ def load_setup(reader: LogReader, cfg: BridgeLocConfig) -> Setup:
         MissingTopicError: the robot camera's images or calibration (``/NAME/camera_model``) are
             missing (basic and full modes), or no infrastructure camera has a world pose.
     """
-    meta = reader.metadata().get("bridgeloc", {})
+    meta = {**reader.metadata().get("bridgeloc", {}), **cfg.site.get("bridgeloc", {})}
     rcam_name = cfg.robot_camera or meta.get("robot_camera", "r1cam")
     tops = reader.topics()
     models = _models(reader)
@@ -313,7 +313,10 @@ class RobotPass:
             icam,
             writer,
         )
-        rmeta = reader.metadata().get(f"robot/{setup.robot}", {})
+        rmeta = {
+            **reader.metadata().get(f"robot/{setup.robot}", {}),
+            **cfg.site.get(f"robot/{setup.robot}", {}),
+        }
         self.drive = DiffDrive(
             float(rmeta.get("ticks_per_m", 2000.0)), float(rmeta.get("wheel_base_m", 0.30))
         )

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import parse_choice, print_json, stderr
+from trackctl.cli.common import SITE_HELP, load_site_file, parse_choice, print_json, stderr
 from trackctl.cli.process import figures_from_output, run_system
 
 bridgeloc_app = typer.Typer(
@@ -86,6 +86,7 @@ def eval_(
     max_sigma: Annotated[
         float, typer.Option(help="Full mode: localized while the EKF position std is below (m).")
     ] = 0.5,
+    site: Annotated[Path | None, typer.Option(help=SITE_HELP)] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     plot: Annotated[
         Path | None, typer.Option(help="Write figures (PNG) to this directory.")
@@ -102,7 +103,9 @@ def eval_(
     mode_value = parse_choice(Mode, mode, "--mode")
     pose_value = parse_choice(PoseMethod, pose, "--pose")
     proc = BridgeLocProcessor(
-        BridgeLocConfig(mode=mode_value, pose=pose_value, max_sigma_m=max_sigma)
+        BridgeLocConfig(
+            mode=mode_value, pose=pose_value, max_sigma_m=max_sigma, site=load_site_file(site)
+        )
     )
     draw = figures_from_output(out, plot, "bridgeloc")
     run_system(

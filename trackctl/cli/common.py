@@ -9,6 +9,7 @@ import warnings
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from enum import Enum
+from pathlib import Path
 from typing import Any, TypeVar
 
 import typer
@@ -109,6 +110,25 @@ def parse_pose(value: str, option: str) -> tuple[float, float, float]:
     if len(nums) != 3 or not all(math.isfinite(x) for x in nums):
         raise InputError(f"{option} {value!r}: expected X,Y,YAW (m, m, rad), e.g. 1.5,2.0,0.0")
     return nums[0], nums[1], nums[2]
+
+
+SITE_HELP = (
+    "Site YAML (robot geometry, LEDs, tags, IR light, floor plan; docs/site.md), laid over the "
+    "log's own records."
+)
+
+
+def load_site_file(path: Path | None) -> dict[str, dict[str, str]]:
+    """The metadata records of ``--site FILE`` (empty without one).
+
+    Raises:
+        InputError: the file is missing or malformed.
+    """
+    if path is None:
+        return {}
+    from trackctl.ingest.site import read_site
+
+    return read_site(path)
 
 
 def print_json(obj: Any) -> None:

@@ -11,7 +11,7 @@ from typing import Annotated, Any
 import typer
 from rich.markup import escape
 
-from trackctl.cli.common import one_line, print_json, progress, stderr
+from trackctl.cli.common import load_site_file, one_line, print_json, progress, stderr
 from trackctl.errors import InputError
 from trackctl.logs.writer import COMPRESSIONS, LogWriter
 
@@ -77,6 +77,13 @@ def record(
             "camera_info, tf or ignore, e.g. --map /odom=odometry:r1.",
         ),
     ] = None,
+    site: Annotated[
+        Path | None,
+        typer.Option(
+            help="Site YAML (robot geometry, LEDs, tags, IR light, floor plan; docs/site.md) "
+            "stored in the log as metadata records and an attachment."
+        ),
+    ] = None,
     fps: Annotated[
         float | None,
         typer.Option(help="Frame rate of image folders (overrides a video's own rate)."),
@@ -118,10 +125,13 @@ def record(
         parse_named,
         record_files,
         record_live,
+        write_site,
     )
 
     plan = _ros2_plan(ros2, ros2_map, quiet or json_out)
     cfg = RecordConfig(
+        site=site,
+        site_records=load_site_file(site),
         ros2=ros2,
         ros2_plan=plan,
         imu=parse_named(imu or [], "--imu"),
@@ -148,6 +158,7 @@ def record(
         *cfg.video.values(),
         *cfg.calib.values(),
         *([ros2] if ros2 is not None else []),
+        *([site] if site is not None else []),
     ]
     counts: Counter[str] = Counter()
     rejected = 0
@@ -169,6 +180,7 @@ def record(
         with LogWriter(
             out, inputs=inputs, compression=compression, chunk_size=chunk, keep_partial=live
         ) as writer:
+            write_site(writer, cfg)
             if not cfg.empty:
                 with progress("recording files", quiet) as bar:
                     counts.update(record_files(writer, cfg, lambda n: bar(n, None)))

@@ -7,7 +7,14 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import parse_choice, parse_pose, print_json, stderr
+from trackctl.cli.common import (
+    SITE_HELP,
+    load_site_file,
+    parse_choice,
+    parse_pose,
+    print_json,
+    stderr,
+)
 from trackctl.cli.process import run_system
 
 
@@ -49,6 +56,7 @@ def smirror(
             "pose until then."
         ),
     ] = None,
+    site: Annotated[Path | None, typer.Option(help=SITE_HELP)] = None,
     plot: Annotated[
         Path | None, typer.Option(help="Write the paper's figures (PNG) to this directory.")
     ] = None,
@@ -72,6 +80,7 @@ def smirror(
             robot=robot,
             link_kBps=link_kbps,
             start=None if start is None else parse_pose(start, "--start"),
+            site=load_site_file(site),
         )
     except ValueError as err:
         raise InputError(str(err)) from None

@@ -25,6 +25,7 @@ from trackctl.logs.writer import LogWriter
 __all__ = [
     "RecordConfig",
     "record_files",
+    "write_site",
     "record_live",
     "LiveStats",
     "UdpSource",
@@ -47,6 +48,10 @@ class RecordConfig:
     jpeg_quality: int = 90
     time_unit: str = "s"
     """Unit of the CSV files' ``t_s`` column: s, ms, us or ns."""
+    site: Path | None = None
+    """The site file (:mod:`trackctl.ingest.site`), attached to the log as it was written."""
+    site_records: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
+    """Its metadata records (written before any message)."""
     ros2: Path | None = None
     """A ROS 2 bag (directory or .mcap/.db3) to convert with ``ros2_plan``."""
     ros2_plan: tuple[TopicPlan, ...] = ()
@@ -96,6 +101,15 @@ def _frames(path: Path, name: str, cfg: RecordConfig, order: int) -> Iterator[St
         jpeg_quality=cfg.jpeg_quality,
     ):
         yield (t_ns, order, topics.image(name), img)
+
+
+def write_site(writer: LogWriter, cfg: RecordConfig) -> None:
+    """The site file's metadata records, and the file itself as an attachment."""
+    for name, record in cfg.site_records.items():
+        writer.add_metadata(name, dict(record))
+    if cfg.site is not None:
+        data = cfg.site.read_bytes()
+        writer.add_attachment(f"site/{cfg.site.name}", data, "application/x-yaml", 0)
 
 
 def record_files(

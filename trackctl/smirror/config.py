@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 
@@ -61,6 +62,8 @@ class SmirrorConfig:
     margin_px: int = 8
     seed: int = 0
     """Seeds the queue positions and broadcast losses."""
+    site: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
+    """Site records laid over the log's metadata (``--site``: :mod:`trackctl.ingest.site`)."""
     start: tuple[float, float, float] | None = None
     """The robot's start pose (x m, y m, yaw rad, world frame) when it is known (a dock); None:
     unknown, the robot asks every node for images until one of them shows its LEDs."""

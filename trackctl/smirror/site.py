@@ -82,7 +82,8 @@ def camera_models(reader: LogReader) -> dict[str, CameraModel]:
 def robot_name(reader: LogReader, cfg: SmirrorConfig) -> str:
     if cfg.robot:
         return cfg.robot
-    names = sorted(k.split("/", 1)[1] for k in reader.metadata() if k.startswith("robot/"))
+    records = {**reader.metadata(), **cfg.site}
+    names = sorted(k.split("/", 1)[1] for k in records if k.startswith("robot/"))
     if not names:
         names = sorted(
             t.split("/")[2]
@@ -101,8 +102,8 @@ def robot_name(reader: LogReader, cfg: SmirrorConfig) -> str:
     return names[0]
 
 
-def floorplan(reader: LogReader) -> FloorPlan | None:
-    md = reader.metadata().get("smirror/floorplan")
+def floorplan(reader: LogReader, metadata: Mapping[str, Mapping[str, str]]) -> FloorPlan | None:
+    md = metadata.get("smirror/floorplan")
     if not md or "plan" not in md:
         return None
     try:
@@ -138,7 +139,7 @@ def _warn_defaults(
         parts.append("no smirror/floorplan (walls do not block the nodes' views)")
     if parts:
         warnings.warn(
-            f"{reader.path}: site defaults used: {'; '.join(parts)}",
+            f"{reader.path}: site defaults used: {'; '.join(parts)} (give them with --site)",
             IncompleteInputWarning,
             stacklevel=3,
         )
@@ -197,7 +198,7 @@ def load_site(reader: LogReader, cfg: SmirrorConfig) -> Site:
             f"{reader.path}: {odom_topic} is missing: smirror --mode mirror+odom dead-reckons "
             f"robot {robot!r} with its wheel odometry (use --mode centralized for vision only)"
         )
-    metadata = reader.metadata()
+    metadata = {**reader.metadata(), **cfg.site}
     rmd = metadata.get(f"robot/{robot}", {})
     where = f"{reader.path}: metadata robot/{robot}"
     led_default, drive_default = LedConfig(), DiffDrive()
@@ -211,7 +212,7 @@ def load_site(reader: LogReader, cfg: SmirrorConfig) -> Site:
         metadata_float(rmd, "wheel_base_m", drive_default.wheel_base_m, where),
     )
     n_req = cfg.requesters or int(metadata.get("smirror/requesters", {}).get("count", 1))
-    plan = floorplan(reader)
+    plan = floorplan(reader, metadata)
     _warn_defaults(reader, robot, rmd, led, drive, plan)
     cams = {n: PinholeCamera(m) for n, m in models.items()}
     nodes = {n: MirrorNode(m, cfg.node) for n, m in models.items()}

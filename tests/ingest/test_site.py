@@ -1,0 +1,103 @@
+"""Site files: parsed strictly into the metadata records processors read; ``record --site``
+stores them; ``smirror/bridgeloc --site`` lay them over a log."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from tests.conftest import ROOT
+from tests.ingest.ros2_bags import smirror_log_to_bag
+from trackctl.cli.main import app
+from trackctl.errors import InputError
+from trackctl.ingest.site import read_site, site_records
+from trackctl.logs import LogReader
+
+SMIRROR = ROOT / "sample_logs" / "smirror.mcap"
+BRIDGELOC = ROOT / "sample_logs" / "bridgeloc.mcap"
+
+
+def _sample_site() -> dict:
+    """The site of the S-Mirror sample log, as a user would write it."""
+    md = LogReader(SMIRROR).metadata()
+    robot = {k: float(v) for k, v in md["robot/r1"].items()}
+    return {
+        "robots": {"r1": robot},
+        "smirror": {"requesters": 1, "floorplan": json.loads(md["smirror/floorplan"]["plan"])},
+    }
+
+
+def test_records_match_what_the_simulator_writes() -> None:
+    records = site_records(_sample_site(), "site.yaml")
+    md = LogReader(SMIRROR).metadata()
+    assert {k: float(v) for k, v in records["robot/r1"].items()} == {
+        k: float(v) for k, v in md["robot/r1"].items()
+    }
+    assert json.loads(records["smirror/floorplan"]["plan"]) == json.loads(
+        md["smirror/floorplan"]["plan"]
+    )
+    assert records["smirror/requesters"] == {"count": "1"}
+    bl = site_records({"bridgeloc": {"tag_n": 3, "robot_camera": "front"}})["bridgeloc"]
+    assert bl == {"tag_n": "3", "robot_camera": "front"}
+
+
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        ({"robot": {}}, "unknown key 'robot'"),
+        ({"robots": {"r1": {"wheelbase": 0.3}}}, r"robots.r1: unknown key 'wheelbase'"),
+        ({"robots": {"r1": {"ticks_per_m": "many"}}}, r"robots.r1.ticks_per_m: 'many' is not"),
+        ({"robots": {"r1": {"wheel_base_m": -0.3}}}, "must be positive"),
+        ({"robots": {"r1": {"led_height_m": float("nan")}}}, "is not finite"),
+        ({"smirror": {"requesters": 0}}, "must be >= 1"),
+        ({"smirror": {"floorplan": {"walls": 3}}}, "smirror.floorplan"),
+        ({"bridgeloc": {"tag_n": 2.5}}, "is not an integer"),
+        ({"bridgeloc": {"robot_camera": 5}}, "expected a name"),
+        ([1, 2], "expected a mapping"),
+    ],
+)
+def test_bad_sites_name_file_and_key(data: object, message: str) -> None:
+    with pytest.raises(InputError, match=message) as err:
+        site_records(data, "site.yaml")
+    assert str(err.value).startswith("site.yaml")
+
+
+def test_read_site_errors(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="no such file"):
+        read_site(tmp_path / "none.yaml")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("robots: [unclosed\n")
+    with pytest.raises(InputError, match="not valid YAML at line"):
+        read_site(bad)
+
+
+def test_recorded_site_silences_the_defaults_warning(tmp_path: Path) -> None:
+    bag, site = tmp_path / "bag", tmp_path / "site.yaml"
+    smirror_log_to_bag(SMIRROR, bag)
+    site.write_text(yaml.safe_dump(_sample_site()))
+    runner = CliRunner()
+    log = tmp_path / "with_site.mcap"
+    rec = runner.invoke(app, ["record", str(log), "--ros2", str(bag), "--site", str(site), "-q"])
+    assert rec.exit_code == 0, rec.output
+    reader = LogReader(log)
+    assert "robot/r1" in reader.metadata() and "site/site.yaml" in reader.attachments()
+    stored = runner.invoke(app, ["smirror", str(log), "--json", "-q"])
+    assert stored.exit_code == 0 and "site defaults used" not in stored.output
+    bare = tmp_path / "bare.mcap"
+    runner.invoke(app, ["record", str(bare), "--ros2", str(bag), "-q"])
+    overlaid = runner.invoke(app, ["smirror", str(bare), "--site", str(site), "--json", "-q"])
+    assert overlaid.exit_code == 0 and "site defaults used" not in overlaid.output
+    plain = runner.invoke(app, ["smirror", str(bare), "--json", "-q"])
+    assert "site defaults used" in plain.output
+
+
+def test_bridgeloc_reads_the_site(tmp_path: Path) -> None:
+    site = tmp_path / "site.yaml"
+    site.write_text("bridgeloc:\n  robot_camera: frontcam\n")
+    result = CliRunner().invoke(app, ["bridgeloc", "eval", str(BRIDGELOC), "--site", str(site)])
+    assert result.exit_code == 2
+    assert "frontcam" in result.output

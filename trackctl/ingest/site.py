@@ -1,0 +1,155 @@
+"""A site file: the physical setup that logs do not carry (robot geometry, tags, lights, walls).
+
+One documented YAML (metres, radians, world frame z up) replaces the metadata records that only
+the simulators wrote. ``record --site FILE`` stores it in a log (as those records plus the file
+as an attachment); ``smirror --site FILE`` and ``bridgeloc eval --site FILE`` lay it over the
+log's own records (the file wins). Every key is optional; a processor names what it defaulted.
+
+.. code-block:: yaml
+
+    robots:
+      r1:                    # the robot's NAME (/robot/NAME/odom)
+        ticks_per_m: 2000    # wheel encoder ticks per metre of travel
+        wheel_base_m: 0.30   # distance between the wheels
+        led_height_m: 0.32   # S-Mirror LEDs above the floor
+        led_front_m: 0.15    # front (red) LED ahead of the wheel axis centre
+        led_back_m: -0.15    # back (green) LED, negative = behind
+    smirror:
+      requesters: 1          # robots requesting images (ours + others)
+      floorplan:             # walls block a node's view (line of sight)
+        size_m: [27.0, 8.0]
+        wall_height_m: 2.6
+        walls: [[[0, 0], [27, 0]], [[9, 0], [9, 3.2]]]
+        rooms: [[0, 0, 9, 8], [9, 0, 27, 8]]
+    bridgeloc:
+      robot: r1
+      robot_camera: r1cam    # the camera on the robot (/r1cam/image)
+      tag_n: 2               # N x N code cells of the rotation-symmetric tags
+      tag_size_m: 0.30       # printed tag side
+      border_ratio: 5.0
+      ir_height_m: 0.65      # height of the IR light on the robot
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from trackctl.errors import InputError
+
+__all__ = ["read_site", "site_records", "ROBOT_KEYS", "BRIDGELOC_KEYS"]
+
+ROBOT_KEYS = ("ticks_per_m", "wheel_base_m", "led_height_m", "led_front_m", "led_back_m")
+BRIDGELOC_KEYS = {
+    "robot": str,
+    "robot_camera": str,
+    "tag_n": int,
+    "tag_size_m": float,
+    "border_ratio": float,
+    "ir_height_m": float,
+}
+_SMIRROR_KEYS = ("requesters", "floorplan")
+_TOP = ("robots", "smirror", "bridgeloc")
+
+
+def _number(value: Any, where: str, kind: type = float) -> str:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(f"{where}: {value!r} is not a number")
+    if not math.isfinite(float(value)):
+        raise InputError(f"{where}: {value!r} is not finite")
+    if kind is int and float(value) != int(value):
+        raise InputError(f"{where}: {value!r} is not an integer")
+    return str(int(value)) if kind is int else str(float(value))
+
+
+def _mapping(value: Any, where: str) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise InputError(f"{where}: expected a mapping, got {type(value).__name__}")
+    return value
+
+
+def _known(values: Mapping[str, Any], allowed: Any, where: str) -> None:
+    unknown = sorted(set(values) - set(allowed))
+    if unknown:
+        raise InputError(
+            f"{where}: unknown key {unknown[0]!r} (known: {', '.join(sorted(allowed))})"
+        )
+
+
+def site_records(data: Any, path: str | Path = "site") -> dict[str, dict[str, str]]:
+    """A parsed site file as the metadata records processors read.
+
+    Raises:
+        InputError: an unknown key, a value of the wrong type (names the file and key path).
+    """
+    top = _mapping(data if data is not None else {}, str(path))
+    _known(top, _TOP, str(path))
+    out: dict[str, dict[str, str]] = {}
+    for name, robot in _mapping(top.get("robots", {}), f"{path}: robots").items():
+        where = f"{path}: robots.{name}"
+        if not isinstance(name, str) or not name or "/" in name:
+            raise InputError(f"{where}: a robot NAME must be a non-empty string without '/'")
+        robot = _mapping(robot, where)
+        _known(robot, ROBOT_KEYS, where)
+        out[f"robot/{name}"] = {k: _number(v, f"{where}.{k}") for k, v in robot.items()}
+        for k in ("ticks_per_m", "wheel_base_m"):
+            if k in robot and float(robot[k]) <= 0:
+                raise InputError(f"{where}.{k}: must be positive, got {robot[k]!r}")
+    smirror = _mapping(top.get("smirror", {}), f"{path}: smirror")
+    _known(smirror, _SMIRROR_KEYS, f"{path}: smirror")
+    if "requesters" in smirror:
+        count = _number(smirror["requesters"], f"{path}: smirror.requesters", int)
+        if int(count) < 1:
+            raise InputError(f"{path}: smirror.requesters: must be >= 1, got {count}")
+        out["smirror/requesters"] = {"count": count}
+    if "floorplan" in smirror:
+        from trackctl.geometry.floorplan import FloorPlan
+
+        plan = _mapping(smirror["floorplan"], f"{path}: smirror.floorplan")
+        try:
+            FloorPlan.from_json(dict(plan))
+        except (ValueError, KeyError, TypeError) as err:
+            raise InputError(f"{path}: smirror.floorplan: {err}") from err
+        out["smirror/floorplan"] = {"plan": json.dumps(dict(plan))}
+    bl = _mapping(top.get("bridgeloc", {}), f"{path}: bridgeloc")
+    _known(bl, BRIDGELOC_KEYS, f"{path}: bridgeloc")
+    if bl:
+        rec = {}
+        for k, v in bl.items():
+            kind = BRIDGELOC_KEYS[k]
+            where = f"{path}: bridgeloc.{k}"
+            if kind is str:
+                if not isinstance(v, str) or not v:
+                    raise InputError(f"{where}: expected a name, got {v!r}")
+                rec[k] = v
+            else:
+                rec[k] = _number(v, where, kind)
+        out["bridgeloc"] = rec
+    return out
+
+
+def read_site(path: str | Path) -> dict[str, dict[str, str]]:
+    """The metadata records of a site file.
+
+    Raises:
+        InputError: the file is missing, is not YAML, or does not fit the layout above.
+    """
+    import yaml
+
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"--site {path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(f"--site {path}: cannot read ({err})") from err
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        at = f" at line {mark.line + 1}" if mark is not None else ""
+        raise InputError(f"--site {path}: not valid YAML{at}") from err
+    return site_records(data, path)
