@@ -70,6 +70,7 @@ def smirror(
     """S-Mirror: localize a robot from its LEDs in node images, dead-reckoning in between."""
     from trackctl.errors import InputError
     from trackctl.smirror import Mode, SmirrorConfig, SmirrorProcessor
+    from trackctl.smirror.link import LinkConfig
 
     mode_value = parse_choice(Mode, mode, "--mode")
     try:
@@ -78,7 +79,7 @@ def smirror(
             broadcast_threshold=broadcast_threshold,
             requesters=requesters,
             robot=robot,
-            link_kBps=link_kbps,
+            link=LinkConfig(unicast_kBps=link_kbps),
             start=None if start is None else parse_pose(start, "--start"),
             site=load_site_file(site),
         )

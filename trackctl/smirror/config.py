@@ -6,6 +6,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
 
+from trackctl.smirror.link import LinkConfig
 from trackctl.smirror.node import NodeConfig
 from trackctl.smirror.robot import FilterConfig
 
@@ -45,15 +46,8 @@ class SmirrorConfig:
     beacon_period_s: float = 1.0
     sensing_ms: float = 40.0
     """Sensing delay: the sensors' sampling period (25 Hz, §4.1.3 B)."""
-    link_kBps: float = 1000.0  # noqa: N815 - kB/s, as the paper writes it
-    """Unicast throughput of the wireless link (kB/s)."""
-    link_latency_ms: float = 35.0
-    broadcast_kBps: float = 250.0  # noqa: N815
-    """Broadcast goes at the basic rate (kB/s)."""
-    broadcast_wait_ms: float = 200.0
-    """Broadcast frames wait for the access point's delivery beacon (DTIM)."""
-    broadcast_loss: float = 0.05
-    """Broadcast has no link-layer retry: this fraction of images is lost."""
+    link: LinkConfig = field(default_factory=LinkConfig)
+    """Each node's link: throughput, latency, DTIM wait, broadcast loss, queue limit."""
     processing_ms: float = 15.0
     """Processing time used to time a fix's arrival (measured times go into the delay figures;
     a fixed budget keeps the output poses deterministic)."""
@@ -98,6 +92,12 @@ class SmirrorResult:
     images_old: int = 0
     beacons: int = 0
     cast_modes: set[str] = field(default_factory=set)
+    queue_ms: list[float] = field(default_factory=list)
+    """Time each answer waited in its node's transmit queue."""
+    answers_dropped: int = 0
+    """Answers not sent: the node's queue already held more than its limit."""
+    ours_requested: int = 0
+    """Answers our robot asked for; ``fix_attempts`` of them arrived."""
     decode_failures: int = 0
     fix_attempts: int = 0
     fixes: int = 0

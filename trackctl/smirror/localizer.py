@@ -26,6 +26,7 @@ from trackctl.logs.messages import GroundTruth, MirrorTransmission, WheelOdometr
 from trackctl.logs.reader import LogMessage
 from trackctl.logs.writer import LogWriter
 from trackctl.smirror.config import Mode, SmirrorConfig, SmirrorResult, pose_topic, sent_topic
+from trackctl.smirror.link import Delivery, NodeLink
 from trackctl.smirror.node import CastMode, ForegroundPayload, beacon_bytes, decide_cast
 from trackctl.smirror.robot import LedFix, PoseFilter, detect_leds, fix_from_leds
 from trackctl.smirror.site import Site
@@ -55,6 +56,7 @@ class Localizer:
         self.site, self.cfg, self.writer = site, cfg, writer
         self.res = SmirrorResult(requesters=site.requesters, robot=site.robot)
         self.rng = np.random.default_rng(cfg.seed)
+        self.links = {n: NodeLink(cfg.link, self.rng) for n in sorted(site.models)}
         self.pose_out = pose_topic(site.robot)
         self.beacon_sizes = {n: beacon_bytes(m) for n, m in site.models.items()}
         self.next_beacon_ns = 0
@@ -278,7 +280,15 @@ class Localizer:
         full = node.full_frame_bytes(frame)
         cast = decide_cast(requests, cfg.broadcast_threshold)
         size = payload.size_bytes
-        sent = size if cast is CastMode.BROADCAST else size * requests
+        broadcast = cast is CastMode.BROADCAST
+        delivery = self.links[name].send(t_ns / 1e6, size, requests, broadcast, ours)
+        res.queue_ms.append(delivery.queue_ms)
+        if delivery.dropped:
+            res.answers_dropped += 1
+            if ours:
+                res.ours_requested += 1
+            return
+        sent = size if broadcast else size * requests
         res.cast_modes.add(cast.value)
         res.image_messages += 1
         res.images_new += is_new
@@ -305,32 +315,25 @@ class Localizer:
                 t_ns,
             )
         if ours and self.filt is not None:
-            self._receive(name, t_ns, payload, cast, requests, node_ms, self.filt)
+            self._receive(name, t_ns, payload, delivery, node_ms, self.filt)
 
     def _receive(
         self,
         name: str,
         t_ns: int,
         payload: ForegroundPayload,
-        cast: CastMode,
-        requests: int,
+        delivery: Delivery,
         node_ms: float,
         filt: PoseFilter,
     ) -> None:
         """Our robot: the transfer, then LED detection on the received crops; the fix is queued
         for the time it arrives."""
         res, cfg, led = self.res, self.cfg, self.site.led
-        size = payload.size_bytes
-        if cast is CastMode.BROADCAST:
-            comm_ms = cfg.broadcast_wait_ms + size / cfg.broadcast_kBps
-            lost = bool(self.rng.random() < cfg.broadcast_loss)
-        else:
-            position = int(self.rng.integers(1, requests + 1))
-            comm_ms = cfg.link_latency_ms + position * size / cfg.link_kBps
-            lost = False
-        if lost:
-            res.broadcast_lost += 1
+        res.ours_requested += 1
+        if delivery.comm_ms is None:
+            res.broadcast_lost += delivery.lost
             return
+        comm_ms = delivery.comm_ms
         started = time.perf_counter()
         front, back = detect_leds(payload.crops(), led)
         fix = (

@@ -163,6 +163,15 @@ def report_metrics(
         if not res.nis
         else round(float(np.mean(np.asarray(res.nis) <= NIS_95_3DOF)), 4),
         "unlocalized_samples": res.unlocalized_samples,
+        # the links: queueing, answers never sent, our answers that arrived
+        "queue_ms_mean": None if central or not res.queue_ms else _mean(res.queue_ms),
+        "queue_ms_max": None
+        if central or not res.queue_ms
+        else round(float(np.max(res.queue_ms)), 3),
+        "answers_dropped": res.answers_dropped,
+        "delivered_share": None
+        if central or not res.ours_requested
+        else round(res.fix_attempts / res.ours_requested, 4),
     }
 
 
@@ -230,8 +239,10 @@ def run_detailed(
             "broadcast_threshold": cfg.broadcast_threshold,
             "requesters": res.requesters,
             "robot": res.robot,
-            "link_kBps": cfg.link_kBps,
-            "broadcast_kBps": cfg.broadcast_kBps,
+            "link_kBps": cfg.link.unicast_kBps,
+            "broadcast_kBps": cfg.link.broadcast_kBps,
+            "dtim_ms": cfg.link.dtim_ms,
+            "max_queue_ms": cfg.link.max_queue_ms,
             "beacon_period_s": cfg.beacon_period_s,
             "sensing_ms": cfg.sensing_ms,
         },
