@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from tests.logcompare import assert_same_log
@@ -45,3 +46,19 @@ def test_sample_has_the_scenario_topics() -> None:
     assert present["/robot/r1/odom"].schema_name == "trackctl.WheelOdometry"
     assert present["/ground_truth"].schema_name == "trackctl.GroundTruth"
     assert {"robot/r1", "smirror/floorplan", "smirror/requesters"} <= set(reader.metadata())
+
+
+def test_lens_distortion_and_led_coloured_clothes(tmp_path: Path) -> None:
+    from trackctl.sim.smirror import _clothes
+
+    base = SmirrorScenario(paths=1, people=2, width_px=160, height_px=120, fps=2.0, duration_s=2.0)
+    plain, bent = tmp_path / "plain.mcap", tmp_path / "bent.mcap"
+    simulate_smirror(str(plain), base)
+    simulate_smirror(str(bent), replace(base, distortion_k1=-0.2))
+    model = next(iter(LogReader(bent).messages(["/node0/camera_model"]))).message
+    assert model.distortion[0] == -0.2
+    a = next(iter(LogReader(plain).messages(["/node0/image"]))).message.data
+    b = next(iter(LogReader(bent).messages(["/node0/image"]))).message.data
+    assert a != b
+    shirts = _clothes(replace(base, people=4, led_clothes=0.5))
+    assert shirts[:2] == [(70, 200, 60), (200, 60, 200)] and shirts[2] != shirts[0]

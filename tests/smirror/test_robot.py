@@ -89,3 +89,24 @@ def test_fix_sigma_grows_with_range(node1) -> None:  # type: ignore[no-untyped-d
     near = f.fix_sigma(LedFix(0, 0, 0, 0, 3.0, "n"), cam, 0.32)
     far = f.fix_sigma(LedFix(0, 0, 0, 0, 10.0, "n"), cam, 0.32)
     assert far[0] > 2 * near[0]
+
+
+def test_filter_learns_the_heading_bias_of_mismatched_wheels() -> None:
+    """Opposite wheel-scale errors turn the robot by b rad per metre the encoders never see; the
+    fixes teach the filter b, and dead reckoning without fixes then follows the true arc."""
+    b_true, step = 0.1, 0.04
+    f = PoseFilter(0.0, 0.0, 0.0, 0, FilterConfig())
+    x = y = yaw = 0.0
+    for k in range(1, 501):  # 20 m, a fix every 0.4 m
+        mid = yaw + b_true * step / 2
+        x, y, yaw = x + step * math.cos(mid), y + step * math.sin(mid), yaw + b_true * step
+        t = k * 40_000_000
+        f.step(t, step, 0.0)  # the encoders say: straight
+        if k % 10 == 0:
+            f.apply_fix(LedFix(t, x, y, yaw, 5.0, "n"), 0.03, 0.05)
+    assert f.heading_bias == pytest.approx(b_true, abs=0.02)
+    for k in range(501, 551):  # 2 m without fixes
+        mid = yaw + b_true * step / 2
+        x, y, yaw = x + step * math.cos(mid), y + step * math.sin(mid), yaw + b_true * step
+        f.step(k * 40_000_000, step, 0.0)
+    assert math.hypot(f.pose[0] - x, f.pose[1] - y) < 0.1

@@ -126,6 +126,25 @@ def simulate_smirror(
     duration: Annotated[
         float | None, typer.Option(help="Cut the patrol after this many seconds.")
     ] = None,
+    calib_error_deg: Annotated[
+        float, typer.Option(help="Node calibration error: rotation sigma per axis, degrees.")
+    ] = 0.15,
+    distortion_k1: Annotated[
+        float, typer.Option(help="Radial lens distortion k1 of the node cameras (e.g. -0.2).")
+    ] = 0.0,
+    wheel_scale_error: Annotated[
+        float | None,
+        typer.Option(
+            help="Opposite encoder scale errors of the two wheels (0.02 = +-2 %; default "
+            "+0.4 % / -0.3 %)."
+        ),
+    ] = None,
+    slip: Annotated[
+        float, typer.Option(help="Relative random slip of each wheel increment.")
+    ] = 0.03,
+    led_clothes: Annotated[
+        float, typer.Option(help="Share of people in LED-coloured (green/magenta) shirts.")
+    ] = 0.0,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
@@ -149,6 +168,13 @@ def simulate_smirror(
             height_px=h,
             jpeg_quality=jpeg_quality,
             duration_s=duration,
+            calib_rot_deg=calib_error_deg,
+            distortion_k1=distortion_k1,
+            slip_sigma=slip,
+            led_clothes=led_clothes,
+            wheel_scale=SmirrorScenario().wheel_scale
+            if wheel_scale_error is None
+            else (1.0 + wheel_scale_error, 1.0 - wheel_scale_error),
         )
     except ValueError as err:
         raise InputError(f"simulate smirror: {err}") from None

@@ -39,6 +39,7 @@ from trackctl.logs.messages import (
     WheelOdometry,
 )
 from trackctl.logs.writer import LogWriter
+from trackctl.sim.lens import LensDistortion
 
 __all__ = [
     "BridgeLocScenario",
@@ -337,14 +338,7 @@ class _Renderer:
         self.cfg = cfg
         self.rng = rng
         self.K = np.array([[model.fx_px, 0, model.cx_px], [0, model.fy_px, model.cy_px], [0, 0, 1]])
-        w, h = model.width_px, model.height_px
-        grid = np.stack(
-            np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32)), axis=-1
-        ).reshape(-1, 1, 2)
-        und = cv2.undistortPoints(grid, self.K, np.asarray(model.distortion, float), P=self.K)
-        und = und.reshape(h, w, 2)
-        self.map_x = und[..., 0].astype(np.float32)
-        self.map_y = und[..., 1].astype(np.float32)
+        self.lens = LensDistortion(model)
         self._tex: dict[tuple[Code, int], np.ndarray] = {}
 
     def texture(self, code: Code, side: int) -> np.ndarray:
@@ -354,10 +348,7 @@ class _Renderer:
         return self._tex[key]
 
     def finish(self, ideal: np.ndarray) -> bytes:
-        img = cv2.remap(
-            ideal, self.map_x, self.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
-        )
-        img = cv2.GaussianBlur(img, (0, 0), 0.7)
+        img = cv2.GaussianBlur(self.lens.apply(ideal), (0, 0), 0.7)
         noise = self.rng.normal(0.0, self.cfg.noise_sigma, img.shape)
         img = np.clip(img + noise, 0, 255).astype(np.uint8)
         ok, buf = cv2.imencode(".jpg", img, [int(cv2.IMWRITE_JPEG_QUALITY), self.cfg.jpeg_quality])

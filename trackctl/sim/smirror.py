@@ -37,6 +37,7 @@ from trackctl.logs.messages import (
     WheelOdometry,
 )
 from trackctl.logs.writer import LogWriter
+from trackctl.sim.lens import LensDistortion
 from trackctl.sim.smirror_render import FloorPlan, NodeRenderer, RobotShape, three_rooms
 from trackctl.sim.walkers import random_waypoint
 
@@ -140,6 +141,12 @@ class SmirrorScenario:
     """Wheels slip on turns in place: the true rotation falls short of the encoders by this."""
     calib_rot_deg: float = 0.15
     calib_pos_m: float = 0.02
+    distortion_k1: float = 0.0
+    """Radial lens distortion of the node cameras (OpenCV k1; -0.2 is a wide-angle webcam):
+    frames are rendered through it and the logged calibration carries it."""
+    led_clothes: float = 0.0
+    """Share of people dressed in the LEDs' colours (green or magenta shirts): clutter that the
+    LED detector can mistake for the robot."""
     dock_s: float = 3.0
     duration_s: float | None = None
     """Cut the patrol after this many seconds (short logs for tests); None: all of it."""
@@ -221,8 +228,20 @@ def node_models(cfg: SmirrorScenario) -> list[CameraModel]:
             cfg.height_px,
             look_at(np.array(eye), np.array(target)),
             hfov_deg=cfg.hfov_deg,
+            distortion=(cfg.distortion_k1, 0.0, 0.0, 0.0, 0.0),
         )
         for name, eye, target in NODES
+    ]
+
+
+_LED_CLOTHES = [(70, 200, 60), (200, 60, 200)]  # BGR: a bright green and a magenta shirt
+
+
+def _clothes(cfg: SmirrorScenario) -> list[tuple[int, int, int]]:
+    """Each person's shirt colour; ``led_clothes`` of them in the LEDs' colours."""
+    n_led = int(round(cfg.led_clothes * cfg.people))
+    return [
+        _LED_CLOTHES[k % 2] if k < n_led else _CLOTHES[k % len(_CLOTHES)] for k in range(cfg.people)
     ]
 
 
@@ -265,7 +284,13 @@ def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, 
     true_models = node_models(cfg)
     calib_models = [_calibrated(m, rng, cfg) for m in true_models]
     walkers = _people(cfg, plan, duration_s, rng)
-    renderers = [NodeRenderer(PinholeCamera(m), plan, rng, cfg.noise_sigma) for m in true_models]
+    # drawn through an ideal pinhole, then warped by the lens
+    renderers = [
+        NodeRenderer(PinholeCamera(replace(m, distortion=(0.0,) * 5)), plan, rng, cfg.noise_sigma)
+        for m in true_models
+    ]
+    lenses = [LensDistortion(m) for m in true_models]
+    shirts = _clothes(cfg)
     counts: dict[str, int] = {}
 
     def put(writer: LogWriter, topic: str, msg: object, t_ns: int) -> None:
@@ -322,12 +347,10 @@ def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, 
             while next_frame < n_frames and int(round(next_frame * frame_dt * S)) <= t_ns:
                 tf = next_frame * frame_dt
                 tf_ns = int(round(tf * S))
-                people = [
-                    (person_xy(k, tf), _CLOTHES[k % len(_CLOTHES)]) for k in range(len(walkers))
-                ]
+                people = [(person_xy(k, tf), shirts[k]) for k in range(len(walkers))]
                 robot = robot_pose(tf)
-                for model, ren in zip(true_models, renderers, strict=True):
-                    img = ren.render(people, [robot], shape, rng)
+                for model, ren, lens in zip(true_models, renderers, lenses, strict=True):
+                    img = lens.apply(ren.render(people, [robot], shape, rng))
                     ok, buf = cv2.imencode(
                         ".jpg", img, [int(cv2.IMWRITE_JPEG_QUALITY), cfg.jpeg_quality]
                     )

@@ -116,14 +116,19 @@ def fix_from_leds(
 
 
 class _DiffDriveEKF(ExtendedKalmanFilter):
-    """filterpy's EKF with the unicycle motion model as its (non-linear) state prediction."""
+    """filterpy's EKF with the unicycle motion model as its (non-linear) state prediction.
+
+    State (x, y, yaw, b): b is the heading bias per metre of travel (rad/m) that opposite wheel
+    scale errors cause (left wheel +e, right -e: b = 2e / wheel base); the filter learns it from
+    the fixes and corrects dead reckoning with it out of coverage."""
 
     x: np.ndarray
 
     def predict_x(self, u: Any = 0) -> None:
         ds, dyaw = float(u[0]), float(u[1])
+        dyaw += float(self.x[3, 0]) * ds
         mid = float(self.x[2, 0]) + dyaw / 2
-        self.x = self.x + np.array([[ds * math.cos(mid)], [ds * math.sin(mid)], [dyaw]])
+        self.x = self.x + np.array([[ds * math.cos(mid)], [ds * math.sin(mid)], [dyaw], [0.0]])
         self.x[2, 0] = wrap(float(self.x[2, 0]))
 
 
@@ -142,6 +147,11 @@ class FilterConfig:
     fix_floor_m: float = 0.03
     calib_rad: float = 0.003
     """Residual calibration error of a node camera (rad): a ground error growing with range."""
+    heading_bias_sigma: float = 0.1
+    """Prior std of the heading bias per metre (rad/m): opposite wheel-scale errors of +-1.5 %
+    on a 0.30 m wheel base (uncalibrated platforms show 1-2 %, Borenstein & Feng's UMBmark)."""
+    heading_bias_walk: float = 0.002
+    """Random walk of that bias per metre (rad/m per sqrt(m)): load, floor, tyre wear."""
     gate_chi2: float = 16.27
     """Mahalanobis gate of a fix (chi-square, 3 dof, 99.9 %)."""
     max_rejects: int = 3
@@ -164,9 +174,9 @@ class PoseFilter:
         self.localized = localized
         """False until the first fix when the start is unknown: the state is then a placeholder
         (dead reckoning from nowhere) and the first fix sets it, at the fix's time."""
-        self.ekf = _DiffDriveEKF(dim_x=3, dim_z=3)
-        self.ekf.x = np.array([[x], [y], [yaw]])
-        self.ekf.P = np.diag([0.05**2, 0.05**2, 0.05**2])
+        self.ekf = _DiffDriveEKF(dim_x=4, dim_z=3)
+        self.ekf.x = np.array([[x], [y], [yaw], [0.0]])
+        self.ekf.P = np.diag([0.05**2, 0.05**2, 0.05**2, cfg.heading_bias_sigma**2])
         self.ekf.R = np.eye(3)
         self.t_ns = t_ns
         # (t_ns, x, P, increment that led here)
@@ -182,17 +192,33 @@ class PoseFilter:
     def pose(self) -> tuple[float, float, float]:
         return float(self.ekf.x[0, 0]), float(self.ekf.x[1, 0]), float(self.ekf.x[2, 0])
 
+    @property
+    def heading_bias(self) -> float:
+        """The learnt heading bias per metre (rad/m)."""
+        return float(self.ekf.x[3, 0])
+
     def _predict(self, ds: float, dyaw: float) -> None:
-        yaw = float(self.ekf.x[2, 0]) + dyaw / 2
+        yaw = float(self.ekf.x[2, 0]) + (dyaw + self.heading_bias * ds) / 2
         c, s = math.cos(yaw), math.sin(yaw)
-        self.ekf.F = np.array([[1, 0, -ds * s], [0, 1, ds * c], [0, 0, 1.0]])
-        # noise enters through the increments: Q = G diag(var_ds, var_dyaw) G^T
-        g = np.array([[c, -0.5 * ds * s], [s, 0.5 * ds * c], [0, 1.0]])
+        h = 0.5 * ds  # d(mid yaw)/d(b) = ds / 2
+        self.ekf.F = np.array(
+            [
+                [1, 0, -ds * s, -ds * s * h],
+                [0, 1, ds * c, ds * c * h],
+                [0, 0, 1.0, ds],
+                [0, 0, 0, 1.0],
+            ]
+        )
+        # noise enters through the increments: Q = G diag(var_ds, var_dyaw) G^T, plus the
+        # bias's random walk
+        g = np.array([[c, -0.5 * ds * s], [s, 0.5 * ds * c], [0, 1.0], [0, 0]])
         var_ds = (self.cfg.odom_rel_sigma * ds) ** 2 + 1e-8
         var_dyaw = (
             (self.cfg.yaw_rel_sigma * dyaw) ** 2 + self.cfg.yaw_per_m_sigma**2 * abs(ds) + 1e-8
         )
-        self.ekf.Q = g @ np.diag([var_ds, var_dyaw]) @ g.T
+        q = g @ np.diag([var_ds, var_dyaw]) @ g.T
+        q[3, 3] += self.cfg.heading_bias_walk**2 * abs(ds) + 1e-12
+        self.ekf.Q = q
         self.ekf.predict(u=np.array([ds, dyaw]))
 
     def step(self, t_ns: int, ds: float, dyaw: float) -> None:
@@ -230,13 +256,18 @@ class PoseFilter:
         z = np.array([[fix.x_m], [fix.y_m], [fix.yaw_rad]])
         r = np.diag([sigma_pos**2, sigma_pos**2, sigma_yaw**2])
         if not self.localized:
-            # the first fix of an unknown start: the pose is the fix, its covariance the fix's
+            # the first fix of an unknown start: the pose is the fix, its covariance the fix's;
+            # the heading bias keeps its prior
             self.localized = True
-            self._replay(idx, t0, z, r, later)
+            x_new = np.vstack([z, self.ekf.x[3:]])
+            p_new = np.zeros((4, 4))
+            p_new[:3, :3] = r
+            p_new[3, 3] = self.ekf.P[3, 3]
+            self._replay(idx, t0, x_new, p_new, later)
             return True
-        y = z - self.ekf.x
+        y = z - self.ekf.x[:3]
         y[2, 0] = wrap(float(y[2, 0]))
-        s = self.ekf.P + r
+        s = self.ekf.P[:3, :3] + r
         d2 = float((y.T @ np.linalg.solve(s, y))[0, 0])
         self.last_nis = d2
         if d2 > self.cfg.gate_chi2 and self.rejects < self.cfg.max_rejects:
@@ -246,12 +277,12 @@ class PoseFilter:
         if d2 > self.cfg.gate_chi2:
             # the camera keeps disagreeing: the dead-reckoned pose is what is wrong (wheel slip,
             # a bad start); widen its covariance by the disagreement so the fix takes over
-            self.ekf.P = self.ekf.P + np.diag(y[:, 0] ** 2)
+            self.ekf.P[:3, :3] = self.ekf.P[:3, :3] + np.diag(y[:, 0] ** 2)
         self.rejects = 0
         self.ekf.update(
             z,
-            HJacobian=lambda _x: np.eye(3),
-            Hx=lambda x: x,
+            HJacobian=lambda _x: np.eye(3, 4),
+            Hx=lambda x: x[:3],
             R=r,
             residual=lambda a, b: np.array(
                 [[a[0, 0] - b[0, 0]], [a[1, 0] - b[1, 0]], [wrap(a[2, 0] - b[2, 0])]]
