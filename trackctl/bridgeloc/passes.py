@@ -37,7 +37,7 @@ from trackctl.bridgeloc.detect import DetectorConfig, TagDetection, detect_tags
 from trackctl.bridgeloc.ekf import RobotEkf
 from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
-from trackctl.geometry.odometry import DiffDrive
+from trackctl.geometry.odometry import DiffDrive, increment
 from trackctl.logs import topics
 from trackctl.logs.foxglove import pose_in_frame
 from trackctl.logs.messages import CameraModel, GroundTruth, WheelOdometry
@@ -326,7 +326,7 @@ class RobotPass:
         self.other: dict[Mode, Estimates] = {m: [] for m in Mode}
         self.bridge_only: Estimates = []
         self.stats = RobotPassStats()
-        self.prev_ticks: tuple[int, int] | None = None
+        self.prev_odom: WheelOdometry | None = None
         self.odom_topic = topics.odom(setup.robot)
         self.frame_topic: str | None = topics.image(setup.rcam_name) if setup.needs_robot else None
         if cfg.mode is Mode.ICAM:
@@ -361,14 +361,12 @@ class RobotPass:
                 self.truth[t_ns] = (e.position_m.x, e.position_m.y)
 
     def _on_odometry(self, od: WheelOdometry) -> None:
-        if od.left_ticks is None or od.right_ticks is None:
-            return
-        if self.prev_ticks is not None and self.setup.needs_robot:
-            ds, dyaw = self.drive.motion_from_ticks(
-                od.left_ticks - self.prev_ticks[0], od.right_ticks - self.prev_ticks[1]
-            )
-            self.ekf.predict(ds, dyaw)
-        self.prev_ticks = (od.left_ticks, od.right_ticks)
+        # encoder ticks, or v/omega (nav_msgs/Odometry twist), or the robot's own poses
+        if self.prev_odom is not None and self.setup.needs_robot:
+            step = increment(self.prev_odom, od, self.drive)
+            if step is not None:
+                self.ekf.predict(*step)
+        self.prev_odom = od
 
     def _observe_tags(
         self, t_ns: int, data: bytes, det_times: list[float]

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
-__all__ = ["DiffDrive", "integrate_step"]
+__all__ = ["DiffDrive", "integrate_step", "increment"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,3 +36,23 @@ def integrate_step(
     """Advance a planar pose by a distance along the mid-step heading (second-order accurate)."""
     mid = yaw + dyaw / 2.0
     return x + ds * math.cos(mid), y + ds * math.sin(mid), yaw + dyaw
+
+
+def increment(
+    last: Any, now: Any, drive: DiffDrive, prefer_ticks: bool = True
+) -> tuple[float, float] | None:
+    """(distance m, heading change rad) between two odometry samples (``WheelOdometry``-like):
+    from encoder ticks when both have them, else the velocities of ``last`` held until ``now``
+    (what ``nav_msgs/Odometry`` twist gives); None when the samples have nothing in common
+    (ticks in one, velocities in neither)."""
+    ticks = last.left_ticks is not None and now.left_ticks is not None
+    ticks = ticks and last.right_ticks is not None and now.right_ticks is not None
+    vel = last.v_mps is not None and last.omega_rps is not None
+    if ticks and (prefer_ticks or not vel):
+        return drive.motion_from_ticks(
+            now.left_ticks - last.left_ticks, now.right_ticks - last.right_ticks
+        )
+    if vel:
+        dt = (now.t_ns - last.t_ns) / 1e9
+        return last.v_mps * dt, last.omega_rps * dt
+    return None

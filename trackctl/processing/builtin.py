@@ -6,7 +6,7 @@ import math
 from collections import defaultdict
 from dataclasses import dataclass, field
 
-from trackctl.geometry.odometry import DiffDrive, integrate_step
+from trackctl.geometry.odometry import DiffDrive, increment, integrate_step
 from trackctl.logs import topics
 from trackctl.logs.foxglove import pose_in_frame
 from trackctl.logs.messages import MetricReport, WheelOdometry
@@ -260,20 +260,14 @@ class DeadReckoningProcessor:
         dt: float,
         metadata: dict[str, dict[str, str]],
     ) -> tuple[float, float]:
-        has_ticks = odo.left_ticks is not None and last.left_ticks is not None
-        has_vel = odo.v_mps is not None and last.v_mps is not None
-        if has_ticks and (self.config.prefer_ticks or not has_vel):
-            md = metadata.get(f"robot/{name}", {})
-            drive = DiffDrive(
-                float(md.get("ticks_per_m", self.config.drive.ticks_per_m)),
-                float(md.get("wheel_base_m", self.config.drive.wheel_base_m)),
-            )
-            return drive.motion_from_ticks(
-                odo.left_ticks - last.left_ticks,  # type: ignore[operator]
-                odo.right_ticks - last.right_ticks,  # type: ignore[operator]
-            )
-        # velocities held over the interval (the sample at its start)
-        return last.v_mps * dt, last.omega_rps * dt  # type: ignore[operator]
+        md = metadata.get(f"robot/{name}", {})
+        drive = DiffDrive(
+            float(md.get("ticks_per_m", self.config.drive.ticks_per_m)),
+            float(md.get("wheel_base_m", self.config.drive.wheel_base_m)),
+        )
+        # ticks (preferred only when asked, if the robot also reports v/omega), else v/omega
+        # held over the interval, else the robot's own poses
+        return increment(last, odo, drive, prefer_ticks=self.config.prefer_ticks) or (0.0, 0.0)
 
     @staticmethod
     def _score(

@@ -20,6 +20,7 @@ import time
 import cv2
 import numpy as np
 
+from trackctl.geometry.odometry import increment
 from trackctl.logs import topics
 from trackctl.logs.foxglove import pose_in_frame
 from trackctl.logs.messages import GroundTruth, MirrorTransmission, WheelOdometry
@@ -208,18 +209,8 @@ class Localizer:
                 self.res.nis.append(filt.last_nis)
         last = self.last_odo
         assert last is not None
-        if (
-            odo.left_ticks is not None
-            and last.left_ticks is not None
-            and odo.right_ticks is not None
-            and last.right_ticks is not None
-        ):
-            ds, dyaw = self.site.drive.motion_from_ticks(
-                odo.left_ticks - last.left_ticks, odo.right_ticks - last.right_ticks
-            )
-        else:  # velocities held over the interval
-            dt = (t_ns - filt.t_ns) / 1e9
-            ds, dyaw = (last.v_mps or 0.0) * dt, (last.omega_rps or 0.0) * dt
+        # encoder ticks, or v/omega held over the interval, or the robot's own poses
+        ds, dyaw = increment(last, odo, self.site.drive) or (0.0, 0.0)
         filt.step(t_ns, ds, dyaw)
 
     # -- node frames ----------------------------------------------------------------------------
