@@ -69,13 +69,34 @@ def test_unknown_schema_in_a_log_names_topic_and_schema(tmp_path: Path) -> None:
     with path.open("wb") as f:
         w = Writer(f)
         w.start()
-        sid = w.register_schema("std_msgs/String", "ros2msg", b"string data")
-        cid = w.register_channel("/chatter", "cdr", sid)
-        w.add_message(cid, 1, b"\x00\x01\x00\x00\x02\x00\x00\x00a\x00", 1)
+        sid = w.register_schema("my_msgs/Blob", "flatbuffer", b"table Blob {}")
+        cid = w.register_channel("/blob", "flatbuffer", sid)
+        w.add_message(cid, 1, b"\x00\x01", 1)
         w.finish()
     code, _, err = _cli("replay", str(path), "--speed", "0")
     assert code == 2
-    _one_line_error(err, "unknown schema 'std_msgs/String'", "cdr")
+    _one_line_error(err, "unknown schema 'my_msgs/Blob'", "flatbuffer")
+
+
+def test_ros2_cdr_channels_decode(tmp_path: Path) -> None:
+    """ROS 2 CDR with its ros2msg definition decodes (trackctl.logs.ros2); a CDR message that
+    does not fit its definition is skipped with a warning, not a traceback."""
+    from mcap.writer import Writer
+
+    path = tmp_path / "ros.mcap"
+    with path.open("wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
+        cid = w.register_channel("/chatter", "cdr", sid)
+        w.add_message(cid, 1, b"\x00\x01\x00\x00\x02\x00\x00\x00a\x00", 1)
+        w.add_message(cid, 2, b"\x00\x01", 2)
+        w.finish()
+    code, out, err = _cli("replay", str(path), "--speed", "0", "--format", "jsonl")
+    assert code == 0, err
+    (line,) = [x for x in out.splitlines() if x.startswith("{")]
+    assert '"message":{"data":"a"}' in line.replace(" ", "")
+    assert "cannot decode" in err and "Traceback" not in err
 
 
 def test_missing_required_topic(sample_log: Path, tmp_path: Path) -> None:

@@ -101,3 +101,36 @@ def test_bridgeloc_reads_the_site(tmp_path: Path) -> None:
     result = CliRunner().invoke(app, ["bridgeloc", "eval", str(BRIDGELOC), "--site", str(site)])
     assert result.exit_code == 2
     assert "frontcam" in result.output
+
+
+def test_bridgeloc_names_its_defaults_once(tmp_path: Path) -> None:
+    from trackctl.logs import LogWriter
+
+    bare = tmp_path / "bare.mcap"
+    reader = LogReader(BRIDGELOC)
+    with LogWriter(bare) as w:
+        for raw in reader.raw():
+            w.write_raw(raw)
+    runner = CliRunner()
+    plain = runner.invoke(app, ["bridgeloc", "eval", str(bare), "--json", "-q"])
+    lines = [x for x in plain.output.splitlines() if "site defaults used" in x]
+    assert plain.exit_code == 0 and len(lines) == 1
+    assert "tag_size_m=0.3" in lines[0] and "robot/r1 ticks_per_m=2000.0" in lines[0]
+    site = tmp_path / "site.yaml"
+    md = reader.metadata()
+    site.write_text(
+        yaml.safe_dump(
+            {
+                "robots": {"r1": {k: float(v) for k, v in md["robot/r1"].items()}},
+                "bridgeloc": {
+                    "robot": "r1",
+                    "robot_camera": md["bridgeloc"]["robot_camera"],
+                    "tag_n": int(md["bridgeloc"]["tag_n"]),
+                    "tag_size_m": float(md["bridgeloc"]["tag_size_m"]),
+                    "ir_height_m": float(md["bridgeloc"]["ir_height_m"]),
+                },
+            }
+        )
+    )
+    given = runner.invoke(app, ["bridgeloc", "eval", str(bare), "--site", str(site), "--json"])
+    assert given.exit_code == 0 and "site defaults used" not in given.output

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import cv2
@@ -35,7 +37,7 @@ from trackctl.bridgeloc.config import (
 )
 from trackctl.bridgeloc.detect import DetectorConfig, TagDetection, detect_tags
 from trackctl.bridgeloc.ekf import RobotEkf
-from trackctl.errors import InputError, MissingTopicError
+from trackctl.errors import IncompleteInputWarning, InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.geometry.odometry import DiffDrive, increment
 from trackctl.logs import topics
@@ -151,6 +153,7 @@ def load_setup(reader: LogReader, cfg: BridgeLocConfig) -> Setup:
         )
     n = cfg.tag_n or int(meta.get("tag_n", 2))
     rgeo = CameraGeometry.from_model(models[rcam_name]) if needs_robot else None
+    _warn_defaults(reader, cfg, meta)
     return Setup(
         meta=meta,
         robot=cfg.robot or meta.get("robot", "r1"),
@@ -165,6 +168,39 @@ def load_setup(reader: LogReader, cfg: BridgeLocConfig) -> Setup:
         cam_h=float(rgeo.t[2]) if rgeo is not None else 0.5,
         present=set(tops),
     )
+
+
+_SITE_DEFAULTS = {
+    "robot": ("robot", "r1"),
+    "robot_camera": ("robot_camera", "r1cam"),
+    "tag_n": ("tag_n", 2),
+    "tag_size_m": ("tag_size_m", 0.30),
+    "ir_height_m": ("ir_height_m", 0.65),
+}
+
+
+def _warn_defaults(reader: LogReader, cfg: BridgeLocConfig, meta: Mapping[str, str]) -> None:
+    """One warning naming the setup values neither the command line, the site nor the log gave
+    (their defaults are the simulator's, which a real site rarely matches)."""
+    robot = cfg.robot or meta.get("robot", "r1")
+    records = {**reader.metadata(), **cfg.site}
+    missing = [
+        f"{key}={default}"
+        for attr, (key, default) in _SITE_DEFAULTS.items()
+        if getattr(cfg, attr) is None and key not in meta
+    ]
+    rmd = records.get(f"robot/{robot}", {})
+    missing += [
+        f"robot/{robot} {k}={v}"
+        for k, v in (("ticks_per_m", 2000.0), ("wheel_base_m", 0.30))
+        if k not in rmd
+    ]
+    if missing:
+        warnings.warn(
+            f"{reader.path}: site defaults used: {', '.join(missing)} (give them with --site)",
+            IncompleteInputWarning,
+            stacklevel=3,
+        )
 
 
 def _require_robot_camera(
