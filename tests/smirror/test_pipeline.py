@@ -194,3 +194,18 @@ def test_finding_itself_costs_little_against_a_known_start(smirror_log: Path) ->
     assert tail.sum() == len(res_found.t_s) > 0.8 * len(res_known.t_s)
     err_known = float(np.mean(np.asarray(res_known.error_m)[tail]))
     assert float(np.mean(res_found.error_m)) <= err_known + 0.03
+
+
+def test_led_coloured_clothes_are_not_taken_for_the_robot(tmp_path: Path) -> None:
+    """People in green and magenta shirts (the LEDs' colours) in every room: blobs too large for
+    an LED, and pairs that do not lie the LEDs' distance apart, are never a fix."""
+    from trackctl.sim.smirror import SmirrorScenario, simulate_smirror
+
+    log = tmp_path / "clutter.mcap"
+    scene = SmirrorScenario(
+        paths=1, people=6, led_clothes=0.5, width_px=480, height_px=360, fps=2.5, duration_s=34.0
+    )
+    simulate_smirror(str(log), scene)
+    metrics, _ = run_detailed(LogReader(log), None, SmirrorConfig())
+    assert metrics.metrics["fixes_used"] > 20
+    assert metrics.metrics["error_m_mean"] < 0.2

@@ -29,7 +29,7 @@ from trackctl.logs.writer import LogWriter
 from trackctl.smirror.config import Mode, SmirrorConfig, SmirrorResult, pose_topic, sent_topic
 from trackctl.smirror.link import Delivery, NodeLink
 from trackctl.smirror.node import CastMode, ForegroundPayload, beacon_bytes, decide_cast
-from trackctl.smirror.robot import LedFix, PoseFilter, detect_leds, fix_from_leds
+from trackctl.smirror.robot import LedFix, PoseFilter, locate_robot
 from trackctl.smirror.site import Site
 
 __all__ = ["Localizer", "decode_frame"]
@@ -231,12 +231,9 @@ class Localizer:
         """The vision-only baseline: LED detection on the whole frame, at the server."""
         res, cfg, led = self.res, self.cfg, self.site.led
         started = time.perf_counter()
-        front, back = detect_leds([(0, 0, frame)], led)
-        fix = (
-            None
-            if front is None or back is None
-            else fix_from_leds(front, back, self.site.cams[name], led, t_ns)
-        )
+        last = self.central_pose
+        near = None if last is None else (last.x_m, last.y_m)
+        fix = locate_robot([(0, 0, frame)], self.site.cams[name], led, t_ns, near)
         self.central_ms = (time.perf_counter() - started) * 1e3
         res.robot_ms.append(self.central_ms)
         res.fix_attempts += 1
@@ -326,12 +323,8 @@ class Localizer:
             return
         comm_ms = delivery.comm_ms
         started = time.perf_counter()
-        front, back = detect_leds(payload.crops(), led)
-        fix = (
-            None
-            if front is None or back is None
-            else fix_from_leds(front, back, self.site.cams[name], led, payload.t_ns)
-        )
+        near = (filt.pose[0], filt.pose[1]) if filt.localized else None
+        fix = locate_robot(payload.crops(), self.site.cams[name], led, payload.t_ns, near)
         robot_ms = (time.perf_counter() - started) * 1e3
         res.robot_ms.append(robot_ms)
         res.fix_attempts += 1

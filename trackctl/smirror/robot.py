@@ -43,6 +43,12 @@ class LedConfig:
     """Hue range of the back LED (magenta)."""
     min_saturation: int = 110
     min_value: int = 150
+    max_blob_px: float = 400.0
+    """Largest blob (pixels, at a 686 px focal length; scaled by focal length squared) that can
+    be an LED: a diffused LED glows ~4 cm wide, 15-140 px from 3-11 m. Bigger blobs of the LED
+    colours are clothes, signs or lamps and never taken for the robot."""
+    candidates: int = 4
+    """Blobs of each colour tried in pairs (largest first)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +71,66 @@ def _blob(hsv: np.ndarray, hue: tuple[int, int], cfg: LedConfig) -> tuple[float,
         return None
     k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     return float(cents[k, 0]), float(cents[k, 1]), int(stats[k, cv2.CC_STAT_AREA])
+
+
+def _blobs(
+    hsv: np.ndarray, hue: tuple[int, int], cfg: LedConfig, max_area: float
+) -> list[tuple[int, float, float]]:
+    """(area, x, y) of the blobs of one LED colour that are small enough to be an LED."""
+    mask = cv2.inRange(hsv, (hue[0], cfg.min_saturation, cfg.min_value), (hue[1], 255, 255))
+    n, _, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    return [
+        (int(stats[k, cv2.CC_STAT_AREA]), float(cents[k, 0]), float(cents[k, 1]))
+        for k in range(1, n)
+        if stats[k, cv2.CC_STAT_AREA] <= max_area
+    ]
+
+
+def locate_robot(
+    crops: list[tuple[int, int, np.ndarray]],
+    cam: PinholeCamera,
+    cfg: LedConfig,
+    t_ns: int,
+    near: tuple[float, float] | None = None,
+) -> LedFix | None:
+    """The robot's pose from the LED-coloured blobs in ``crops`` (full-frame offsets x, y).
+
+    Blobs too large for an LED are ignored; of the remaining front/back pairs (the largest
+    ``cfg.candidates`` of each colour), the fix is the pair whose two points on the LED plane
+    lie the LEDs' distance apart (within 40 %), the one nearest ``near`` (the robot's predicted
+    position) when given, else the one closest to that distance. None when no pair fits:
+    clothes, signs or lamps in the LEDs' colours are not taken for the robot.
+    """
+    max_area = cfg.max_blob_px * (cam.model.fx_px / 686.0) ** 2
+    found: list[list[tuple[int, float, float]]] = [[], []]
+    for x0, y0, image in crops:
+        hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
+        for k, hue in enumerate((cfg.front_hue, cfg.back_hue)):
+            found[k] += [(a, x + x0, y + y0) for a, x, y in _blobs(hsv, hue, cfg, max_area)]
+    fronts = sorted(found[0], reverse=True)[: cfg.candidates]
+    backs = sorted(found[1], reverse=True)[: cfg.candidates]
+    spacing = cfg.led_front_m - cfg.led_back_m
+    best: tuple[float, LedFix] | None = None
+    for _, fx, fy in fronts:
+        for _, bx, by in backs:
+            fix = fix_from_leds(
+                np.array([fx, fy]),
+                np.array([bx, by]),
+                cam,
+                cfg,
+                t_ns,
+                gate_m=(0.6 * spacing, 1.4 * spacing),
+            )
+            if fix is None:
+                continue
+            if near is not None:
+                score = math.hypot(fix.x_m - near[0], fix.y_m - near[1])
+            else:
+                pts = cam.ground_point(np.array([[fx, fy], [bx, by]]), cfg.led_height_m)
+                score = abs(float(np.linalg.norm(pts[0, :2] - pts[1, :2])) - spacing)
+            if best is None or score < best[0]:
+                best = (score, fix)
+    return None if best is None else best[1]
 
 
 def detect_leds(
