@@ -166,11 +166,15 @@ def test_non_utf8_json_payload_of_another_tool_is_skipped_with_a_warning(tmp_pat
 
 
 def test_smirror_on_a_log_without_robot_metadata(sample_log: Path, tmp_path: Path) -> None:
-    # demo.mcap's robot metadata lacks the LED keys: the defaults apply, no crash
+    # demo.mcap's robot metadata lacks the LED keys: the defaults apply and are named, no crash;
+    # its robot carries no LEDs, so no node ever finds it: never localized, never a made-up pose
     res = runner.invoke(app, ["smirror", str(sample_log), "--json", "-q"])
     assert res.exit_code == 0, res.output
     report = json.loads(res.stdout.splitlines()[0])
-    assert report["system"] == "smirror" and report["error_m_mean"] < 1.0
+    assert report["system"] == "smirror" and report["fixes"] == 0
+    assert report["localized_share"] == 0.0 and report["error_m_mean"] is None
+    assert report["unlocalized_samples"] > 0
+    assert "site defaults used: robot/r1 led_height_m=0.32" in res.output
 
 
 def test_output_in_a_read_only_directory(sample_log: Path, tmp_path: Path) -> None:
