@@ -499,8 +499,11 @@ class RobotPass:
             self.stats.tag_observations += 1
 
     def finish(self) -> None:
-        """I-Cam mode writes its poses once the pass is over (they are the infrastructure's)."""
+        """I-Cam mode writes its poses once the pass is over: one per infrastructure frame that
+        saw the IR light, at that frame's time (the ground truth is only where they are scored)."""
         if self.cfg.mode is Mode.ICAM:
-            for t_ns, pose in self.est:
-                if pose is not None:
-                    self.writer.write(POSE_TOPIC, pose_in_frame(t_ns, pose[0], pose[1], 0.0), t_ns)
+            for t in self.icam.times.tolist():
+                fix = self.icam.at(int(t))
+                if fix is not None:
+                    pose = pose_in_frame(int(t), float(fix[0]), float(fix[1]), 0.0)
+                    self.writer.write(POSE_TOPIC, pose, int(t))
