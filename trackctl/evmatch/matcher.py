@@ -201,8 +201,8 @@ def _pairs(eids: Sequence[int], evidence: Evidence) -> tuple[np.ndarray, np.ndar
     the ids fit (a city's first refining round has ten million pairs)."""
     lens = np.fromiter((len(evidence[e]) for e in eids), np.int64, count=len(eids))
     total = int(lens.sum())
-    top = max((max(evidence[e], default=0) for e in eids), default=0)
-    s_type = np.int32 if top < 2**31 else np.int64
+    # evidence arrays hold 4-byte ids ('i') exactly when every scenario id fits (_evidence_type)
+    s_type = np.int32 if eids and evidence[eids[0]].itemsize == 4 else np.int64
     e_type = np.int32 if max(eids, default=0) < 2**31 else np.int64
     ev_e = np.repeat(np.asarray(eids, e_type), lens)
     ev_s = np.fromiter(itertools.chain.from_iterable(evidence[e] for e in eids), s_type, total)

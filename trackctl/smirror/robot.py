@@ -22,7 +22,15 @@ from filterpy.kalman import ExtendedKalmanFilter
 
 from trackctl.geometry.camera import PinholeCamera
 
-__all__ = ["LedConfig", "LedFix", "detect_leds", "fix_from_leds", "PoseFilter", "wrap"]
+__all__ = [
+    "LedConfig",
+    "LedFix",
+    "detect_leds",
+    "fix_from_leds",
+    "locate_robot",
+    "PoseFilter",
+    "wrap",
+]
 
 
 def wrap(a: float) -> float:
@@ -62,15 +70,6 @@ class LedFix:
     range_m: float
     """Ground distance from the node camera (its error grows with it)."""
     node: str
-
-
-def _blob(hsv: np.ndarray, hue: tuple[int, int], cfg: LedConfig) -> tuple[float, float, int] | None:
-    mask = cv2.inRange(hsv, (hue[0], cfg.min_saturation, cfg.min_value), (hue[1], 255, 255))
-    n, _, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    if n <= 1:
-        return None
-    k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    return float(cents[k, 0]), float(cents[k, 1]), int(stats[k, cv2.CC_STAT_AREA])
 
 
 def _blobs(
@@ -141,16 +140,18 @@ def detect_leds(
     ``crops`` are ``(x, y, image)`` with x/y the crop's top-left pixel in the full frame (a
     whole frame is one crop at 0, 0). The largest blob of each LED colour over all crops wins.
     """
-    best: list[tuple[int, np.ndarray] | None] = [None, None]
+    best: list[tuple[int, float, float] | None] = [None, None]
     for x0, y0, image in crops:
         hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
         for k, hue in enumerate((cfg.front_hue, cfg.back_hue)):
-            b = _blob(hsv, hue, cfg)
-            if b is not None and (best[k] is None or b[2] > best[k][0]):  # type: ignore[index]
-                best[k] = (b[2], np.array([b[0] + x0, b[1] + y0]))
+            for area, x, y in _blobs(hsv, hue, cfg, math.inf):
+                kept = best[k]
+                if kept is None or area > kept[0]:
+                    best[k] = (area, x + x0, y + y0)
+    front, back = best
     return (
-        None if best[0] is None else best[0][1],
-        None if best[1] is None else best[1][1],
+        None if front is None else np.array(front[1:]),
+        None if back is None else np.array(back[1:]),
     )
 
 
