@@ -313,15 +313,11 @@ def _transforms(msg: Any, t_fallback: int) -> Any:
 
 
 def _matrix(tr: Any, q: Any) -> np.ndarray:
-    x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
-    n = math.sqrt(x * x + y * y + z * z + w * w) or 1.0
-    x, y, z, w = x / n, y / n, z / n, w / n
+    """A ROS transform as a 4x4 matrix (scipy normalises the quaternion)."""
+    from scipy.spatial.transform import Rotation
+
     m = np.eye(4)
-    m[:3, :3] = [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ]
+    m[:3, :3] = Rotation.from_quat([float(q.x), float(q.y), float(q.z), float(q.w)]).as_matrix()
     m[:3, 3] = [float(tr.x), float(tr.y), float(tr.z)]
     return m
 
