@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -37,9 +36,10 @@ from trackctl.bridgeloc.config import (
 )
 from trackctl.bridgeloc.detect import DetectorConfig, TagDetection, detect_tags
 from trackctl.bridgeloc.ekf import RobotEkf
-from trackctl.errors import IncompleteInputWarning, InputError, MissingTopicError
+from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.geometry.odometry import DiffDrive, increment
+from trackctl.ingest.site import warn_site_defaults
 from trackctl.logs import topics
 from trackctl.logs.foxglove import pose_in_frame
 from trackctl.logs.messages import CameraModel, GroundTruth, WheelOdometry
@@ -190,17 +190,10 @@ def _warn_defaults(reader: LogReader, cfg: BridgeLocConfig, meta: Mapping[str, s
         if getattr(cfg, attr) is None and key not in meta
     ]
     rmd = records.get(f"robot/{robot}", {})
-    missing += [
-        f"robot/{robot} {k}={v}"
-        for k, v in (("ticks_per_m", 2000.0), ("wheel_base_m", 0.30))
-        if k not in rmd
-    ]
-    if missing:
-        warnings.warn(
-            f"{reader.path}: site defaults used: {', '.join(missing)} (give them with --site)",
-            IncompleteInputWarning,
-            stacklevel=3,
-        )
+    drive = DiffDrive()
+    wheels = (("ticks_per_m", drive.ticks_per_m), ("wheel_base_m", drive.wheel_base_m))
+    missing += [f"robot/{robot} {k}={v}" for k, v in wheels if k not in rmd]
+    warn_site_defaults(reader.path, [", ".join(missing)] if missing else [])
 
 
 def _require_robot_camera(
@@ -353,8 +346,10 @@ class RobotPass:
             **reader.metadata().get(f"robot/{setup.robot}", {}),
             **cfg.site.get(f"robot/{setup.robot}", {}),
         }
+        default = DiffDrive()
         self.drive = DiffDrive(
-            float(rmeta.get("ticks_per_m", 2000.0)), float(rmeta.get("wheel_base_m", 0.30))
+            float(rmeta.get("ticks_per_m", default.ticks_per_m)),
+            float(rmeta.get("wheel_base_m", default.wheel_base_m)),
         )
         self.ekf = RobotEkf(cfg.ekf)
         self.truth: dict[int, tuple[float, float]] = {}

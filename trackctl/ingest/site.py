@@ -34,13 +34,20 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+import warnings
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from trackctl.errors import InputError
+from trackctl.errors import IncompleteInputWarning, InputError
 
-__all__ = ["read_site", "site_records", "ROBOT_KEYS", "BRIDGELOC_KEYS"]
+__all__ = [
+    "read_site",
+    "site_records",
+    "warn_site_defaults",
+    "ROBOT_KEYS",
+    "BRIDGELOC_KEYS",
+]
 
 ROBOT_KEYS = ("ticks_per_m", "wheel_base_m", "led_height_m", "led_front_m", "led_back_m")
 BRIDGELOC_KEYS = {
@@ -153,3 +160,14 @@ def read_site(path: str | Path) -> dict[str, dict[str, str]]:
         at = f" at line {mark.line + 1}" if mark is not None else ""
         raise InputError(f"--site {path}: not valid YAML{at}") from err
     return site_records(data, path)
+
+
+def warn_site_defaults(log: str | Path, used: Sequence[str]) -> None:
+    """One warning naming every site value a processor defaulted (``used``: ``key=value``
+    groups); nothing when it defaulted none."""
+    if used:
+        warnings.warn(
+            f"{log}: site defaults used: {'; '.join(used)} (give them with --site)",
+            IncompleteInputWarning,
+            stacklevel=3,
+        )

@@ -5,16 +5,16 @@ from __future__ import annotations
 
 import json
 import math
-import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from trackctl.errors import IncompleteInputWarning, InputError, MissingTopicError
+from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.geometry.floorplan import FloorPlan, line_of_sight
 from trackctl.geometry.odometry import DiffDrive
+from trackctl.ingest.site import warn_site_defaults
 from trackctl.logs import topics
 from trackctl.logs.messages import CameraModel, WheelOdometry
 from trackctl.logs.reader import LogReader
@@ -137,12 +137,7 @@ def _warn_defaults(
         parts.append(f"robot/{robot} {', '.join(missing)}")
     if plan is None:
         parts.append("no smirror/floorplan (walls do not block the nodes' views)")
-    if parts:
-        warnings.warn(
-            f"{reader.path}: site defaults used: {'; '.join(parts)} (give them with --site)",
-            IncompleteInputWarning,
-            stacklevel=3,
-        )
+    warn_site_defaults(reader.path, parts)
 
 
 def metadata_float(values: Mapping[str, str], key: str, default: float, where: str) -> float:
