@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import ROOT
+from tests.ingest.ros2_bags import twist_from_ticks
 from trackctl.bridgeloc import BridgeLocConfig, BridgeLocProcessor
 from trackctl.geometry.odometry import DiffDrive
 from trackctl.logs import LogReader, LogWriter
@@ -23,13 +24,7 @@ def _as_twist(src: Path, dst: Path) -> None:
     md = reader.metadata()
     drive = DiffDrive(float(md["robot/r1"]["ticks_per_m"]), float(md["robot/r1"]["wheel_base_m"]))
     odos = [m.message for m in reader.messages(["/robot/r1/odom"])]
-    vel = {}
-    for a, b in zip(odos, odos[1:], strict=False):
-        ds, dyaw = drive.motion_from_ticks(
-            b.left_ticks - a.left_ticks, b.right_ticks - a.right_ticks
-        )
-        dt = (b.t_ns - a.t_ns) / 1e9
-        vel[a.t_ns] = (ds / dt, dyaw / dt)
+    vel = twist_from_ticks(odos, drive)
     with LogWriter(dst) as w:
         for name, record in md.items():
             w.add_metadata(name, record)

@@ -76,6 +76,19 @@ def _static_tf(model: CameraModel, frame: str) -> Any:
     return T["tf2_msgs/msg/TFMessage"](transforms=[tf])
 
 
+def twist_from_ticks(odos: list[WheelOdometry], drive: DiffDrive) -> dict[int, tuple[float, float]]:
+    """(v, omega) at each sample's time that reproduce the ticks of the interval after it (the
+    last sample: standing still)."""
+    out = {o.t_ns: (0.0, 0.0) for o in odos}
+    for a, b in zip(odos, odos[1:], strict=False):
+        ds, dyaw = drive.motion_from_ticks(
+            b.left_ticks - a.left_ticks, b.right_ticks - a.right_ticks
+        )
+        dt = (b.t_ns - a.t_ns) / 1e9
+        out[a.t_ns] = (ds / dt, dyaw / dt)
+    return out
+
+
 def smirror_log_to_bag(log: Path, bag: Path, storage: StoragePlugin = StoragePlugin.MCAP) -> None:
     """A ROS 2 bag of an S-Mirror log's robot and nodes: ``/r1/odom`` (nav_msgs/Odometry: the
     velocities that reproduce the wheel ticks over each interval, and the integrated pose),
@@ -114,6 +127,7 @@ def smirror_log_to_bag(log: Path, bag: Path, storage: StoragePlugin = StoragePlu
         pending = next(frames, None)
         x = y = yaw = 0.0
         zero36 = np.zeros(36)
+        twist = twist_from_ticks([o for _, o in odo], drive)
         for i, (t_ns, o) in enumerate(odo):
             while pending is not None and pending.log_time_ns <= t_ns:
                 name = pending.topic.split("/")[1]
@@ -126,14 +140,7 @@ def smirror_log_to_bag(log: Path, bag: Path, storage: StoragePlugin = StoragePlu
                     c_img[name], pending.log_time_ns, TS.serialize_cdr(img, c_img[name].msgtype)
                 )
                 pending = next(frames, None)
-            v = omega = 0.0
-            if i + 1 < len(odo):
-                t2, o2 = odo[i + 1]
-                dt = (t2 - t_ns) / 1e9
-                ds, dyaw = drive.motion_from_ticks(
-                    o2.left_ticks - o.left_ticks, o2.right_ticks - o.right_ticks
-                )
-                v, omega = ds / dt, dyaw / dt
+            v, omega = twist[o.t_ns]
             msg = T["nav_msgs/msg/Odometry"](
                 header=_header(t_ns, "odom"),
                 child_frame_id="base_link",
