@@ -10,7 +10,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trackctl.bridgeloc.bridge import CameraGeometry, bridge_lstsq, bridge_pnp
+from trackctl.bridgeloc.bridge import (
+    CameraGeometry,
+    bridge_lstsq,
+    bridge_pnp,
+    project_corners,
+    tag_corners_in_camera,
+)
 from trackctl.bridgeloc.detect import detect_tags, order_corners
 from trackctl.bridgeloc.ekf import RobotEkf
 from trackctl.bridgeloc.tags import Mount, Placement
@@ -118,19 +124,79 @@ def test_bridge_pnp_recovers_base_pose() -> None:
     assert (x, y, yaw) == pytest.approx(pose, abs=1e-3)
 
 
-def test_ekf_range_bearing_pulls_towards_truth() -> None:
+def _seen_tag(pose: tuple[float, float, float], center=(5.0, 2.0, 0.9)):  # noqa: ANN001, ANN202
+    """A tag on the wall x = 5 seen by the robot camera at ``pose``: (geometry, detection)."""
+    from dataclasses import replace
+
+    from trackctl.bridgeloc.detect import TagDetection
+
+    rcam = robot_camera_model(0.5)
+    geo = CameraGeometry.from_model(rcam)
+    world_cam = replace(rcam, world_from_camera=_compose(rcam.world_from_camera, *pose))
+    tag = WallTag("t", (0, 1, 1, 0), Placement.SQUARE, Mount.ABOVE, center, (-1.0, 0.0), 0.3)
+    px, _ = PinholeCamera(world_cam).project(tag_corners(tag))
+    det = TagDetection((0, 1, 1, 0), Placement.SQUARE, px, 100.0)
+    # the map's corners in the order the pipeline's solvePnP gives them (base frame -> world)
+    pb = tag_corners_in_camera(det, geo, 0.3) @ geo.R.T + geo.t
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    world = pb @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + [pose[0], pose[1], 0]
+    # and the pixels exactly those of these corners through the distorted lens
+    return geo, world, replace(det, corners=project_corners(pose, world, geo))
+
+
+@pytest.mark.parametrize(
+    ("pose", "robust"),
+    [((3.5, 1.5, 0.1), False), ((2.0, 1.0, 0.3), True)],
+    ids=["1.5m", "3m"],
+)
+def test_bridge_pose_covariance_matches_pixel_noise_scatter(
+    pose: tuple[float, float, float], robust: bool
+) -> None:
+    """The propagated covariance is what 1 px of corner noise actually does to the pose: its
+    std at 1.5 m; at 3 m (a 17 px tag) the scatter has heavy tails (PnP branch flips), so the
+    core (1.4826 MAD) is compared."""
+    from dataclasses import replace
+
+    from trackctl.bridgeloc.bridge import BridgeObservation, bridge_pose
+
+    geo, corners, det = _seen_tag(pose)
+    out = bridge_pose([BridgeObservation(det, corners)], geo, 0.3, 1.0)
+    assert out is not None
+    est, cov = out
+    assert est == pytest.approx(pose, abs=1e-3)
+    rng = np.random.default_rng(0)
+    samples = []
+    for _ in range(400):
+        noisy = replace(det, corners=det.corners + rng.normal(0, 1.0, det.corners.shape))
+        p = bridge_pose([BridgeObservation(noisy, corners)], geo, 0.3, 1.0)
+        assert p is not None
+        samples.append(p[0])
+    dev = np.array(samples) - np.array(pose)
+    if robust:
+        spread = 1.4826 * np.median(np.abs(dev - np.median(dev, axis=0)), axis=0)
+    else:
+        spread = dev.std(axis=0)
+    for i in range(3):
+        assert spread[i] == pytest.approx(math.sqrt(cov[i, i]), rel=0.25)
+
+
+def test_ekf_learns_heading_bias_and_gates_outliers() -> None:
+    """Wheels with opposite scale errors curve the dead-reckoned path; bridged poses every
+    metre teach the filter the bias, and an outlier is rejected."""
+    from trackctl.geometry.odometry import integrate_step
+
     ekf = RobotEkf()
-    ekf.init(0.5, 0.3, 0.1, 0.5, 0.2)
-    truth = np.array([0.0, 0.0, 0.0])
-    tags = [np.array([3.0, 1.0]), np.array([3.0, -1.0]), np.array([-2.0, 2.0])]
-    for _ in range(10):
-        for t in tags:
-            d = t - truth[:2]
-            ekf.update_range_bearing(float(np.hypot(*d)), math.atan2(d[1], d[0]), t)
-    x, y, yaw = ekf.pose
-    assert math.hypot(x, y) < 0.05 and abs(yaw) < 0.02
-    s0 = ekf.sigma_m
-    for _ in range(50):
+    cov = np.diag([0.05**2, 0.05**2, 0.03**2])
+    ekf.init((0.0, 0.0, 0.0), cov)
+    true = (0.0, 0.0, 0.0)
+    bias = 0.08  # rad/m, what +-1.2 % scale errors on a 0.30 m base give
+    for k in range(400):  # 20 m straight, reported as straight by the wheels
+        true = integrate_step(*true, 0.05, bias * 0.05)
         ekf.predict(0.05, 0.0)
-    assert ekf.sigma_m > s0  # odometry alone loses certainty
-    assert ekf.pose[0] == pytest.approx(x + 2.5, abs=0.05)
+        if k % 20 == 19:
+            assert ekf.update_pose(true, cov)
+    assert float(ekf.kf.x[3, 0]) == pytest.approx(bias, abs=0.02)
+    before = ekf.pose
+    assert not ekf.update_pose((before[0] + 3.0, before[1], before[2]), cov)  # a wrong tag
+    assert ekf.pose == pytest.approx(before)
+    assert len(ekf.nis_values) == 20 + 1  # every tested update leaves its NIS

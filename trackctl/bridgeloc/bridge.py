@@ -5,7 +5,8 @@ localize the robot that sees the same tags (Eqs. 4.7-4.9).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -15,6 +16,10 @@ from trackctl.bridgeloc.detect import TagDetection
 from trackctl.logs.messages import CameraModel, Transform
 
 __all__ = [
+    "BridgeObservation",
+    "bridge_pose",
+    "corner_jacobian",
+    "project_corners",
     "CameraGeometry",
     "MapTag",
     "TagMap",
@@ -82,15 +87,24 @@ def tag_corners_in_camera(
     return pts
 
 
-@dataclass
+@dataclass(eq=False)
 class MapTag:
-    """A tag localized in the ground frame by the infrastructure cameras (Eq. 4.6)."""
+    """A tag localized in the ground frame by the infrastructure cameras (Eq. 4.6).
+
+    Sightings are kept (corners, weight); the running weighted mean is what new sightings are
+    merged against, and :meth:`TagMap.finalize` replaces it by the robust mean once."""
 
     pattern_id: str
     mount: str
     corners: np.ndarray
     weight: float
     samples: list[tuple[np.ndarray, float]] = field(default_factory=list)
+    _sum: np.ndarray | None = None
+    cameras: dict[str, int] = field(default_factory=dict)
+    """Sightings per infrastructure camera."""
+    sigma_m: float = 0.02
+    """Std of a mapped corner (m): the sightings' scatter, at least 1 cm (set by
+    :meth:`robust_mean`)."""
 
     @property
     def center(self) -> np.ndarray:
@@ -101,14 +115,47 @@ class MapTag:
         """What the robot can tell apart: pattern + above/below its camera."""
         return f"{self.pattern_id}/{self.mount}"
 
+    @property
+    def sightings(self) -> int:
+        return len(self.samples)
+
+    def add_sample(self, corners: np.ndarray, weight: float) -> None:
+        """O(1): the running weighted mean (the robust one is computed once, at the end)."""
+        if self._sum is None:
+            self._sum = self.corners * self.weight
+        self.samples.append((corners, weight))
+        self._sum = self._sum + corners * weight
+        self.weight += weight
+        self.corners = self._sum / self.weight
+
+    def robust_mean(self, trim: float = 0.2) -> None:
+        """Weighted mean without the worst ``trim`` share of sightings (by distance to the
+        median), the estimate the map keeps."""
+        stack = np.stack([p for p, _ in self.samples])
+        ws = np.array([w for _, w in self.samples])
+        if len(stack) >= 5:
+            med = np.median(stack, axis=0)
+            err = np.linalg.norm(stack - med, axis=2).mean(axis=1)
+            keep = err <= np.quantile(err, 1.0 - trim)
+        else:
+            keep = np.ones(len(stack), bool)
+        self.corners = np.average(stack[keep], axis=0, weights=ws[keep])
+        spread = np.linalg.norm(stack[keep] - self.corners, axis=2).mean(axis=1)
+        self.sigma_m = math.hypot(0.01, float(np.sqrt(np.average(spread**2, weights=ws[keep]))))
+        self.weight = float(ws.sum())
+
 
 class TagMap:
-    """Tags in the ground frame, accumulated over infrastructure camera frames (tags are static)."""
+    """Tags in the ground frame, accumulated over infrastructure camera frames (tags are static).
+
+    Adding a sighting is O(tags of that pattern); the robust mean of each tag is computed once
+    in :meth:`finalize` (O(sightings log sightings) in all)."""
 
     def __init__(self, camera_height_m: float, merge_m: float = 0.6) -> None:
         self.camera_height_m = camera_height_m
         self.merge_m = merge_m
         self.tags: list[MapTag] = []
+        self._by_pattern: dict[str, list[MapTag]] = {}
 
     def add(self, det: TagDetection, cam: CameraGeometry, size_m: float) -> MapTag | None:
         """Eq. 4.6: V_o^(G) = Υ(Θ^(C→G)) V_o^(C) + V_c^(G) for every corner; merge into the map."""
@@ -119,32 +166,44 @@ class TagMap:
         dist = float(np.linalg.norm(pc.mean(axis=0)))
         weight = 1.0 / max(dist, 0.3) ** 4  # corner noise grows ~ d^2 in position
         ctr = pw.mean(axis=0)
-        for tag in self.tags:
-            if tag.pattern_id == det.pattern_id and np.linalg.norm(tag.center - ctr) < self.merge_m:
-                tag.samples.append((pw, weight))
-                ws = np.array([w for _, w in tag.samples])
-                # weighted median-like robust mean: drop the worst 20% by distance to the median
-                stack = np.stack([p for p, _ in tag.samples])
-                med = np.median(stack, axis=0)
-                err = np.linalg.norm(stack - med, axis=2).mean(axis=1)
-                keep = err <= np.quantile(err, 0.8) if len(err) >= 5 else np.ones(len(err), bool)
-                tag.corners = np.average(stack[keep], axis=0, weights=ws[keep])
-                tag.weight = float(ws.sum())
+        same = self._by_pattern.setdefault(det.pattern_id, [])
+        for tag in same:
+            if np.linalg.norm(tag.center - ctr) < self.merge_m:
+                tag.add_sample(pw, weight)
+                tag.cameras[cam.name] = tag.cameras.get(cam.name, 0) + 1
                 return tag
         mount = "above" if ctr[2] > self.camera_height_m else "below"
-        tag = MapTag(det.pattern_id, mount, pw, weight, [(pw, weight)])
+        tag = MapTag(det.pattern_id, mount, pw, weight, [(pw, weight)], cameras={cam.name: 1})
         self.tags.append(tag)
+        same.append(tag)
         return tag
 
     def candidates(self, signature: str) -> list[MapTag]:
         """Tags sharing a signature (pattern + mount)."""
         return [t for t in self.tags if t.signature == signature]
 
-    def finalize(self, min_samples: int = 3) -> None:
-        """Drop tags seen fewer than ``min_samples`` times (misreads), re-derive above/below from
-        the final (averaged) centres."""
-        self.tags = [t for t in self.tags if len(t.samples) >= min_samples]
+    def finalize(
+        self,
+        frames: Mapping[str, int] | None = None,
+        min_samples: int = 3,
+        min_share: float = 0.2,
+    ) -> None:
+        """Robust mean of every tag; re-derive above/below from the final centres. A tag is a
+        fixture seen by fixed cameras, so it is kept only if seen ``min_samples`` times and in
+        at least ``min_share`` of the frames of some camera (``frames``: frames per camera);
+        a misread or a passing pattern (a person's shirt) is not."""
+        frames = frames or {}
+
+        def stable(t: MapTag) -> bool:
+            if len(t.samples) < min_samples:
+                return False
+            return not frames or any(
+                n >= min_share * frames.get(c, n) for c, n in t.cameras.items()
+            )
+
+        self.tags = [t for t in self.tags if stable(t)]
         for t in self.tags:
+            t.robust_mean()
             t.mount = "above" if t.center[2] > self.camera_height_m else "below"
 
 
@@ -194,3 +253,143 @@ def bridge_pnp(
     p_base = p_cam - r_wb @ cam.t
     yaw = math.atan2(r_wb[1, 0], r_wb[0, 0])
     return float(p_base[0]), float(p_base[1]), yaw
+
+
+@dataclass(frozen=True)
+class BridgeObservation:
+    """One tag seen by the robot camera and the map tag it is taken to be."""
+
+    detection: TagDetection
+    world: np.ndarray
+    """The map tag's corners (4, 3) in the ground frame."""
+
+
+def _ippe_branches(det: TagDetection, cam: CameraGeometry, size_m: float) -> list[np.ndarray]:
+    """Both solutions of the planar-square PnP (a small tag's pose is two-fold ambiguous), as
+    corners in the robot's base frame."""
+    obj = _object_square(size_m)
+    n, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+        obj,
+        det.corners.astype(np.float64).reshape(-1, 1, 2),
+        cam.K,
+        cam.dist,
+        flags=cv2.SOLVEPNP_IPPE_SQUARE,
+    )
+    out = []
+    for k in range(n):
+        rot, _ = cv2.Rodrigues(rvecs[k])
+        pc = obj @ rot.T + tvecs[k].reshape(1, 3)
+        if (pc[:, 2] > 0).all():
+            out.append(pc @ cam.R.T + cam.t)
+    return out
+
+
+def project_corners(
+    pose: tuple[float, float, float] | np.ndarray, world: np.ndarray, cam: CameraGeometry
+) -> np.ndarray:
+    """Pixels (M, 2) of world points seen by the robot camera with the base at ``pose``
+    (x, y, yaw on the floor; ``cam`` holds base <- camera), lens distortion included."""
+    x, y, yaw = (float(v) for v in pose)
+    c, s = math.cos(yaw), math.sin(yaw)
+    r_wb = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    r_wc = r_wb @ cam.R
+    p_c = r_wb @ cam.t + [x, y, 0.0]
+    r_cw = r_wc.T
+    rvec, _ = cv2.Rodrigues(r_cw)
+    px, _ = cv2.projectPoints(np.asarray(world, np.float64), rvec, -r_cw @ p_c, cam.K, cam.dist)
+    return px.reshape(-1, 2)
+
+
+def corner_jacobian(
+    pose: tuple[float, float, float] | np.ndarray, world: np.ndarray, cam: CameraGeometry
+) -> np.ndarray:
+    """d pixels / d (x, y, yaw), (2M, 3), by central differences (projectPoints has no
+    derivative with respect to our planar pose parametrisation)."""
+    p = np.asarray(pose, float)
+    cols = []
+    for i, eps in enumerate((1e-4, 1e-4, 1e-5)):
+        d = np.zeros(3)
+        d[i] = eps
+        hi = project_corners(p + d, world, cam).reshape(-1)
+        lo = project_corners(p - d, world, cam).reshape(-1)
+        cols.append((hi - lo) / (2 * eps))
+    return np.column_stack(cols)
+
+
+def bridge_pose(
+    observations: list[BridgeObservation],
+    cam: CameraGeometry,
+    size_m: float,
+    sigma_px: float,
+    floor_m: float = 0.0,
+    floor_rad: float = 0.0,
+) -> tuple[tuple[float, float, float], np.ndarray] | None:
+    """The robot pose from tags seen and mapped, with its 3x3 covariance.
+
+    Eq. 4.9 (least squares on the corners in the base frame, known camera height), once per
+    solution of the first tag's two-fold planar PnP ambiguity; the pose whose mapped corners
+    reproject closer to the detected ones wins. (Refining it by minimising the reprojection
+    error over (x, y, yaw) was tried: one small far tag leaves a valley in which the refined
+    pose wanders farther than Eq. 4.9's, 0.12 against 0.08 m on the office log: the map's
+    corners are not exact, and Eq. 4.9 leans less on the tag's mapped tilt.)
+
+    Covariance: for one tag, ``sigma_px`` on each corner pixel propagated through the whole
+    chain (planar PnP, mount, Eq. 4.9) by finite differences that follow the chosen PnP branch;
+    for several tags ``sigma_px``^2 (J^T J)^-1 of the reprojection. Either is long along the
+    valley a far tag leaves. ``floor_m`` / ``floor_rad`` are added for what pixel noise does
+    not explain (camera mount, tag map, robot tilt).
+    """
+    if not observations:
+        return None
+    world = np.concatenate([ob.world for ob in observations])
+    image = np.concatenate([ob.detection.corners for ob in observations]).reshape(-1)
+    rest = []
+    for ob in observations[1:]:
+        pc = tag_corners_in_camera(ob.detection, cam, size_m)
+        if pc is not None:
+            rest.append((ob.world[:, :2], (pc @ cam.R.T + cam.t)[:, :2]))
+    w = np.concatenate([observations[0].world[:, :2], *[r[0] for r in rest]])
+
+    def poses(det: TagDetection) -> list[tuple[float, float, float]]:
+        return [
+            bridge_lstsq(w, np.concatenate([pb[:, :2], *[r[1] for r in rest]]))
+            for pb in _ippe_branches(det, cam, size_m)
+        ]
+
+    first = observations[0].detection
+    cands = poses(first)
+    if not cands:
+        return None
+    cost = [float(np.sum((project_corners(p, world, cam).reshape(-1) - image) ** 2)) for p in cands]
+    pose = cands[int(np.argmin(cost))]
+    # d pose / d pixel of the first tag, following the chosen branch (a finite difference)
+    eps = 0.05
+    cols = []
+    for i in range(8):
+        px = np.array(first.corners, np.float64)
+        px.flat[i] += eps
+        moved = poses(replace(first, corners=px))
+        if not moved:
+            continue
+        near = min(moved, key=lambda p: _pose_dist(p, pose))
+        cols.append(
+            np.array([near[0] - pose[0], near[1] - pose[1], _wrap(near[2] - pose[2])]) / eps
+        )
+    floor = np.diag([floor_m**2, floor_m**2, floor_rad**2])
+    if len(observations) == 1 and len(cols) == 8:
+        jac_px = np.array(cols).T
+        return pose, sigma_px**2 * jac_px @ jac_px.T + floor
+    # several tags: the reprojection's information (Eq. 4.9 is near-efficient with many points)
+    jac = corner_jacobian(pose, world, cam)
+    try:
+        return pose, sigma_px**2 * np.linalg.inv(jac.T @ jac) + floor
+    except np.linalg.LinAlgError:
+        return None
+
+
+def _pose_dist(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:
+    return math.hypot(a[0] - b[0], a[1] - b[1]) + abs(_wrap(a[2] - b[2]))
+
+
+def _wrap(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))

@@ -46,7 +46,9 @@ class BridgeLocConfig:
     tag_size_m: float | None = None
     ir_height_m: float | None = None
     max_sigma_m: float = 0.5
-    """Full mode: a position counts as localized while the EKF's position std is below this."""
+    """Full mode: a pose counts as confident while the EKF's position std is below this."""
+    success_m: float = 0.5
+    """Scoring: a pose within this distance of the ground truth is a success."""
     max_range_m: float = 4.5
     """Tags seen by the robot farther than this are not used (the paper's 4 m detection limit)."""
     ir_threshold: int = 235

@@ -197,6 +197,72 @@ def _quiet_zone_quads(
     return out, [box for _, box in starts]
 
 
+def refine_edges(gray: np.ndarray, quad: np.ndarray, border_px: float) -> np.ndarray:
+    """Corners as the intersections of the four border edges, each edge fitted to the points
+    where the grey level crosses halfway between the black border and the white quiet zone.
+
+    cornerSubPix alone leaves the corners of a blurred, JPEG'd small square ~0.35 px inside it
+    (measured on rendered 26 px tags): 2 % of the side, i.e. 2 % of the distance. Edges are
+    symmetric under blur, so their halfway crossings are not biased (AprilTag refines its quads
+    the same way). Falls back to ``quad`` where an edge cannot be measured."""
+    q = np.asarray(quad, np.float64).reshape(4, 2)
+    reach = float(np.clip(0.8 * border_px, 1.5, 4.0))
+    offsets = np.linspace(-reach, reach, 2 * int(np.ceil(reach * 2)) + 1)
+    ts = np.linspace(0.2, 0.8, 9)
+    ctr = q.mean(axis=0)
+    lines = []
+    for i in range(4):
+        a, b = q[i], q[(i + 1) % 4]
+        d = b - a
+        length = float(np.linalg.norm(d))
+        if length < 4:
+            return q
+        d /= length
+        nrm = np.array([-d[1], d[0]])
+        if nrm @ (a - ctr) < 0:
+            nrm = -nrm  # outward
+        base = a[None, :] + ts[:, None] * (b - a)[None, :]
+        pts = base[:, None, :] + offsets[None, :, None] * nrm[None, None, :]
+        prof = cv2.remap(
+            gray.astype(np.float32),
+            pts[..., 0].astype(np.float32),
+            pts[..., 1].astype(np.float32),
+            cv2.INTER_LINEAR,
+            borderMode=cv2.BORDER_REPLICATE,
+        )
+        found = []
+        for k in range(len(ts)):
+            row = prof[k]
+            lo, hi = float(row[: len(row) // 3].mean()), float(row[-(len(row) // 3) :].mean())
+            if hi - lo < 20:
+                continue  # no clear dark-to-light edge here
+            mid = (lo + hi) / 2
+            j = np.nonzero((row[:-1] < mid) & (row[1:] >= mid))[0]
+            if len(j) != 1:
+                continue
+            j0 = int(j[0])
+            f = (mid - row[j0]) / (row[j0 + 1] - row[j0])
+            off = offsets[j0] + f * (offsets[j0 + 1] - offsets[j0])
+            found.append(base[k] + off * nrm)
+        if len(found) < 4:
+            return q
+        pts_e = np.array(found)
+        m = pts_e.mean(axis=0)
+        _, _, vt = np.linalg.svd(pts_e - m)
+        lines.append((m, vt[0]))
+    out = np.empty_like(q)
+    for i in range(4):
+        (p1, d1), (p2, d2) = lines[i - 1], lines[i]  # corner i joins edges i-1 and i
+        a_mat = np.column_stack([d1, -d2])
+        if abs(np.linalg.det(a_mat)) < 1e-6:
+            return q
+        s_, _ = np.linalg.solve(a_mat, p2 - p1)
+        out[i] = p1 + s_ * d1
+    if np.abs(out - q).max() > 1.5:
+        return q  # the edges disagree with the quad: keep the corner detector's answer
+    return out
+
+
 def _cut_by_edge(q: np.ndarray, w: int, h: int, margin: float) -> bool:
     return bool(
         (q[:, 0] < margin).any()
@@ -305,6 +371,11 @@ def _read_quad(
     if dec is None:
         return None
     code, contrast = dec
+    if refine and border_px >= 3.0:
+        # only quads that read as tags (most candidates are not), with a border wide enough to
+        # hold an edge profile (below 3 px the code cells and the blur reach the crossing and
+        # the edges are worse than cornerSubPix: measured on rendered tags at 3-4 m)
+        corners = refine_edges(gray, corners, border_px)
     return TagDetection(code, placement, corners, contrast)
 
 

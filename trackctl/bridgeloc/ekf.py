@@ -1,80 +1,80 @@
 """Continuous localization (dissertation §4.2.3 C, Eqs. 4.10-4.12): an EKF over the robot pose
-r_t = (x, y, θ) with odometry as control and range-bearing tag observations.
+with wheel odometry as control and the bridged tag observations as measurements.
+
+The paper's EKF turns each tag seen into a range-bearing reading of the tag's centre (Eq. 4.12)
+and keeps the tag's corners only to start the filter. Here every bridged observation (Eq. 4.9 on
+one tag's four corners) enters as a full pose (x, y, θ) with the covariance propagated from the
+corners' pixel noise, so the heading the corners carry is never thrown away; Basic mode is that
+same measurement without the motion model. The state carries the heading bias per metre that
+wheel scale errors cause (:mod:`trackctl.geometry.odometry_ekf`, shared with S-Mirror); the
+filter's consistency is checked by the normalized innovation squared (NIS) of every update.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cache
 
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
+from scipy.stats import chi2
 
-from trackctl.geometry.odometry import integrate_step
+from trackctl.geometry.odometry_ekf import DiffDriveEkf, OdometryNoise, nis, wrap
 
-__all__ = ["EkfConfig", "RobotEkf", "wrap"]
+__all__ = ["EkfConfig", "RobotEkf", "wrap", "chi2_95", "gate"]
 
 
-def wrap(a: float) -> float:
-    """Angle in (-pi, pi]."""
-    return math.atan2(math.sin(a), math.cos(a))
+@cache
+def chi2_95(dof: int) -> float:
+    """95 % quantile of chi-square: a consistent filter's NIS falls below it 95 % of the time."""
+    return float(chi2.ppf(0.95, dof))
+
+
+@cache
+def gate(dof: int) -> float:
+    """99.9 % quantile: a measurement beyond it is an outlier (wrong tag, reflection)."""
+    return float(chi2.ppf(0.999, dof))
 
 
 @dataclass(frozen=True, slots=True)
 class EkfConfig:
-    """Noise model of the EKF."""
+    """Noise model of the EKF (documented sources in docs/bridgeloc.md)."""
 
-    odom_dist_frac: float = 0.03
-    """Std of travelled distance per step, as a fraction of it."""
-    odom_yaw_frac: float = 0.03
-    odom_yaw_floor_rad: float = 0.002
-    odom_dist_floor_m: float = 0.001
-    range_sigma_frac: float = 0.06
-    """Std of a tag's measured range, fraction of the range (+ 3 cm)."""
-    bearing_sigma_rad: float = 0.04
-    fix_sigma_m: float = 0.12
-    """Std of an absolute position fix (I-Cam)."""
-    bridge_sigma_m: float = 0.15
-    bridge_yaw_sigma_rad: float = 0.08
-    gate_m: float = 1.2
-    """A tag observation whose observed position (Eq. 4.11) is farther than this from every
-    candidate is ignored."""
-
-
-class _Ekf(ExtendedKalmanFilter):
-    """filterpy's EKF with the nonlinear diff-drive motion as its state prediction."""
-
-    x: np.ndarray
-
-    def predict_x(self, u: Any = 0) -> None:
-        ds, dyaw = float(u[0]), float(u[1])
-        x, y, th = integrate_step(
-            float(self.x[0, 0]), float(self.x[1, 0]), float(self.x[2, 0]), ds, dyaw
-        )
-        self.x = np.array([[x], [y], [wrap(th)]])
-
-
-def _res_angle(idx: int):  # noqa: ANN202
-    def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        y = a - b
-        y[idx, 0] = wrap(float(y[idx, 0]))
-        return y
-
-    return residual
+    odometry: OdometryNoise = field(default_factory=OdometryNoise)
+    corner_sigma_px: float = 1.0
+    """Std of a detected tag corner (px): sub-pixel corners on JPEG'd, blurred images are good to
+    ~0.3 px (OpenCV cornerSubPix), widened for lens calibration residuals."""
+    bridge_floor_m: float = 0.03
+    """Position std added to every bridged pose: camera mount and tag map errors."""
+    bridge_floor_rad: float = 0.02
+    """Heading std added to every bridged pose: camera mount yaw, robot pitch and roll."""
+    icam_sigma_px: float = 1.5
+    """Std of the IR light's centroid in an infrastructure image (px)."""
+    icam_floor_m: float = 0.05
+    """Position std added to every I-Cam fix: light not over the base centre, camera pose."""
+    max_rejects: int = 3
+    """After this many robot frames in a row whose tags were all gated out, a pose bridged
+    from uniquely identified tags restarts the filter (wheel slip or a wrong start: the state,
+    not the cameras, is wrong)."""
 
 
 class RobotEkf:
-    """EKF of Eqs. 4.10-4.12 with odometry control and range-bearing / position observations."""
+    """Odometry prediction, pose and position updates with NIS gating."""
 
     def __init__(self, config: EkfConfig | None = None) -> None:
         self.cfg = config or EkfConfig()
-        self.kf = _Ekf(dim_x=3, dim_z=2)
+        self.kf = DiffDriveEkf()
         self.initialized = False
+        self.nis_values: list[tuple[float, int]] = []
+        """(NIS, dof) of every update tested against the state."""
 
-    def init(self, x: float, y: float, yaw: float, sigma_m: float, sigma_yaw: float) -> None:
-        self.kf.x = np.array([[x], [y], [wrap(yaw)]])
-        self.kf.P = np.diag([sigma_m**2, sigma_m**2, sigma_yaw**2])
+    def init(self, pose: tuple[float, float, float], cov: np.ndarray) -> None:
+        self.kf.x = np.array([[pose[0]], [pose[1]], [wrap(pose[2])], [0.0]])
+        p = np.zeros((4, 4))
+        p[:3, :3] = cov
+        p[3, 3] = self.cfg.odometry.heading_bias_sigma**2
+        self.kf.P = p
         self.initialized = True
 
     @property
@@ -87,67 +87,97 @@ class RobotEkf:
         """Largest position standard deviation (m)."""
         return float(math.sqrt(max(np.linalg.eigvalsh(self.kf.P[:2, :2]).max(), 0.0)))
 
+    @property
+    def sigma_yaw(self) -> float:
+        return float(math.sqrt(max(float(self.kf.P[2, 2]), 0.0)))
+
     def predict(self, ds: float, dyaw: float) -> None:
-        """Control c_t from the wheel encoders: g(r, c) = integrate_step (mid-point heading)."""
+        """Control c_t from the wheel encoders (Eq. 4.10's g, with the heading bias)."""
+        if self.initialized:
+            self.kf.predict_odometry(ds, dyaw, self.cfg.odometry)
+
+    def pose_nis(self, pose: tuple[float, float, float], cov: np.ndarray) -> float:
+        """NIS a pose measurement would have (for choosing among tags sharing a pattern)."""
+        y = np.array(pose) - np.array(self.pose)
+        y[2] = wrap(float(y[2]))
+        return nis(y, self.kf.P[:3, :3] + cov)
+
+    def position_nis(self, xy: np.ndarray, cov: np.ndarray) -> float:
+        y = np.asarray(xy, float)[:2] - np.array(self.pose[:2])
+        return nis(y, self.kf.P[:2, :2] + cov)
+
+    def update_pose(self, pose: tuple[float, float, float], cov: np.ndarray) -> bool:
+        """A bridged pose (x, y, θ) with its 3x3 covariance; False when gated out."""
         if not self.initialized:
-            return
-        c = self.cfg
-        th = float(self.kf.x[2, 0]) + dyaw / 2
-        self.kf.F = np.array([[1, 0, -ds * math.sin(th)], [0, 1, ds * math.cos(th)], [0, 0, 1]])
-        v = np.array(
-            [[math.cos(th), -ds * math.sin(th) / 2], [math.sin(th), ds * math.cos(th) / 2], [0, 1]]
+            self.init(pose, cov)
+            return True
+        if not self._gate(self.pose_nis(pose, cov), 3):
+            return False
+        self.kf.update(
+            np.array(pose, float)[:, None],
+            lambda _x: np.eye(3, 4),
+            lambda s: s[:3],
+            R=cov,
+            residual=_res_yaw,
         )
-        m = np.diag(
-            [
-                (c.odom_dist_frac * abs(ds) + c.odom_dist_floor_m) ** 2,
-                (c.odom_yaw_frac * abs(dyaw) + c.odom_yaw_floor_rad + 0.01 * abs(ds)) ** 2,
-            ]
-        )
-        self.kf.Q = v @ m @ v.T
-        self.kf.predict(u=np.array([ds, dyaw]))
-
-    def observed_position(self, rng_m: float, bearing: float) -> np.ndarray:
-        """Eq. 4.11: where the observed tag is, given the current pose."""
-        x, y, th = self.pose
-        return np.array([x + rng_m * math.cos(bearing + th), y + rng_m * math.sin(bearing + th)])
-
-    def update_range_bearing(self, rng_m: float, bearing: float, tag_xy: np.ndarray) -> None:
-        """Eq. 4.12: h(r) = (range, bearing) to the chosen tag (x_m, y_m)."""
-        c = self.cfg
-        xm, ym = float(tag_xy[0]), float(tag_xy[1])
-
-        def hx(x: np.ndarray) -> np.ndarray:
-            dx, dy = xm - x[0, 0], ym - x[1, 0]
-            return np.array([[math.hypot(dx, dy)], [wrap(math.atan2(dy, dx) - x[2, 0])]])
-
-        def hjac(x: np.ndarray) -> np.ndarray:
-            dx, dy = xm - x[0, 0], ym - x[1, 0]
-            q = max(dx * dx + dy * dy, 1e-6)
-            r = math.sqrt(q)
-            return np.array([[-dx / r, -dy / r, 0.0], [dy / q, -dx / q, -1.0]])
-
-        r_mat = np.diag([(c.range_sigma_frac * rng_m + 0.03) ** 2, c.bearing_sigma_rad**2])
-        z = np.array([rng_m, bearing])[:, None]  # filterpy 2.0: column vectors
-        self.kf.update(z, hjac, hx, R=r_mat, residual=_res_angle(1))
         self.kf.x[2, 0] = wrap(float(self.kf.x[2, 0]))
+        return True
 
-    def update_pose(
-        self, x: float, y: float, yaw: float | None, sigma_m: float, sigma_yaw: float
-    ) -> None:
-        """An absolute fix: position (I-Cam) or position + heading (bridging)."""
+    def measurement_nis(
+        self, z: np.ndarray, hx: Callable[[np.ndarray], np.ndarray], jac: np.ndarray, r: np.ndarray
+    ) -> float:
+        """NIS of a measurement ``z`` with model ``hx`` (of the pose) and Jacobian ``jac``
+        (len z, 3) at the current state."""
+        h = np.hstack([jac, np.zeros((len(z), 1))])
+        return nis(np.asarray(z, float) - hx(np.array(self.pose)), h @ self.kf.P @ h.T + r)
+
+    def update_measurement(
+        self,
+        z: np.ndarray,
+        hx: Callable[[np.ndarray], np.ndarray],
+        jac: np.ndarray,
+        r: np.ndarray,
+    ) -> bool:
+        """A non-linear measurement of the pose (a tag's corner pixels), gated by NIS."""
+        if not self._gate(self.measurement_nis(z, hx, jac, r), len(z)):
+            return False
+        h = np.hstack([jac, np.zeros((len(z), 1))])
+        self.kf.update(
+            np.asarray(z, float)[:, None],
+            lambda _x: h,
+            lambda s: hx(s[:3, 0])[:, None],
+            R=r,
+        )
+        self.kf.x[2, 0] = wrap(float(self.kf.x[2, 0]))
+        return True
+
+    def update_position(self, xy: np.ndarray, cov: np.ndarray) -> bool:
+        """An I-Cam position fix with its 2x2 covariance; False when gated out."""
         if not self.initialized:
-            self.init(
-                x, y, 0.0 if yaw is None else yaw, sigma_m, math.pi if yaw is None else sigma_yaw
-            )
-            return
-        if yaw is None:
-            h = np.array([[1.0, 0, 0], [0, 1.0, 0]])
-            z = np.array([x, y])[:, None]
-            r_mat = np.eye(2) * sigma_m**2
-            self.kf.update(z, lambda _x: h, lambda s: h @ s, R=r_mat)
-        else:
-            h = np.eye(3)
-            z = np.array([x, y, yaw])[:, None]
-            r_mat = np.diag([sigma_m**2, sigma_m**2, sigma_yaw**2])
-            self.kf.update(z, lambda _x: h, lambda s: h @ s, R=r_mat, residual=_res_angle(2))
+            # position known, heading not: a wide prior until a tag gives it
+            self.init((float(xy[0]), float(xy[1]), 0.0), _block(cov, math.pi**2))
+            return True
+        if not self._gate(self.position_nis(xy, cov), 2):
+            return False
+        h = np.eye(2, 4)
+        self.kf.update(np.asarray(xy, float)[:2, None], lambda _x: h, lambda s: h @ s, R=cov)
         self.kf.x[2, 0] = wrap(float(self.kf.x[2, 0]))
+        return True
+
+    def _gate(self, d2: float, dof: int) -> bool:
+        """True unless the NIS is beyond the 99.9 % gate (an outlier); every NIS is kept."""
+        self.nis_values.append((d2, dof))
+        return d2 <= gate(dof)
+
+
+def _block(cov2: np.ndarray, var_yaw: float) -> np.ndarray:
+    out = np.zeros((3, 3))
+    out[:2, :2] = cov2
+    out[2, 2] = var_yaw
+    return out
+
+
+def _res_yaw(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    y = a - b
+    y[2, 0] = wrap(float(y[2, 0]))
+    return y

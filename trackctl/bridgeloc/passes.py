@@ -13,6 +13,7 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import partial
 
 import cv2
 import numpy as np
@@ -21,10 +22,14 @@ from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 from foxglove_schemas_protobuf.TextAnnotation_pb2 import TextAnnotation
 
 from trackctl.bridgeloc.bridge import (
+    BridgeObservation,
     CameraGeometry,
+    MapTag,
     TagMap,
-    bridge_lstsq,
     bridge_pnp,
+    bridge_pose,
+    corner_jacobian,
+    project_corners,
     tag_corners_in_camera,
 )
 from trackctl.bridgeloc.config import (
@@ -50,7 +55,9 @@ from trackctl.processing.base import Progress
 __all__ = [
     "Setup",
     "load_setup",
+    "IcamFix",
     "IcamFixes",
+    "ir_blobs",
     "map_tags",
     "RobotPass",
     "ir_light",
@@ -88,15 +95,21 @@ def _annotations(t_ns: int, dets: list[TagDetection], labels: list[str]) -> Imag
 
 
 def ir_light(gray: np.ndarray, threshold: int, min_area: int) -> np.ndarray | None:
-    """Pixel of the brightest saturated blob (the robot's IR light), or None."""
+    """Pixel of the largest saturated blob, or None (kept for callers that want one blob)."""
+    blobs = ir_blobs(gray, threshold, min_area)
+    return None if not blobs else max(blobs, key=lambda b: b[1])[0]
+
+
+def ir_blobs(gray: np.ndarray, threshold: int, min_area: int) -> list[tuple[np.ndarray, int]]:
+    """Every saturated blob (centroid px, area px): the robot's IR light and whatever else is
+    as bright (lamps, reflections, windows); the caller tells them apart."""
     _, binary = cv2.threshold(gray, threshold, 255, cv2.THRESH_BINARY)
     n, _, stats, cents = cv2.connectedComponentsWithStats(binary)
-    if n <= 1:
-        return None
-    k = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    if stats[k, cv2.CC_STAT_AREA] < min_area:
-        return None
-    return cents[k]
+    return [
+        (cents[k], int(stats[k, cv2.CC_STAT_AREA]))
+        for k in range(1, n)
+        if stats[k, cv2.CC_STAT_AREA] >= min_area
+    ]
 
 
 def _models(reader: LogReader) -> dict[str, CameraModel]:
@@ -213,20 +226,64 @@ def _require_robot_camera(
         )
 
 
+@dataclass(frozen=True, slots=True)
+class IcamFix:
+    """One IR-light candidate on the ground plane, with its 2x2 covariance."""
+
+    xy: np.ndarray
+    cov: np.ndarray
+    camera: str
+
+
 class IcamFixes:
-    """The robot's IR light seen by the infrastructure cameras: ground positions by time."""
+    """The robot's IR light seen by the infrastructure cameras: candidates by frame time.
 
-    def __init__(self, fixes: dict[int, list[np.ndarray]], half_period_ns: int) -> None:
-        self.fixes = fixes
-        self.times = np.array(sorted(fixes), dtype=np.int64)
+    Blobs lit at the same pixel in at least ``static_share`` of a camera's frames are fixtures
+    (lamps, reflections), not a robot that drives, and are dropped."""
+
+    def __init__(self, half_period_ns: int) -> None:
+        self.fixes: dict[int, list[IcamFix]] = {}
         self.half_period_ns = half_period_ns
+        self.times = np.zeros(0, np.int64)
+        self.static_dropped = 0
+        self._cells: dict[str, dict[tuple[int, int], int]] = {}
+        self._frames: dict[str, int] = {}
+        self._pending: list[tuple[int, tuple[int, int], IcamFix]] = []
 
-    def at(self, t_ns: int) -> np.ndarray | None:
-        """The mean fix of the infrastructure frame nearest ``t_ns`` within half a frame
-        period, or None."""
+    CELL_PX = 6
+
+    @property
+    def frames_per_camera(self) -> dict[str, int]:
+        return dict(self._frames)
+
+    def frame(self, camera: str) -> None:
+        self._frames[camera] = self._frames.get(camera, 0) + 1
+
+    def add(self, t_ns: int, px: np.ndarray, fix: IcamFix) -> None:
+        cell = (int(px[0]) // self.CELL_PX, int(px[1]) // self.CELL_PX)
+        counts = self._cells.setdefault(fix.camera, {})
+        counts[cell] = counts.get(cell, 0) + 1
+        self._pending.append((t_ns, cell, fix))
+
+    def finalize(self, static_share: float = 0.5, min_frames: int = 20) -> None:
+        for t_ns, (cx, cy), fix in self._pending:
+            counts = self._cells[fix.camera]
+            lit = sum(counts.get((cx + i, cy + j), 0) for i in (-1, 0, 1) for j in (-1, 0, 1))
+            frames = self._frames.get(fix.camera, 0)
+            if frames >= min_frames and lit >= static_share * frames:
+                self.static_dropped += 1
+                continue
+            self.fixes.setdefault(t_ns, []).append(fix)
+        self._pending.clear()
+        self._cells.clear()
+        self.times = np.array(sorted(self.fixes), dtype=np.int64)
+
+    def candidates(self, t_ns: int) -> list[IcamFix]:
+        """The candidates of the infrastructure frame nearest ``t_ns`` within half a frame
+        period (empty if none)."""
         times = self.times
         if not len(times):
-            return None
+            return []
         i = int(np.searchsorted(times, t_ns))
         best = None
         for j in (i - 1, i):
@@ -236,7 +293,20 @@ class IcamFixes:
                 and (best is None or abs(int(times[j]) - t_ns) < abs(best - t_ns))
             ):
                 best = int(times[j])
-        return None if best is None else np.mean(self.fixes[best], axis=0)
+        return [] if best is None else self.fixes[best]
+
+    def at(self, t_ns: int, agree_m: float = 0.5) -> np.ndarray | None:
+        """The fix at ``t_ns`` without a motion model: the covariance-weighted mean of the
+        candidates when they agree (several cameras seeing the light), None when there are none
+        or they disagree (a lamp the static test missed: ambiguous)."""
+        cands = self.candidates(t_ns)
+        if not cands:
+            return None
+        w = [np.linalg.inv(c.cov) for c in cands]
+        mean = np.linalg.solve(sum(w), sum(wi @ c.xy for wi, c in zip(w, cands, strict=True)))
+        if any(np.linalg.norm(c.xy - mean) > agree_m for c in cands):
+            return None
+        return mean
 
 
 def map_tags(
@@ -254,7 +324,8 @@ def map_tags(
     """
     infra = setup.infra
     tag_map = TagMap(setup.cam_h)
-    fixes: dict[int, list[np.ndarray]] = {}
+    icam = IcamFixes(0)
+    max_ir_m = 0.25  # the light's glow is never wider than this on the ground plane
     geos = {name: CameraGeometry.from_model(m) for name, m in infra.items()}
     pins = {name: PinholeCamera(m) for name, m in infra.items()}
     infra_period: dict[str, int] = {}
@@ -276,40 +347,99 @@ def map_tags(
         writer.write(
             annotations_topic(cam), _annotations(msg.log_time_ns, dets, labels), msg.log_time_ns
         )
-        px = ir_light(gray, cfg.ir_threshold, cfg.ir_min_area_px)
-        if px is not None:
-            g = pins[cam].ground_point(px[None], ground_z=setup.ir_height_m)[0]
-            if not np.isnan(g).any():
-                fixes.setdefault(msg.log_time_ns, []).append(g[:2])
+        icam.frame(cam)
+        for px, area in ir_blobs(gray, cfg.ir_threshold, cfg.ir_min_area_px):
+            fix = _icam_fix(pins[cam], px, area, setup.ir_height_m, cfg, max_ir_m)
+            if fix is not None:
+                icam.add(msg.log_time_ns, px, fix)
         if cam in last_t:
             infra_period.setdefault(cam, msg.log_time_ns - last_t[cam])
         last_t[cam] = msg.log_time_ns
-    tag_map.finalize()
-    half_period = max(infra_period.values(), default=200_000_000) // 2
-    return tag_map, IcamFixes(fixes, half_period), n_msgs
+    tag_map.finalize(icam.frames_per_camera)
+    icam.half_period_ns = max(infra_period.values(), default=200_000_000) // 2
+    icam.finalize()
+    return tag_map, icam, n_msgs
+
+
+def _icam_fix(
+    pin: PinholeCamera,
+    px: np.ndarray,
+    area: int,
+    ir_height_m: float,
+    cfg: BridgeLocConfig,
+    max_size_m: float,
+) -> IcamFix | None:
+    """Eq. 4.2: the blob's pixel on the plane z = IR height, with its covariance (the ground
+    distance per pixel grows as d^2 / (f * drop)); None when the ray misses the plane or the
+    blob is too big to be the light at that distance."""
+    g = pin.ground_point(px[None], ground_z=ir_height_m)[0]
+    if np.isnan(g).any():
+        return None
+    f = float(pin.model.fx_px)
+    d = float(np.linalg.norm(pin.position - g))
+    if math.sqrt(area) * d / f > max_size_m:
+        return None
+    drop = max(0.3, abs(float(pin.position[2]) - ir_height_m))
+    per_px = d * d / (f * drop)
+    sigma = math.hypot(cfg.ekf.icam_floor_m, cfg.ekf.icam_sigma_px * per_px)
+    return IcamFix(g[:2].copy(), np.eye(2) * sigma**2, pin.model.camera)
+
+
+def _in_front(pose: Pose, world: np.ndarray, cam: CameraGeometry, min_depth_m: float = 0.2) -> bool:
+    """Whether mapped corners lie in front of the robot camera at ``pose`` (projection is
+    meaningless behind it)."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    r_wb = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    p_c = r_wb @ cam.t + [pose[0], pose[1], 0.0]
+    depth = (np.asarray(world) - p_c) @ (r_wb @ cam.R)[:, 2]
+    return bool((depth > min_depth_m).all())
+
+
+def _reproject(pose: np.ndarray, world: np.ndarray, cam: CameraGeometry) -> np.ndarray:
+    return project_corners(pose, world, cam).reshape(-1)
 
 
 def _bridge_fix(
     obs: list[tuple[TagDetection, str, np.ndarray]],
     tag_map: TagMap,
     rgeo: CameraGeometry,
-    method: PoseMethod,
-) -> tuple[float, float, float] | None:
-    """Basic bridging: corners of uniquely identified tags, mapped and seen -> robot pose."""
-    world, robot, image = [], [], []
-    for d, sig, pb in obs:
+    setup: Setup,
+    cfg: BridgeLocConfig,
+) -> tuple[Pose, np.ndarray] | None:
+    """Basic bridging: the tags whose signature is unique in the map -> robot pose (Eq. 4.9)
+    and its covariance (the same measurement the EKF takes)."""
+    unique = []
+    for d, sig, _ in obs:
         cands = tag_map.candidates(sig)
-        if len(cands) != 1:
-            continue  # without motion history a shared pattern cannot be told apart
-        world.append(cands[0].corners)
-        robot.append(pb)
-        image.append(d.corners)
-    if not world:
+        if len(cands) == 1:  # without motion history a shared pattern cannot be told apart
+            unique.append(BridgeObservation(d, cands[0].corners))
+    if not unique:
         return None
-    w = np.concatenate(world)
-    if method is PoseMethod.PNP:
-        return bridge_pnp(w, np.concatenate(image), rgeo)
-    return bridge_lstsq(w[:, :2], np.concatenate(robot)[:, :2])
+    return _bridged(unique, rgeo, setup, cfg)
+
+
+def _bridged(
+    observations: list[BridgeObservation],
+    rgeo: CameraGeometry,
+    setup: Setup,
+    cfg: BridgeLocConfig,
+) -> tuple[Pose, np.ndarray] | None:
+    e = cfg.ekf
+    out = bridge_pose(
+        observations,
+        rgeo,
+        setup.tag_size_m,
+        e.corner_sigma_px,
+        e.bridge_floor_m,
+        e.bridge_floor_rad,
+    )
+    if out is None or cfg.pose is PoseMethod.LSTSQ:
+        return out
+    # --pose pnp: the pose from one solvePnP, the covariance from the same propagation
+    w = np.concatenate([o.world for o in observations])
+    img = np.concatenate([o.detection.corners for o in observations])
+    pnp = bridge_pnp(w, img, rgeo)
+    return None if pnp is None else (pnp, out[1])
 
 
 @dataclass
@@ -321,6 +451,11 @@ class RobotPassStats:
     tag_observations: int = 0
     robot_frames: int = 0
     ambiguous_matches: int = 0
+    rejected_updates: int = 0
+    frames_with_pose: int = 0
+    frames_with_fix: int = 0
+    icam_fused: int = 0
+    restarts: int = 0
 
 
 class RobotPass:
@@ -354,9 +489,16 @@ class RobotPass:
         self.ekf = RobotEkf(cfg.ekf)
         self.truth: dict[int, tuple[float, float]] = {}
         self.est: Estimates = []
+        self.sigmas: dict[int, float] = {}
+        """Full mode: the EKF's largest position std at every output pose."""
         self.other: dict[Mode, Estimates] = {m: [] for m in Mode}
+        self.other_sigmas: dict[int, float] = {}
         self.bridge_only: Estimates = []
+        self.robot_sightings: dict[int, int] = {}
+        """Map tag (index in the map) -> robot frames that used it."""
         self.stats = RobotPassStats()
+        self._icam_next = 0
+        self._bad_frames = 0
         self.prev_odom: WheelOdometry | None = None
         self.odom_topic = topics.odom(setup.robot)
         self.frame_topic: str | None = topics.image(setup.rcam_name) if setup.needs_robot else None
@@ -377,14 +519,36 @@ class RobotPass:
             self._on_truth(t_ns, message)  # type: ignore[arg-type]
             if self.frame_topic != topics.GROUND_TRUTH:
                 return
+        if self.setup.needs_robot:
+            self._fuse_icam_until(t_ns)
         if topic == self.odom_topic:
             self._on_odometry(message)  # type: ignore[arg-type]
             return
-        fix = self.icam.at(t_ns)
         if self.cfg.mode is Mode.ICAM:
+            fix = self.icam.at(t_ns)
             self.est.append((t_ns, None if fix is None else (float(fix[0]), float(fix[1]), 0.0)))
             return
-        self._on_frame(t_ns, message, fix, det_times)
+        self._on_frame(t_ns, message, det_times)
+
+    def _fuse_icam_until(self, t_ns: int) -> None:
+        """Full mode: I-Cam fixes enter the EKF at their own frame times (the infrastructure
+        and robot cameras are not synchronised): the candidate that fits the state best
+        (least NIS; a lamp the static test missed fits worse than the robot's light), gated."""
+        times = self.icam.times
+        while self._icam_next < len(times) and int(times[self._icam_next]) <= t_ns:
+            t = int(times[self._icam_next])
+            self._icam_next += 1
+            cands = self.icam.fixes[t]
+            ekf = self.ekf
+            if not ekf.initialized:
+                fix = self.icam.at(t)
+                if fix is not None:  # position only; a tag then gives the heading
+                    ekf.update_position(fix, np.mean([c.cov for c in cands], axis=0))
+                continue
+            best = min(cands, key=lambda c: ekf.position_nis(c.xy, c.cov))
+            ok = ekf.update_position(best.xy, best.cov)
+            self.stats.icam_fused += ok
+            self.stats.rejected_updates += not ok
 
     def _on_truth(self, t_ns: int, gt: GroundTruth) -> None:
         for e in gt.entities:
@@ -429,13 +593,13 @@ class RobotPass:
         )
         return obs
 
-    def _on_frame(
-        self, t_ns: int, message: object, fix: np.ndarray | None, det_times: list[float]
-    ) -> None:
+    def _on_frame(self, t_ns: int, message: object, det_times: list[float]) -> None:
         self.stats.robot_frames += 1
-        assert self.setup.rgeo is not None
+        rgeo = self.setup.rgeo
+        assert rgeo is not None
         obs = self._observe_tags(t_ns, message.data, det_times)  # type: ignore[attr-defined]
-        bridge = _bridge_fix(obs, self.tag_map, self.setup.rgeo, self.cfg.pose)
+        bridge = _bridge_fix(obs, self.tag_map, rgeo, self.setup, self.cfg)
+        fix = self.icam.at(t_ns)
         if bridge is not None:
             self.stats.bridge_fixes += 1
         if fix is not None:
@@ -444,54 +608,104 @@ class RobotPass:
         icam_pose = None if fix is None else (float(fix[0]), float(fix[1]), 0.0)
         basic_pose: Pose | None = None
         if fix is not None:
-            basic_pose = (float(fix[0]), float(fix[1]), bridge[2] if bridge else 0.0)
+            basic_pose = (float(fix[0]), float(fix[1]), bridge[0][2] if bridge else 0.0)
         elif bridge is not None:
-            basic_pose = bridge
-        self._ekf_update(fix, bridge, obs)
-        full_pose: Pose | None = None
-        if self.ekf.initialized and self.ekf.sigma_m <= self.cfg.max_sigma_m:
-            full_pose = self.ekf.pose
-        self.bridge_only.append((t_ns, bridge))
+            basic_pose = bridge[0]
+        fused = self._ekf_update(t_ns, bridge, obs)
+        if fused or fix is not None or bridge is not None:
+            self.stats.frames_with_fix += 1
+        full_pose: Pose | None = self.ekf.pose if self.ekf.initialized else None
+        if full_pose is not None:
+            self.other_sigmas[t_ns] = self.ekf.sigma_m
+        self.bridge_only.append((t_ns, None if bridge is None else bridge[0]))
         self.other[Mode.ICAM].append((t_ns, icam_pose))
         self.other[Mode.BASIC].append((t_ns, basic_pose))
         self.other[Mode.FULL].append((t_ns, full_pose))
         pose = {Mode.ICAM: icam_pose, Mode.BASIC: basic_pose, Mode.FULL: full_pose}[self.cfg.mode]
         self.est.append((t_ns, pose))
         if pose is not None:
+            self.stats.frames_with_pose += 1
+            if self.cfg.mode is Mode.FULL:
+                self.sigmas[t_ns] = self.ekf.sigma_m
             self.writer.write(POSE_TOPIC, pose_in_frame(t_ns, pose[0], pose[1], pose[2]), t_ns)
 
     def _ekf_update(
         self,
-        fix: np.ndarray | None,
-        bridge: Pose | None,
+        t_ns: int,
+        bridge: tuple[Pose, np.ndarray] | None,
         obs: list[tuple[TagDetection, str, np.ndarray]],
-    ) -> None:
-        """Full mode: I-Cam fix, then the bridge pose to initialize, else every tag seen as a
-        range-bearing observation of its mapped position (nearest candidate, gated)."""
-        ekf, c = self.ekf, self.cfg.ekf
-        if fix is not None:
-            ekf.update_pose(float(fix[0]), float(fix[1]), None, c.fix_sigma_m, 0.0)
-        if not ekf.initialized and bridge is not None:
-            ekf.update_pose(*bridge, c.bridge_sigma_m, c.bridge_yaw_sigma_rad)
-            return
+    ) -> bool:
+        """Full mode: every tag seen, as the mapped tag it is most likely to be (the least NIS
+        among those sharing its signature, Eq. 4.11's nearest-candidate rule), gated by NIS.
+        Before the filter has a state (no I-Cam fix yet) it starts from the unique tags' bridged
+        pose. True if anything was fused."""
+        ekf, fused, rejected = self.ekf, False, False
         if not ekf.initialized:
-            return
-        for _, sig, pb in obs:
-            ctr = pb.mean(axis=0)
-            rng_m = math.hypot(ctr[0], ctr[1])
-            bearing = math.atan2(ctr[1], ctr[0])
-            cands = self.tag_map.candidates(sig)
-            if not cands:
+            if bridge is None:
+                return False
+            ekf.init(*bridge)
+            return True
+        rgeo = self.setup.rgeo
+        assert rgeo is not None
+        for d, sig, _ in obs:
+            mapped = self.tag_map.candidates(sig)
+            if not mapped:
                 continue
-            seen_at = ekf.observed_position(rng_m, bearing)  # Eq. 4.11
-            dists = [float(np.linalg.norm(t.center[:2] - seen_at)) for t in cands]
-            k = int(np.argmin(dists))
-            if len(cands) > 1:
+            if len(mapped) > 1:
                 self.stats.ambiguous_matches += 1
-            if dists[k] > c.gate_m + 2 * ekf.sigma_m:
-                continue
-            ekf.update_range_bearing(rng_m, bearing, cands[k].center[:2])  # Eq. 4.12
-            self.stats.tag_observations += 1
+            ok, tag = self._fuse_tag(d, mapped, rgeo)
+            self.stats.rejected_updates += not ok
+            rejected |= not ok
+            if ok:
+                fused = True
+                self.stats.tag_observations += 1
+                k = self.tag_map.tags.index(tag)
+                self.robot_sightings[k] = self.robot_sightings.get(k, 0) + 1
+        # frames in a row where the tags only disagreed with the state: after a few, a pose
+        # bridged from uniquely identified tags restarts the filter (slip, kidnapping)
+        self._bad_frames = 0 if fused or not rejected else self._bad_frames + 1
+        if self._bad_frames >= self.cfg.ekf.max_rejects and bridge is not None:
+            ekf.init(*bridge)
+            self._bad_frames = 0
+            self.stats.restarts += 1
+            return True
+        return fused
+
+    def _fuse_tag(
+        self, d: TagDetection, mapped: list[MapTag], rgeo: CameraGeometry
+    ) -> tuple[bool, MapTag]:
+        """One tag seen: its corner pixels are the measurement, h(r) their reprojection from
+        the mapped corners (Eq. 4.12's role, with the heading the corners carry). Among tags
+        sharing the signature the one with the least NIS is taken (Eq. 4.11's nearest
+        candidate). While the heading is still unknown (started from an I-Cam fix) the
+        bridged pose is used instead: the reprojection is too non-linear in the heading."""
+        ekf, cfg, setup = self.ekf, self.cfg, self.setup
+        if ekf.sigma_yaw > 0.3:
+            options = []
+            for tag in mapped:
+                m = _bridged([BridgeObservation(d, tag.corners)], rgeo, setup, cfg)
+                if m is not None:
+                    options.append((ekf.pose_nis(*m), m, tag))
+            if not options:
+                return False, mapped[0]
+            _, meas, tag = min(options, key=lambda o: o[0])
+            return ekf.update_pose(*meas), tag
+        z = np.asarray(d.corners, float).reshape(-1)
+        scored = []
+        for tag in mapped:
+            if not _in_front(ekf.pose, tag.corners, rgeo):
+                continue  # a tag sharing the pattern behind the robot cannot be this one
+            # pixel noise and the map's corner error seen from here
+            rng_m = max(0.3, float(np.linalg.norm(tag.center[:2] - np.array(ekf.pose[:2]))))
+            var = cfg.ekf.corner_sigma_px**2 + (float(rgeo.K[0, 0]) * tag.sigma_m / rng_m) ** 2
+            r = np.eye(len(z)) * var
+            jac = corner_jacobian(ekf.pose, tag.corners, rgeo)
+            hx = partial(_reproject, world=tag.corners, cam=rgeo)
+            scored.append((ekf.measurement_nis(z, hx, jac, r), tag, hx, jac, r))
+        if not scored:
+            return False, mapped[0]
+        _, tag, hx, jac, r = min(scored, key=lambda o: o[0])
+        return ekf.update_measurement(z, hx, jac, r), tag
 
     def finish(self) -> None:
         """I-Cam mode writes its poses once the pass is over: one per infrastructure frame that

@@ -24,6 +24,7 @@ from trackctl.bridgeloc.config import (
     PoseMethod,
     annotations_topic,
 )
+from trackctl.bridgeloc.ekf import chi2_95
 from trackctl.bridgeloc.passes import Estimates, RobotPass, Setup, load_setup, map_tags
 from trackctl.logs.messages import MetricReport
 from trackctl.logs.reader import LogReader
@@ -79,22 +80,39 @@ def run(
             "tag_n": setup.tag_n,
             "tag_size_m": setup.tag_size_m,
             "max_sigma_m": cfg.max_sigma_m,
+            "success_m": cfg.success_m,
             "max_range_m": cfg.max_range_m,
         },
     )
 
 
 def _pass_metrics(rp: RobotPass, setup: Setup, cfg: BridgeLocConfig) -> dict[str, Any]:
-    """The run scored against the ground truth, and as each other mode would score it."""
+    """The run scored against the ground truth (the only reader of it), as each other mode
+    would score it, and the figures that need no truth (coverage, tags, filter consistency)."""
     n_tags = len(rp.tag_map.tags)
-    metrics = _score(rp.est, rp.truth, cfg, n_tags, setup.meta, rp.bridge_only)
+    sig = rp.sigmas if cfg.mode is Mode.FULL else None
+    metrics = _score(rp.est, rp.truth, cfg, n_tags, setup.meta, rp.bridge_only, sig)
     for m, rows in rp.other.items():
         if rows:  # the same run scored as the other modes would be (same frames, same fixes)
             sm = _score(rows, rp.truth, cfg, n_tags, {})
             metrics[f"success_rate_{m.value}"] = sm["success_rate"]
             metrics[f"error_m_mean_{m.value}"] = sm["error_m_mean"]
     metrics.update(asdict(rp.stats))
+    frames = rp.stats.robot_frames
+    metrics["pose_share"] = round(rp.stats.frames_with_pose / frames, 4) if frames else None
+    metrics["fix_share"] = round(rp.stats.frames_with_fix / frames, 4) if frames else None
+    nis = [(v, k) for v, k in rp.ekf.nis_values if math.isfinite(v)]
+    metrics["nis_per_dof_mean"] = round(float(np.mean([v / k for v, k in nis])), 3) if nis else None
+    metrics["nis_within_95"] = (
+        round(float(np.mean([v <= chi2_95(k) for v, k in nis])), 4) if nis else None
+    )
+    metrics["icam_static_blobs_dropped"] = rp.icam.static_dropped
     metrics["tags_mapped"] = n_tags
+    for k, tag in enumerate(rp.tag_map.tags):
+        x, y, z = (round(float(v), 2) for v in tag.center)
+        metrics[f"tag{k}"] = f"{tag.signature} at ({x}, {y}, {z}) m"
+        metrics[f"tag{k}_infra_sightings"] = tag.sightings
+        metrics[f"tag{k}_robot_sightings"] = rp.robot_sightings.get(k, 0)
     metrics["tag_map_error_m_mean"] = _map_error(rp.tag_map, setup.meta)
     return metrics
 
@@ -106,9 +124,12 @@ def _score(
     n_tags: int,
     meta: dict[str, str],
     bridge_only: Estimates | None = None,
+    sigmas: dict[int, float] | None = None,
 ) -> dict[str, float | int | str | None]:
+    """Positions = output instants with ground truth; success = a pose within ``success_m``
+    of the truth; confident (full mode) = the filter's position std <= ``max_sigma_m``."""
     errors = []
-    positions = localized = 0
+    positions = localized = successes = confident = calibrated = 0
     for t_ns, pose in est:
         gt = truth.get(t_ns)
         if gt is None:
@@ -119,16 +140,24 @@ def _score(
         localized += 1
         e = math.dist(pose[:2], gt)
         errors.append(e)
+        successes += e <= cfg.success_m
+        if sigmas is not None and sigmas.get(t_ns, math.inf) <= cfg.max_sigma_m:
+            confident += 1
+            calibrated += e <= 2 * sigmas[t_ns]
     out: dict[str, float | int | str | None] = {
         "system": "bridgeloc",
         "mode": cfg.mode.value,
         "tags": int(len(json.loads(meta["tags_truth"]))) if "tags_truth" in meta else n_tags,
         "positions": positions,
         "localized": localized,
-        "success_rate": round(localized / positions, 4) if positions else None,
+        "success_rate": round(successes / positions, 4) if positions else None,
+        "success_threshold_m": cfg.success_m,
         "error_m_mean": round(float(np.mean(errors)), 4) if errors else None,
         "error_m_median": round(float(np.median(errors)), 4) if errors else None,
     }
+    if sigmas is not None:
+        out["confident_rate"] = round(confident / positions, 4) if positions else None
+        out["confident_within_2sigma"] = round(calibrated / confident, 4) if confident else None
     if meta.get("field") == "office" and "tags_truth" in meta and bridge_only is not None:
         # Fig. 4.20 is about view bridging itself: score the bridging fixes alone
         rows = [

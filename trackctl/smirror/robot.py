@@ -14,13 +14,12 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
 
 from trackctl.geometry.camera import PinholeCamera
+from trackctl.geometry.odometry_ekf import DiffDriveEkf, OdometryNoise, wrap
 
 __all__ = [
     "LedConfig",
@@ -31,11 +30,6 @@ __all__ = [
     "PoseFilter",
     "wrap",
 ]
-
-
-def wrap(a: float) -> float:
-    """Angle in [-pi, pi)."""
-    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 @dataclass(frozen=True, slots=True)
@@ -182,23 +176,6 @@ def fix_from_leds(
     )
 
 
-class _DiffDriveEKF(ExtendedKalmanFilter):
-    """filterpy's EKF with the unicycle motion model as its (non-linear) state prediction.
-
-    State (x, y, yaw, b): b is the heading bias per metre of travel (rad/m) that opposite wheel
-    scale errors cause (left wheel +e, right -e: b = 2e / wheel base); the filter learns it from
-    the fixes and corrects dead reckoning with it out of coverage."""
-
-    x: np.ndarray
-
-    def predict_x(self, u: Any = 0) -> None:
-        ds, dyaw = float(u[0]), float(u[1])
-        dyaw += float(self.x[3, 0]) * ds
-        mid = float(self.x[2, 0]) + dyaw / 2
-        self.x = self.x + np.array([[ds * math.cos(mid)], [ds * math.sin(mid)], [dyaw], [0.0]])
-        self.x[2, 0] = wrap(float(self.x[2, 0]))
-
-
 @dataclass(frozen=True, slots=True)
 class FilterConfig:
     """Noise model of the fusion."""
@@ -241,7 +218,14 @@ class PoseFilter:
         self.localized = localized
         """False until the first fix when the start is unknown: the state is then a placeholder
         (dead reckoning from nowhere) and the first fix sets it, at the fix's time."""
-        self.ekf = _DiffDriveEKF(dim_x=4, dim_z=3)
+        self.ekf = DiffDriveEkf()
+        self._noise = OdometryNoise(
+            cfg.odom_rel_sigma,
+            cfg.yaw_per_m_sigma,
+            cfg.yaw_rel_sigma,
+            cfg.heading_bias_sigma,
+            cfg.heading_bias_walk,
+        )
         self.ekf.x = np.array([[x], [y], [yaw], [0.0]])
         self.ekf.P = np.diag([0.05**2, 0.05**2, 0.05**2, cfg.heading_bias_sigma**2])
         self.ekf.R = np.eye(3)
@@ -265,28 +249,7 @@ class PoseFilter:
         return float(self.ekf.x[3, 0])
 
     def _predict(self, ds: float, dyaw: float) -> None:
-        yaw = float(self.ekf.x[2, 0]) + (dyaw + self.heading_bias * ds) / 2
-        c, s = math.cos(yaw), math.sin(yaw)
-        h = 0.5 * ds  # d(mid yaw)/d(b) = ds / 2
-        self.ekf.F = np.array(
-            [
-                [1, 0, -ds * s, -ds * s * h],
-                [0, 1, ds * c, ds * c * h],
-                [0, 0, 1.0, ds],
-                [0, 0, 0, 1.0],
-            ]
-        )
-        # noise enters through the increments: Q = G diag(var_ds, var_dyaw) G^T, plus the
-        # bias's random walk
-        g = np.array([[c, -0.5 * ds * s], [s, 0.5 * ds * c], [0, 1.0], [0, 0]])
-        var_ds = (self.cfg.odom_rel_sigma * ds) ** 2 + 1e-8
-        var_dyaw = (
-            (self.cfg.yaw_rel_sigma * dyaw) ** 2 + self.cfg.yaw_per_m_sigma**2 * abs(ds) + 1e-8
-        )
-        q = g @ np.diag([var_ds, var_dyaw]) @ g.T
-        q[3, 3] += self.cfg.heading_bias_walk**2 * abs(ds) + 1e-12
-        self.ekf.Q = q
-        self.ekf.predict(u=np.array([ds, dyaw]))
+        self.ekf.predict_odometry(ds, dyaw, self._noise)
 
     def step(self, t_ns: int, ds: float, dyaw: float) -> None:
         """Dead-reckon one odometry increment."""
