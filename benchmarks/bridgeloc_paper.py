@@ -48,6 +48,9 @@ from trackctl.sim.bridgeloc import (
 
 cv2.setNumThreads(1)
 
+PRESET = "realistic"
+"""Simulator preset of the renders and logs (``--preset``): realistic (default) or paper."""
+
 
 def counts() -> None:
     print("== unique tags (enumeration vs Theorem 5 / Theorem 6 / paper)")
@@ -129,7 +132,7 @@ def max_distance(
     pattern) and places the tag up to one pixel off the optical axis, so its edges fall at a
     random phase of the pixel grid. The scan stops after three failing steps in a row.
     """
-    cfg = BridgeLocScenario(n=n)
+    cfg = BridgeLocScenario(n=n, preset=PRESET)
     best, misses, d = 0.0, 0, 0.75
     bg = np.full((model.height_px, model.width_px), 110, np.uint8)
     rens = [_Renderer(model, np.random.default_rng(s), cfg) for s in range(len(codes))]
@@ -177,7 +180,7 @@ def detection_range(quick: bool) -> None:
     print("== Fig. 4.16: max detection distance (m) vs N, frontal, 640x480, blur+noise+JPEG")
     print("   paper: d_max falls steeply with N; N=2 -> N=3 loses ~33% (cell 1/2 -> 1/3)")
     for cname, model in cams.items():
-        rng_tex = _Renderer(model, np.random.default_rng(0), BridgeLocScenario())
+        rng_tex = _Renderer(model, np.random.default_rng(0), BridgeLocScenario(preset=PRESET))
         print(f" {cname}")
         print("   size  " + "  ".join(f"N={n:<4d}" for n in ns))
         table = {}
@@ -185,7 +188,9 @@ def detection_range(quick: bool) -> None:
             row = []
             for n in ns:
                 codes, detect = _ours(n)
-                tex = _Renderer(model, np.random.default_rng(0), BridgeLocScenario(n=n)).texture
+                tex = _Renderer(
+                    model, np.random.default_rng(0), BridgeLocScenario(n=n, preset=PRESET)
+                ).texture
                 d = max_distance(model, codes, n, size, tex, detect)
                 row.append(d)
                 table[(size, n)] = d
@@ -213,7 +218,9 @@ def detection_range(quick: bool) -> None:
                 continue
             if dict_id is None:
                 codes, detect = _ours(bits)
-                tex = _Renderer(model, np.random.default_rng(0), BridgeLocScenario(n=bits)).texture
+                tex = _Renderer(
+                    model, np.random.default_rng(0), BridgeLocScenario(n=bits, preset=PRESET)
+                ).texture
             else:
                 codes, tex, detect = _aruco_texture(dict_id)
             res[label] = max_distance(
@@ -267,7 +274,7 @@ def _eval(log: Path, tmp: Path, mode: Mode, pose: PoseMethod = PoseMethod.LSTSQ)
 
 def office(tmp: Path) -> None:
     log = tmp / "office.mcap"
-    simulate_bridgeloc(log, BridgeLocScenario(field="office", tags=1, seed=0))
+    simulate_bridgeloc(log, BridgeLocScenario(field="office", tags=1, seed=0, preset=PRESET))
     print("== Fig. 4.20: median error (m) per distance x view angle, office, view bridging alone")
     print("   paper: < 0.25 m for d < 3 m and |angle| <= 45°, growing quickly beyond 3 m")
     for pose in PoseMethod:
@@ -307,7 +314,10 @@ def lobby(tmp: Path, quick: bool, seeds: int) -> None:
         for s in range(seeds):
             log = tmp / f"lobby_{k}_{s}.mcap"
             simulate_bridgeloc(
-                log, BridgeLocScenario(field="lobby", tags=k, seed=100 + s, duration_s=duration)
+                log,
+                BridgeLocScenario(
+                    field="lobby", tags=k, seed=100 + s, duration_s=duration, preset=PRESET
+                ),
             )
             m = _eval(log, tmp, Mode.FULL)  # one pass scores all three modes on the same frames
             for mode in Mode:
@@ -345,8 +355,12 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="fewer sizes/N, shorter lobby runs")
     ap.add_argument("--seeds", type=int, default=1, help="lobby runs per tag count")
     ap.add_argument("--skip", default="", help="comma-separated sections to skip")
+    ap.add_argument("--preset", default="realistic", help="simulator preset: realistic or paper")
     ap.add_argument("--only", default="", help="comma-separated sections to run")
     args = ap.parse_args()
+    global PRESET
+    PRESET = args.preset
+    print(f"simulator preset: {PRESET}")
     sections = ["counts", "range", "speed", "office", "lobby"]
     if args.only:
         sections = [s for s in sections if s in args.only.split(",")]

@@ -33,7 +33,7 @@ def _far_view(code, d: float, n: int = 2, seed: int = 0):  # noqa: ANN001, ANN20
         _infra("c", (0.0, 0.0, 1.0), (5.0, 0.0, 1.0)),
         world_from_camera=Transform(Vec3(0.0, 0.0, 1.0), Quat(0.5, -0.5, 0.5, -0.5)),
     )
-    ren = _Renderer(model, np.random.default_rng(seed), BridgeLocScenario(n=n))
+    ren = _Renderer(model, np.random.default_rng(seed), BridgeLocScenario(n=n, preset="paper"))
     tag = WallTag("t", code, Placement.SQUARE, Mount.ABOVE, (d, 0.03, 1.02), (-1.0, 0.0), 0.3)
     bg = np.full((480, 640), 110, np.uint8)
     ideal = render_view(model, model.world_from_camera, [tag], bg, ren.texture)

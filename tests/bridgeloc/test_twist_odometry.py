@@ -66,6 +66,7 @@ def test_icam_poses_do_not_need_the_truth(tmp_path: Path) -> None:
         raws = LogReader(out).raw(["/bridgeloc/pose"])
         poses[name] = [(r.log_time_ns, bytes(r.data)) for r in raws]
     # the sample's infrastructure cameras run at 1 Hz for 10 s: one pose per frame with a fix
-    assert 3 <= len(poses["with"]) <= 11
+    # (the robot is within the IR light's range of a camera in 2 of them)
+    assert 2 <= len(poses["with"]) <= 11
     assert len({t for t, _ in poses["with"]}) == len(poses["with"])
     assert poses["with"] == poses["without"]

@@ -5,18 +5,20 @@ localize the robot that sees the same tags (Eqs. 4.7-4.9).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
 
 from trackctl.bridgeloc.detect import TagDetection
 from trackctl.logs.messages import CameraModel, Transform
 
 __all__ = [
     "BridgeObservation",
+    "bridge_branches",
     "bridge_pose",
     "corner_jacobian",
     "project_corners",
@@ -102,6 +104,8 @@ class MapTag:
     _sum: np.ndarray | None = None
     cameras: dict[str, int] = field(default_factory=dict)
     """Sightings per infrastructure camera."""
+    nearest_m: float = math.inf
+    """Distance of the nearest camera that saw it (its systematic error grows with it)."""
     sigma_m: float = 0.02
     """Std of a mapped corner (m): the sightings' scatter, at least 1 cm (set by
     :meth:`robust_mean`)."""
@@ -128,9 +132,10 @@ class MapTag:
         self.weight += weight
         self.corners = self._sum / self.weight
 
-    def robust_mean(self, trim: float = 0.2) -> None:
+    def robust_mean(self, trim: float = 0.2, systematic_per_m: float = 0.0) -> None:
         """Weighted mean without the worst ``trim`` share of sightings (by distance to the
-        median), the estimate the map keeps."""
+        median), the estimate the map keeps; ``sigma_m`` = the sightings' scatter, at least
+        1 cm, plus ``systematic_per_m`` x the nearest camera's distance (calibration, bias)."""
         stack = np.stack([p for p, _ in self.samples])
         ws = np.array([w for _, w in self.samples])
         if len(stack) >= 5:
@@ -141,7 +146,9 @@ class MapTag:
             keep = np.ones(len(stack), bool)
         self.corners = np.average(stack[keep], axis=0, weights=ws[keep])
         spread = np.linalg.norm(stack[keep] - self.corners, axis=2).mean(axis=1)
-        self.sigma_m = math.hypot(0.01, float(np.sqrt(np.average(spread**2, weights=ws[keep]))))
+        scatter = float(np.sqrt(np.average(spread**2, weights=ws[keep])))
+        systematic = systematic_per_m * (self.nearest_m if math.isfinite(self.nearest_m) else 0.0)
+        self.sigma_m = math.hypot(0.01, scatter, systematic)
         self.weight = float(ws.sum())
 
 
@@ -151,9 +158,12 @@ class TagMap:
     Adding a sighting is O(tags of that pattern); the robust mean of each tag is computed once
     in :meth:`finalize` (O(sightings log sightings) in all)."""
 
-    def __init__(self, camera_height_m: float, merge_m: float = 0.6) -> None:
+    def __init__(
+        self, camera_height_m: float, merge_m: float = 0.6, systematic_per_m: float = 0.0
+    ) -> None:
         self.camera_height_m = camera_height_m
         self.merge_m = merge_m
+        self.systematic_per_m = systematic_per_m
         self.tags: list[MapTag] = []
         self._by_pattern: dict[str, list[MapTag]] = {}
 
@@ -171,9 +181,12 @@ class TagMap:
             if np.linalg.norm(tag.center - ctr) < self.merge_m:
                 tag.add_sample(pw, weight)
                 tag.cameras[cam.name] = tag.cameras.get(cam.name, 0) + 1
+                tag.nearest_m = min(tag.nearest_m, dist)
                 return tag
         mount = "above" if ctr[2] > self.camera_height_m else "below"
-        tag = MapTag(det.pattern_id, mount, pw, weight, [(pw, weight)], cameras={cam.name: 1})
+        tag = MapTag(
+            det.pattern_id, mount, pw, weight, [(pw, weight)], cameras={cam.name: 1}, nearest_m=dist
+        )
         self.tags.append(tag)
         same.append(tag)
         return tag
@@ -203,7 +216,7 @@ class TagMap:
 
         self.tags = [t for t in self.tags if stable(t)]
         for t in self.tags:
-            t.robust_mean()
+            t.robust_mean(systematic_per_m=self.systematic_per_m)
             t.mount = "above" if t.center[2] > self.camera_height_m else "below"
 
 
@@ -316,19 +329,21 @@ def corner_jacobian(
     return np.column_stack(cols)
 
 
-def bridge_pose(
+def bridge_branches(
     observations: list[BridgeObservation],
     cam: CameraGeometry,
     size_m: float,
     sigma_px: float,
     floor_m: float = 0.0,
     floor_rad: float = 0.0,
-) -> tuple[tuple[float, float, float], np.ndarray] | None:
-    """The robot pose from tags seen and mapped, with its 3x3 covariance.
+) -> list[tuple[tuple[float, float, float], np.ndarray, float]]:
+    """The robot poses from tags seen and mapped that the pixels allow, with their 3x3
+    covariances and reprojection costs (px^2), best first.
 
     Eq. 4.9 (least squares on the corners in the base frame, known camera height), once per
-    solution of the first tag's two-fold planar PnP ambiguity; the pose whose mapped corners
-    reproject closer to the detected ones wins. (Refining it by minimising the reprojection
+    solution of the first tag's two-fold planar PnP ambiguity; a solution is kept unless its
+    mapped corners reproject worse than the best by more than the noise explains (chi-square
+    in 3 dof, 99 %): a small tag seen near head-on keeps both. (Refining it by minimising the reprojection
     error over (x, y, yaw) was tried: one small far tag leaves a valley in which the refined
     pose wanders farther than Eq. 4.9's, 0.12 against 0.08 m on the office log: the map's
     corners are not exact, and Eq. 4.9 leans less on the tag's mapped tilt.)
@@ -340,7 +355,7 @@ def bridge_pose(
     not explain (camera mount, tag map, robot tilt).
     """
     if not observations:
-        return None
+        return []
     world = np.concatenate([ob.world for ob in observations])
     image = np.concatenate([ob.detection.corners for ob in observations]).reshape(-1)
     rest = []
@@ -359,32 +374,71 @@ def bridge_pose(
     first = observations[0].detection
     cands = poses(first)
     if not cands:
-        return None
+        return []
     cost = [float(np.sum((project_corners(p, world, cam).reshape(-1) - image) ** 2)) for p in cands]
-    pose = cands[int(np.argmin(cost))]
-    # d pose / d pixel of the first tag, following the chosen branch (a finite difference)
+    floor = np.diag([floor_m**2, floor_m**2, floor_rad**2])
+    # the cost difference of two poses is chi-square in the pose's 3 dof when both fit
+    plausible = float(chi2.ppf(0.99, 3)) * sigma_px**2
+    out = []
+    for k in np.argsort(cost):
+        if cost[k] - min(cost) > plausible:
+            continue  # the pixels rule this branch out
+        pose = cands[int(k)]
+        if len(observations) == 1:
+            cov = _branch_cov(first, pose, poses, sigma_px)
+        else:  # several tags: the reprojection's information (Eq. 4.9 is near-efficient)
+            jac = corner_jacobian(pose, world, cam)
+            try:
+                cov = sigma_px**2 * np.linalg.inv(jac.T @ jac)
+            except np.linalg.LinAlgError:
+                cov = None
+        if cov is not None:
+            out.append((pose, cov + floor, cost[int(k)]))
+    return out
+
+
+def _branch_cov(
+    det: TagDetection,
+    pose: tuple[float, float, float],
+    poses: Callable[[TagDetection], list[tuple[float, float, float]]],
+    sigma_px: float,
+) -> np.ndarray | None:
+    """d pose / d pixel of one tag's corners, following the branch at ``pose`` (finite
+    differences), times ``sigma_px``^2."""
     eps = 0.05
     cols = []
     for i in range(8):
-        px = np.array(first.corners, np.float64)
+        px = np.array(det.corners, np.float64)
         px.flat[i] += eps
-        moved = poses(replace(first, corners=px))
+        moved = poses(replace(det, corners=px))
         if not moved:
-            continue
+            return None
         near = min(moved, key=lambda p: _pose_dist(p, pose))
         cols.append(
             np.array([near[0] - pose[0], near[1] - pose[1], _wrap(near[2] - pose[2])]) / eps
         )
-    floor = np.diag([floor_m**2, floor_m**2, floor_rad**2])
-    if len(observations) == 1 and len(cols) == 8:
-        jac_px = np.array(cols).T
-        return pose, sigma_px**2 * jac_px @ jac_px.T + floor
-    # several tags: the reprojection's information (Eq. 4.9 is near-efficient with many points)
-    jac = corner_jacobian(pose, world, cam)
-    try:
-        return pose, sigma_px**2 * np.linalg.inv(jac.T @ jac) + floor
-    except np.linalg.LinAlgError:
+    jac_px = np.array(cols).T
+    return np.asarray(sigma_px**2 * jac_px @ jac_px.T)
+
+
+def bridge_pose(
+    observations: list[BridgeObservation],
+    cam: CameraGeometry,
+    size_m: float,
+    sigma_px: float,
+    floor_m: float = 0.0,
+    floor_rad: float = 0.0,
+) -> tuple[tuple[float, float, float], np.ndarray] | None:
+    """The best branch of :func:`bridge_branches`; when the other branch is plausible too, the
+    covariance also spans the gap between them (the pose is one or the other)."""
+    branches = bridge_branches(observations, cam, size_m, sigma_px, floor_m, floor_rad)
+    if not branches:
         return None
+    pose, cov, _ = branches[0]
+    for other, _, _ in branches[1:]:
+        d = np.array([other[0] - pose[0], other[1] - pose[1], _wrap(other[2] - pose[2])])
+        cov = cov + np.outer(d, d)
+    return pose, cov
 
 
 def _pose_dist(a: tuple[float, float, float], b: tuple[float, float, float]) -> float:

@@ -37,6 +37,16 @@ class DetectorConfig:
     """Grey-level difference required between the white quiet zone and the black border."""
     cell_margin: float = 0.25
     """A cell must differ from the black/white midpoint by this fraction of the contrast."""
+    border_dark_share: float = 0.7
+    """Share of samples along each side's border that must be darker than the midpoint."""
+    quiet_light_share: float = 0.7
+    """Share of samples outside each side that must be lighter than the midpoint."""
+    tiny_parallel_tol: float = 0.2
+    """Tags under ~16 px: opposite sides may differ by this fraction of their mean."""
+    side_contrast: float = 0.3
+    """Each side's quiet zone must be this fraction of the tag's contrast lighter than its
+    border."""
+
     edge_margin_px: float = 2.0
     """Quads with a corner this close to the image edge are cut by it: rejected."""
     vertical_tol_deg: float = 20.0
@@ -117,7 +127,7 @@ def _rings(n: int, border_ratio: float) -> tuple[int, int, float, np.ndarray, np
 
 
 def _decode(
-    gray: np.ndarray, corners: np.ndarray, cfg: DetectorConfig
+    gray: np.ndarray, corners: np.ndarray, cfg: DetectorConfig, check_sides: bool = True
 ) -> tuple[Code, float] | None:
     geo = tag_geometry(cfg.n, cfg.border_ratio)
     side, m, b, ring_in, ring_out = _rings(cfg.n, cfg.border_ratio)
@@ -136,8 +146,12 @@ def _decode(
     if contrast < cfg.min_contrast:
         return None
     mid = (white + black) / 2
+    # a tag's border is dark and its quiet zone light on every side: text, frames and signage
+    # are dark on some sides only (a "[" has no right side, a framed sign no quiet zone)
     if np.mean(inner < mid) < 0.6 or np.mean(outer < mid) > 0.25:
         return None  # not a black border inside a white margin
+    if check_sides and not _sides_ok(gray, corners, mid, contrast, cfg):
+        return None
     cell = geo.cell * side
     bits = []
     for r in range(cfg.n):
@@ -152,6 +166,61 @@ def _decode(
     if all(bits) or not any(bits):
         return None  # uniform codes are not tags (practical rule: too many false positives)
     return tuple(bits), contrast
+
+
+def _parallel_enough(corners: np.ndarray, cfg: DetectorConfig) -> bool:
+    """A tag under ``tiny_side_px`` is far enough for no visible perspective: its opposite
+    sides are equally long (within ``tiny_parallel_tol``). Larger quads are not tested."""
+    sides = np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)
+    if sides.max() > cfg.tiny_side_px * 1.35:
+        return True
+    d02 = abs(sides[0] - sides[2]) / (sides[0] + sides[2])
+    d13 = abs(sides[1] - sides[3]) / (sides[1] + sides[3])
+    return max(d02, d13) <= cfg.tiny_parallel_tol / 2
+
+
+def _sides_ok(
+    gray: np.ndarray, corners: np.ndarray, mid: float, contrast: float, cfg: DetectorConfig
+) -> bool:
+    """Every side of the quad is a dark border with a light quiet zone outside it.
+
+    Sampled in image pixels along each side (its middle 60 %): in the middle of the border and
+    at least 1.2 px outside the edge, so tiny tags are judged on pixels the blur has not mixed
+    (the canonical warp's rings lie within a pixel of the edge for a 10 px tag)."""
+    q = np.asarray(corners, np.float64).reshape(4, 2)
+    side_px = float(np.mean(np.linalg.norm(q - np.roll(q, 1, axis=0), axis=1)))
+    border_px = side_px / (cfg.border_ratio + 2)
+    d_in = 0.5 * border_px
+    d_out = max(1.2, 0.5 * border_px)
+    ctr = q.mean(axis=0)
+    ts = np.linspace(0.2, 0.8, 7)
+    for i in range(4):
+        a, b = q[i], q[(i + 1) % 4]
+        d = (b - a) / max(float(np.linalg.norm(b - a)), 1e-9)
+        nrm = np.array([-d[1], d[0]])
+        if nrm @ (a - ctr) < 0:
+            nrm = -nrm
+        base = a[None, :] + ts[:, None] * (b - a)[None, :]
+        pts = np.concatenate([base - d_in * nrm, base + d_out * nrm]).astype(np.float32)
+        vals = (
+            cv2.remap(
+                gray,
+                pts[None, :, 0],
+                pts[None, :, 1],
+                cv2.INTER_LINEAR,
+                borderMode=cv2.BORDER_REPLICATE,
+            )
+            .reshape(-1)
+            .astype(np.float64)
+        )
+        inside, outside = vals[: len(ts)], vals[len(ts) :]
+        if np.mean(inside < mid) < cfg.border_dark_share:
+            return False  # this side has no dark border ("[" has no right side)
+        if np.mean(outside > mid) < cfg.quiet_light_share:
+            return False  # no light quiet zone here (a frame, a line of text next to it)
+        if float(outside.mean() - inside.mean()) < cfg.side_contrast * contrast:
+            return False
+    return True
 
 
 def _quiet_zone_quads(
@@ -280,7 +349,17 @@ def _fit_tiny(gray: np.ndarray, box: np.ndarray, cfg: DetectorConfig) -> TagDete
     if got is None:
         return None
     corners, placement = order_corners(got.corners, cfg.vertical_tol_deg)
-    dec = _decode(gray, corners, cfg)
+    sides = np.linalg.norm(corners - np.roll(corners, 1, axis=0), axis=1)
+    if (
+        max(
+            abs(sides[0] - sides[2]) / (sides[0] + sides[2]),
+            abs(sides[1] - sides[3]) / (sides[1] + sides[3]),
+        )
+        > cfg.tiny_parallel_tol / 2
+    ):
+        return None  # a tag this small is seen without perspective: opposite sides are equal
+    # the fit itself matched the quiet zone, the border and the cells (residual-gated)
+    dec = _decode(gray, corners, cfg, check_sides=False)
     if dec is None:
         return None
     return TagDetection(dec[0], placement, corners, dec[1])
@@ -367,6 +446,8 @@ def _read_quad(
             (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.01),
         )
     corners, placement = order_corners(refined.reshape(4, 2), cfg.vertical_tol_deg)
+    if not _parallel_enough(corners, cfg):
+        return None
     dec = _decode(gray, corners, cfg)
     if dec is None:
         return None

@@ -49,6 +49,17 @@ class EkfConfig:
     """Position std added to every bridged pose: camera mount and tag map errors."""
     bridge_floor_rad: float = 0.02
     """Heading std added to every bridged pose: camera mount yaw, robot pitch and roll."""
+    camera_tilt_rad: float = 0.01
+    """Std of the robot camera's rotation away from its calibrated mount at any instant
+    (pitch and roll of a small robot on a real floor, mount calibration): a common shift of all
+    corners of a frame, f x this in pixels."""
+    calib_rad: float = 0.004
+    """Residual rotation error of an infrastructure camera's calibrated pose (a floor-point PnP
+    calibration good to a few pixels): ground errors growing with range, for I-Cam fixes and
+    for the tag map."""
+    map_scale_frac: float = 0.01
+    """Systematic range error of a tag localized by an infrastructure camera, as a fraction of
+    its distance (sub-pixel corner bias on a tag tens of pixels wide)."""
     icam_sigma_px: float = 1.5
     """Std of the IR light's centroid in an infrastructure image (px)."""
     icam_floor_m: float = 0.05
@@ -150,6 +161,15 @@ class RobotEkf:
         )
         self.kf.x[2, 0] = wrap(float(self.kf.x[2, 0]))
         return True
+
+    def floor_position(self, sigma_m: float) -> None:
+        """Keep the position std at least ``sigma_m``: a measurement relative to a mapped tag
+        cannot make the robot surer of its position than the map is of the tag (the map's
+        systematic error does not average out over repeated sightings)."""
+        p = self.kf.P[:2, :2]
+        low = float(np.linalg.eigvalsh(p).min())
+        if low < sigma_m**2:
+            self.kf.P[:2, :2] = p + np.eye(2) * (sigma_m**2 - low)
 
     def update_position(self, xy: np.ndarray, cov: np.ndarray) -> bool:
         """An I-Cam position fix with its 2x2 covariance; False when gated out."""

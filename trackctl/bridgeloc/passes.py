@@ -26,6 +26,7 @@ from trackctl.bridgeloc.bridge import (
     CameraGeometry,
     MapTag,
     TagMap,
+    bridge_branches,
     bridge_pnp,
     bridge_pose,
     corner_jacobian,
@@ -100,16 +101,39 @@ def ir_light(gray: np.ndarray, threshold: int, min_area: int) -> np.ndarray | No
     return None if not blobs else max(blobs, key=lambda b: b[1])[0]
 
 
-def ir_blobs(gray: np.ndarray, threshold: int, min_area: int) -> list[tuple[np.ndarray, int]]:
-    """Every saturated blob (centroid px, area px): the robot's IR light and whatever else is
-    as bright (lamps, reflections, windows); the caller tells them apart."""
+def ir_blobs(
+    gray: np.ndarray, threshold: int, min_area: int, isolation: float = 0.75
+) -> list[tuple[np.ndarray, int]]:
+    """Every saturated blob that stands alone (centroid px, area px): the robot's IR light and
+    whatever else glows as it does (lamps, reflections; the caller tells them apart).
+
+    A light source is far brighter than full scale: its core is clipped (>= 250), where a
+    bright surface (white paper under strong light) only crosses the threshold in noisy
+    fragments. And it is a compact spot whose surroundings are dark: the median grey of an
+    annulus at 2.5-4 blob radii must stay below ``isolation`` x ``threshold`` (a window or a
+    large bright patch is not a light)."""
     _, binary = cv2.threshold(gray, threshold, 255, cv2.THRESH_BINARY)
-    n, _, stats, cents = cv2.connectedComponentsWithStats(binary)
-    return [
-        (cents[k], int(stats[k, cv2.CC_STAT_AREA]))
-        for k in range(1, n)
-        if stats[k, cv2.CC_STAT_AREA] >= min_area
-    ]
+    n, labels, stats, cents = cv2.connectedComponentsWithStats(binary)
+    h, w = gray.shape
+    # a light source is far beyond full scale: its core is clipped, not just over threshold
+    clipped = np.bincount(labels[gray >= 250], minlength=n)
+    out = []
+    for k in range(1, n):
+        area = int(stats[k, cv2.CC_STAT_AREA])
+        if area < min_area or clipped[k] < 1:
+            continue
+        cx, cy = cents[k]
+        r = math.sqrt(area / math.pi) + 1.5
+        r_in, r_out = 2.5 * r, 4.0 * r
+        x0, x1 = max(0, int(cx - r_out)), min(w, int(cx + r_out) + 1)
+        y0, y1 = max(0, int(cy - r_out)), min(h, int(cy + r_out) + 1)
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        d2 = (xx - cx) ** 2 + (yy - cy) ** 2
+        ring = gray[y0:y1, x0:x1][(d2 >= r_in * r_in) & (d2 <= r_out * r_out)]
+        if ring.size and float(np.median(ring)) >= isolation * threshold:
+            continue
+        out.append((cents[k], area))
+    return out
 
 
 def _models(reader: LogReader) -> dict[str, CameraModel]:
@@ -323,7 +347,8 @@ def map_tags(
         The finalized tag map, the I-Cam fixes, and the number of messages read.
     """
     infra = setup.infra
-    tag_map = TagMap(setup.cam_h)
+    e = cfg.ekf
+    tag_map = TagMap(setup.cam_h, systematic_per_m=math.hypot(e.calib_rad, e.map_scale_frac))
     icam = IcamFixes(0)
     max_ir_m = 0.25  # the light's glow is never wider than this on the ground plane
     geos = {name: CameraGeometry.from_model(m) for name, m in infra.items()}
@@ -381,7 +406,9 @@ def _icam_fix(
         return None
     drop = max(0.3, abs(float(pin.position[2]) - ir_height_m))
     per_px = d * d / (f * drop)
-    sigma = math.hypot(cfg.ekf.icam_floor_m, cfg.ekf.icam_sigma_px * per_px)
+    e = cfg.ekf
+    # pixel noise and the camera's calibration error, both magnified by the grazing ray
+    sigma = math.hypot(e.icam_floor_m, e.icam_sigma_px * per_px, e.calib_rad * f * per_px)
     return IcamFix(g[:2].copy(), np.eye(2) * sigma**2, pin.model.camera)
 
 
@@ -393,6 +420,19 @@ def _in_front(pose: Pose, world: np.ndarray, cam: CameraGeometry, min_depth_m: f
     p_c = r_wb @ cam.t + [pose[0], pose[1], 0.0]
     depth = (np.asarray(world) - p_c) @ (r_wb @ cam.R)[:, 2]
     return bool((depth > min_depth_m).all())
+
+
+def _position_cov(cov2: np.ndarray, var_yaw: float) -> np.ndarray:
+    out = np.zeros((3, 3))
+    out[:2, :2] = cov2
+    out[2, 2] = var_yaw
+    return out
+
+
+def _usable_start(cov: np.ndarray, max_sigma_m: float) -> bool:
+    """A bridged pose good enough to start (or restart) the filter: position std within
+    ``max_sigma_m`` (a far tag seen near head-on is two-fold ambiguous and is not)."""
+    return float(np.sqrt(np.linalg.eigvalsh(cov[:2, :2]).max())) <= max_sigma_m
 
 
 def _reproject(pose: np.ndarray, world: np.ndarray, cam: CameraGeometry) -> np.ndarray:
@@ -407,7 +447,7 @@ def _bridge_fix(
     cfg: BridgeLocConfig,
 ) -> tuple[Pose, np.ndarray] | None:
     """Basic bridging: the tags whose signature is unique in the map -> robot pose (Eq. 4.9)
-    and its covariance (the same measurement the EKF takes)."""
+    and its covariance."""
     unique = []
     for d, sig, _ in obs:
         cands = tag_map.candidates(sig)
@@ -499,6 +539,7 @@ class RobotPass:
         self.stats = RobotPassStats()
         self._icam_next = 0
         self._bad_frames = 0
+        self._icam_rejects = 0
         self.prev_odom: WheelOdometry | None = None
         self.odom_topic = topics.odom(setup.robot)
         self.frame_topic: str | None = topics.image(setup.rcam_name) if setup.needs_robot else None
@@ -549,6 +590,13 @@ class RobotPass:
             ok = ekf.update_position(best.xy, best.cov)
             self.stats.icam_fused += ok
             self.stats.rejected_updates += not ok
+            self._icam_rejects = 0 if ok else self._icam_rejects + 1
+            if self._icam_rejects >= self.cfg.ekf.max_rejects and len(cands) == 1:
+                # the one light the cameras see keeps disagreeing (a wrong start, slip): the
+                # position is the fix's, the heading kept but no longer trusted
+                ekf.init((*best.xy, ekf.pose[2]), _position_cov(best.cov, 0.5**2))
+                self._icam_rejects = 0
+                self.stats.restarts += 1
 
     def _on_truth(self, t_ns: int, gt: GroundTruth) -> None:
         for e in gt.entities:
@@ -598,7 +646,10 @@ class RobotPass:
         rgeo = self.setup.rgeo
         assert rgeo is not None
         obs = self._observe_tags(t_ns, message.data, det_times)  # type: ignore[attr-defined]
-        bridge = _bridge_fix(obs, self.tag_map, rgeo, self.setup, self.cfg)
+        raw = _bridge_fix(obs, self.tag_map, rgeo, self.setup, self.cfg)
+        # a two-fold ambiguous pose (a far tag near head-on) is no fix: only Fig. 4.20's
+        # bridging-alone scores see it
+        bridge = raw if raw is not None and _usable_start(raw[1], self.cfg.max_sigma_m) else None
         fix = self.icam.at(t_ns)
         if bridge is not None:
             self.stats.bridge_fixes += 1
@@ -617,7 +668,7 @@ class RobotPass:
         full_pose: Pose | None = self.ekf.pose if self.ekf.initialized else None
         if full_pose is not None:
             self.other_sigmas[t_ns] = self.ekf.sigma_m
-        self.bridge_only.append((t_ns, None if bridge is None else bridge[0]))
+        self.bridge_only.append((t_ns, None if raw is None else raw[0]))
         self.other[Mode.ICAM].append((t_ns, icam_pose))
         self.other[Mode.BASIC].append((t_ns, basic_pose))
         self.other[Mode.FULL].append((t_ns, full_pose))
@@ -642,7 +693,7 @@ class RobotPass:
         ekf, fused, rejected = self.ekf, False, False
         if not ekf.initialized:
             if bridge is None:
-                return False
+                return False  # wait for a usable bridged pose or an I-Cam fix
             ekf.init(*bridge)
             return True
         rgeo = self.setup.rgeo
@@ -682,14 +733,24 @@ class RobotPass:
         ekf, cfg, setup = self.ekf, self.cfg, self.setup
         if ekf.sigma_yaw > 0.3:
             options = []
-            for tag in mapped:
-                m = _bridged([BridgeObservation(d, tag.corners)], rgeo, setup, cfg)
-                if m is not None:
-                    options.append((ekf.pose_nis(*m), m, tag))
+            e = cfg.ekf
+            for tag in mapped:  # each tag it may be, each PnP branch the pixels allow
+                for pose, cov, _ in bridge_branches(
+                    [BridgeObservation(d, tag.corners)],
+                    rgeo,
+                    setup.tag_size_m,
+                    e.corner_sigma_px,
+                    e.bridge_floor_m,
+                    e.bridge_floor_rad,
+                ):
+                    options.append((ekf.pose_nis(pose, cov), (pose, cov), tag))
             if not options:
                 return False, mapped[0]
             _, meas, tag = min(options, key=lambda o: o[0])
-            return ekf.update_pose(*meas), tag
+            ok = ekf.update_pose(*meas)
+            if ok:
+                ekf.floor_position(tag.sigma_m)
+            return ok, tag
         z = np.asarray(d.corners, float).reshape(-1)
         scored = []
         for tag in mapped:
@@ -697,15 +758,23 @@ class RobotPass:
                 continue  # a tag sharing the pattern behind the robot cannot be this one
             # pixel noise and the map's corner error seen from here
             rng_m = max(0.3, float(np.linalg.norm(tag.center[:2] - np.array(ekf.pose[:2]))))
-            var = cfg.ekf.corner_sigma_px**2 + (float(rgeo.K[0, 0]) * tag.sigma_m / rng_m) ** 2
+            f = float(rgeo.K[0, 0])
+            var = cfg.ekf.corner_sigma_px**2 + (f * tag.sigma_m / rng_m) ** 2
             r = np.eye(len(z)) * var
+            # the camera's pitch, roll and mount error shift all corners of the frame together
+            common = (f * cfg.ekf.camera_tilt_rad) ** 2
+            r[0::2, 0::2] += common
+            r[1::2, 1::2] += common
             jac = corner_jacobian(ekf.pose, tag.corners, rgeo)
             hx = partial(_reproject, world=tag.corners, cam=rgeo)
             scored.append((ekf.measurement_nis(z, hx, jac, r), tag, hx, jac, r))
         if not scored:
             return False, mapped[0]
         _, tag, hx, jac, r = min(scored, key=lambda o: o[0])
-        return ekf.update_measurement(z, hx, jac, r), tag
+        ok = ekf.update_measurement(z, hx, jac, r)
+        if ok:
+            ekf.floor_position(tag.sigma_m)
+        return ok, tag
 
     def finish(self) -> None:
         """I-Cam mode writes its poses once the pass is over: one per infrastructure frame that

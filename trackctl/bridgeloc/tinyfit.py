@@ -107,14 +107,16 @@ def _design(
 
 
 def _darkness(gray: np.ndarray, centre: np.ndarray, side: float) -> float:
-    """Median of the ring 0.6-0.8 sides around ``centre`` minus the darkest pixel of its core."""
+    """Median of the ring 0.6-0.8 sides around ``centre`` minus the darkest pixel within half
+    a side of it."""
     r = 0.8 * side
     x0, y0 = max(int(np.floor(centre[0] - r)), 0), max(int(np.floor(centre[1] - r)), 0)
     x1, y1 = int(np.ceil(centre[0] + r)), int(np.ceil(centre[1] + r))
     patch = gray[y0 : y1 + 1, x0 : x1 + 1].astype(np.float64)
     ys, xs = np.mgrid[y0 : y0 + patch.shape[0], x0 : x0 + patch.shape[1]]
     cheb = np.maximum(np.abs(xs - centre[0]), np.abs(ys - centre[1]))
-    core, ring = patch[cheb <= 0.35 * side], patch[cheb >= 0.6 * side]
+    # the core spans the whole start square: a start a pixel off still holds the black border
+    core, ring = patch[cheb <= 0.5 * side], patch[cheb >= 0.6 * side]
     if core.size == 0 or ring.size == 0:
         return 0.0
     return float(np.median(ring) - core.min())

@@ -136,6 +136,13 @@ def simulate_bridgeloc(
         5.0
     ),
     seed: Annotated[int, typer.Option(help="Random seed (same seed, same bytes).")] = 0,
+    preset: Annotated[
+        str,
+        typer.Option(
+            help="realistic (posters, lamps, blur, lighting drift, tilt, calibration errors) "
+            "or paper (the dissertation's idealised scene)."
+        ),
+    ] = "realistic",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
@@ -151,6 +158,7 @@ def simulate_bridgeloc(
         duration_s=duration,
         robot_fps=robot_fps,
         infra_fps=infra_fps,
+        preset=preset,
     )
     counts = simulate(str(out), cfg)
     if json_out:

@@ -42,6 +42,8 @@ from trackctl.logs.writer import LogWriter
 from trackctl.sim.lens import LensDistortion
 
 __all__ = [
+    "PRESETS",
+    "Realism",
     "BridgeLocScenario",
     "WallTag",
     "lobby_layout",
@@ -55,6 +57,70 @@ S = 1_000_000_000
 ROBOT = "r1"
 ROBOT_CAMERA = "r1cam"
 MARGIN = 0.25  # white quiet zone around the black square, fraction of its side
+
+
+@dataclass(frozen=True, slots=True)
+class Realism:
+    """What the ``realistic`` preset adds to the idealised scene (``paper``: all off).
+
+    Each model and its source (docs/bridgeloc.md lists them):
+
+    * ``posters`` printed text and signage on the walls (notices, exit signs, framed boxes,
+      arrows; :mod:`trackctl.sim.clutter`): what real corridors carry, and what a square-tag
+      detector mistakes for tags.
+    * ``lamps`` wall lamps at 2.3 m that saturate the IR-sensitive infrastructure cameras as
+      the robot's IR light does (a lit sconce is far brighter than an IR LED at 6 m).
+    * ``defocus_px`` Gaussian blur of a fixed-focus webcam lens (the JD-510 and C210 are
+      fixed-focus; ~1 px is typical away from the focus distance).
+    * ``noise_sigma`` sensor noise in grey levels at indoor light (consumer CMOS at 300 lux,
+      EMVA 1288 datasheets of 1/4" sensors: 3-5 DN), ``jpeg_quality`` of webcam MJPEG.
+    * ``exposure_s`` exposure time (webcam auto-exposure indoors: 1/60-1/30 s): the robot's
+      turning and driving smear its images along the motion.
+    * ``light_drift`` slow global gain change per camera (daylight through windows, dimming:
+      +-15 % over minutes) and ``vignetting`` (corner falloff of a cheap wide lens).
+    * ``tilt_deg`` robot pitch and roll std (floor unevenness and acceleration on a small
+      robot; 2-3 mm bumps over a 0.3 m wheel base give ~0.5 deg).
+    * ``infra_calib_deg`` / ``infra_calib_m`` the infrastructure cameras' true pose differs
+      from the calibrated pose in the log by this much (floor-point PnP calibration at ~1 px).
+    * ``mount_deg`` the robot camera's true mount differs from the calibrated one.
+    * ``ir_offset_m`` the IR light sits this far ahead of the base centre (mounting).
+    """
+
+    posters: int = 0
+    lamps: int = 0
+    defocus_px: float = 0.7
+    noise_sigma: float = 2.5
+    jpeg_quality: int = 75
+    exposure_s: float = 0.0
+    light_drift: float = 0.0
+    vignetting: float = 0.0
+    tilt_deg: float = 0.0
+    infra_calib_deg: float = 0.0
+    infra_calib_m: float = 0.0
+    mount_deg: float = 0.0
+    ir_offset_m: float = 0.0
+
+
+PRESETS: dict[str, Realism] = {
+    "paper": Realism(),
+    "realistic": Realism(
+        posters=6,
+        lamps=2,
+        defocus_px=1.0,
+        noise_sigma=4.0,
+        jpeg_quality=65,
+        exposure_s=1 / 60,
+        light_drift=0.15,
+        vignetting=0.25,
+        tilt_deg=0.5,
+        infra_calib_deg=0.3,
+        infra_calib_m=0.02,
+        mount_deg=0.5,
+        ir_offset_m=0.05,
+    ),
+}
+"""``paper``: the dissertation's idealised setting (clean renders, exact calibration), kept for
+its tables; ``realistic`` (the default): the models above."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,10 +144,16 @@ class BridgeLocScenario:
     """Distance beyond which the IR light is too dim for the infrastructure cameras."""
     speed_mps: float = 0.4
     turn_rps: float = 1.0
-    jpeg_quality: int = 75
-    noise_sigma: float = 2.5
+    preset: str = "realistic"
+    """``realistic`` (default) or ``paper``: see :class:`Realism` and :data:`PRESETS`."""
+
+    @property
+    def realism(self) -> Realism:
+        return PRESETS[self.preset]
 
     def __post_init__(self) -> None:
+        if self.preset not in PRESETS:
+            raise InputError(f"--preset {self.preset!r}: expected one of {', '.join(PRESETS)}")
         if self.field not in ("office", "lobby"):
             raise InputError(f"--field {self.field!r}: expected office or lobby")
         if not 1 <= self.tags <= 56:
@@ -347,11 +419,19 @@ class _Renderer:
             self._tex[key] = tag_texture(code, self.cfg.n, side, margin=MARGIN, white=205, black=30)
         return self._tex[key]
 
-    def finish(self, ideal: np.ndarray) -> bytes:
-        img = cv2.GaussianBlur(self.lens.apply(ideal), (0, 0), 0.7)
-        noise = self.rng.normal(0.0, self.cfg.noise_sigma, img.shape)
+    def finish(self, ideal: np.ndarray, smear_px: float = 0.0) -> bytes:
+        """Lens, motion smear (horizontal, ``smear_px`` long), defocus, noise, JPEG."""
+        real = self.cfg.realism
+        img = self.lens.apply(ideal)
+        if smear_px >= 1.0:
+            k = int(math.ceil(smear_px)) | 1
+            kernel = np.zeros((1, k), np.float32)
+            kernel[0, (k - int(round(smear_px))) // 2 : (k + int(round(smear_px))) // 2 + 1] = 1
+            img = cv2.filter2D(img, -1, kernel / kernel.sum())
+        img = cv2.GaussianBlur(img, (0, 0), real.defocus_px)
+        noise = self.rng.normal(0.0, real.noise_sigma, img.shape)
         img = np.clip(img + noise, 0, 255).astype(np.uint8)
-        ok, buf = cv2.imencode(".jpg", img, [int(cv2.IMWRITE_JPEG_QUALITY), self.cfg.jpeg_quality])
+        ok, buf = cv2.imencode(".jpg", img, [int(cv2.IMWRITE_JPEG_QUALITY), real.jpeg_quality])
         assert ok
         return buf.tobytes()
 
@@ -369,6 +449,28 @@ def draw_tag(img: np.ndarray, cam: PinholeCamera, tag: WallTag, tex_fn) -> None:
     if to_cam[0] * tag.normal[0] + to_cam[1] * tag.normal[1] <= 0.02:
         return  # behind the wall
     outer = tag_corners(tag, 1.0 + 2 * MARGIN)
+    _warp_quad(img, cam, outer, lambda side: tex_fn(tag.code, int(round(side / (1 + 2 * MARGIN)))))
+
+
+@dataclass(frozen=True)
+class Poster:
+    """A printed poster on a wall: corners TL, TR, BR, BL (world), inward normal, texture."""
+
+    corners: np.ndarray
+    normal: tuple[float, float]
+    texture: np.ndarray
+
+
+def draw_poster(img: np.ndarray, cam: PinholeCamera, poster: Poster) -> None:
+    to_cam = cam.position - poster.corners.mean(axis=0)
+    if to_cam[0] * poster.normal[0] + to_cam[1] * poster.normal[1] <= 0.02:
+        return
+    tex = poster.texture
+    _warp_quad(img, cam, poster.corners, lambda side: tex)
+
+
+def _warp_quad(img: np.ndarray, cam: PinholeCamera, outer: np.ndarray, tex_for) -> None:  # noqa: ANN001
+    """Warp the texture ``tex_for(side_px)`` onto the projected world quad ``outer``."""
     pc = cam.to_camera(outer)
     if (pc[:, 2] < 0.05).any():
         return
@@ -384,7 +486,7 @@ def draw_tag(img: np.ndarray, cam: PinholeCamera, tag: WallTag, tex_fn) -> None:
     # supersample small quads and average down (INTER_AREA): edges land within ~0.1 px
     ss = 4 if size[0] * size[1] < 20_000 else (2 if size[0] * size[1] < 80_000 else 1)
     side = int(np.clip(2 ** math.ceil(math.log2(max(side_px * ss, 8))), 16, 1024))
-    tex = tex_fn(tag.code, int(round(side / (1 + 2 * MARGIN))))
+    tex = tex_for(side)
     th, tw = tex.shape
     # texel centres are integers, so the texture's outer edges lie at -0.5 and size - 0.5
     src = np.array(
@@ -410,19 +512,28 @@ def render_view(
     world_from_camera: Transform,
     tags: list[WallTag],
     background: np.ndarray,
-    tex_fn,
-    robot: tuple[float, float, float] | None = None,  # noqa: ANN001
+    tex_fn,  # noqa: ANN001
+    robot: tuple[float, float, float] | None = None,
     ir_height_m: float = 0.65,
     ir_range_m: float = 7.0,
+    posters: tuple[Poster, ...] = (),
+    lamps: tuple[tuple[float, float, float], ...] = (),
+    shade: np.ndarray | None = None,
+    ir_offset_m: float = 0.0,
 ) -> np.ndarray:
-    """The ideal (undistorted) grayscale view: background, tags, robot body and IR light."""
+    """The ideal (undistorted) grayscale view: background, posters, tags, robot body; the
+    scene times ``shade`` (lighting gain x vignetting); then the saturating light sources (the
+    robot's IR light, lamps), which stay saturated whatever the exposure."""
     cam = _pinhole(model, world_from_camera)
     img = background.copy()
+    for poster in posters:
+        draw_poster(img, cam, poster)
     order = sorted(tags, key=lambda t: -float(np.linalg.norm(cam.position - np.asarray(t.center))))
     for tag in order:
         draw_tag(img, cam, tag, tex_fn)
+    lights: list[tuple[np.ndarray, float, float]] = []  # (world point, peak, radius m)
     if robot is not None:
-        x, y, _ = robot
+        x, y, yaw = robot
         ang = np.linspace(0, 2 * math.pi, 16, endpoint=False)
         ring = np.column_stack([x + 0.2 * np.cos(ang), y + 0.2 * np.sin(ang), np.full(16, 0.0)])
         top = ring + [0, 0, ir_height_m - 0.05]
@@ -430,19 +541,33 @@ def render_view(
         if front.all():
             hull = cv2.convexHull(pts.astype(np.float32)).astype(np.int32)
             cv2.fillConvexPoly(img, hull, 45, cv2.LINE_AA)
-        light = np.array([[x, y, ir_height_m]])
-        lp, lfront = cam.project(light)
-        d = float(np.linalg.norm(cam.position - light[0]))
-        if lfront[0]:
-            peak = 255.0 * min(1.0, (ir_range_m / d) ** 2)
-            r = max(1.5, 0.03 * model.fx_px / d)
-            spot: np.ndarray = np.zeros_like(img, np.float32)
-            cv2.circle(
-                spot, tuple(int(round(v)) for v in lp[0]), int(round(r * 2)), 1.0, -1, cv2.LINE_AA
-            )
-            spot = np.asarray(cv2.GaussianBlur(spot, (0, 0), r), np.float32)
-            spot /= max(float(spot.max()), 1e-6)
-            img = np.maximum(img, (spot * peak).astype(np.uint8))
+        light = np.array(
+            [x + ir_offset_m * math.cos(yaw), y + ir_offset_m * math.sin(yaw), ir_height_m]
+        )
+        d = float(np.linalg.norm(cam.position - light))
+        # a light source overexposes the camera (its core is clipped, with bloom); it fades
+        # with the inverse square and stops clipping at ir_range_m
+        lights.append((light, 255.0 * min(3.0, (ir_range_m / d) ** 2), 0.03))
+    for lamp in lamps:
+        lights.append((np.asarray(lamp, float), 3.0 * 255.0, 0.06))
+    if shade is not None:
+        img = np.clip(img * shade, 0, 255).astype(np.uint8)
+    for point, peak, radius_m in lights:
+        lp, lfront = cam.project(point[None])
+        if not lfront[0]:
+            continue
+        d = float(np.linalg.norm(cam.position - point))
+        r = max(1.5, radius_m * model.fx_px / d)
+        centre = tuple(int(round(v)) for v in lp[0])
+        if not (
+            -4 * r < centre[0] < img.shape[1] + 4 * r and -4 * r < centre[1] < img.shape[0] + 4 * r
+        ):
+            continue
+        spot: np.ndarray = np.zeros_like(img, np.float32)
+        cv2.circle(spot, centre, int(round(r * 2)), 1.0, -1, cv2.LINE_AA)
+        spot = np.asarray(cv2.GaussianBlur(spot, (0, 0), r), np.float32)
+        spot /= max(float(spot.max()), 1e-6)
+        img = np.maximum(img, np.clip(spot * peak, 0, 255).astype(np.uint8))
     return img
 
 
@@ -460,15 +585,129 @@ def _in_poly(poly: np.ndarray, x: float, y: float) -> bool:
     return cv2.pointPolygonTest(poly.reshape(-1, 1, 2), (float(x), float(y)), False) >= 0
 
 
-def _compose(base_from_cam: Transform, x: float, y: float, yaw: float) -> Transform:
+def _compose(
+    base_from_cam: Transform,
+    x: float,
+    y: float,
+    yaw: float,
+    pitch: float = 0.0,
+    roll: float = 0.0,
+) -> Transform:
     from scipy.spatial.transform import Rotation
 
-    r_base = Rotation.from_euler("z", yaw)
+    r_base = Rotation.from_euler("ZYX", [yaw, pitch, roll])
     q = base_from_cam.rotation
     r = r_base * Rotation.from_quat([q.x, q.y, q.z, q.w])
     t = base_from_cam.translation
     p = r_base.apply([t.x, t.y, t.z]) + [x, y, 0.0]
     return Transform(Vec3(*map(float, p)), Quat(*map(float, r.as_quat())))
+
+
+def _posters(layout: Layout, real: Realism, rng: np.random.Generator, field: str) -> list[Poster]:
+    """Posters on the walls, clear of the tags (0.4 m), 0.5-0.9 m wide, centred 1.1-1.6 m up."""
+    from trackctl.sim.clutter import signage_texture
+
+    w, h = layout.size
+    walls = (
+        [((w, 0.0), (w, h), (-1.0, 0.0))]
+        if field == "office"
+        else [
+            ((0.0, 0.0), (w, 0.0), (0.0, 1.0)),
+            ((w, h), (0.0, h), (0.0, -1.0)),
+            ((0.0, h), (0.0, 0.0), (1.0, 0.0)),
+            ((w, 0.0), (w, h), (-1.0, 0.0)),
+        ]
+    )
+    out: list[Poster] = []
+    for _ in range(200):
+        if len(out) >= real.posters:
+            break
+        a, b, nrm = walls[int(rng.integers(len(walls)))]
+        along = np.array(b) - np.array(a)
+        length = float(np.linalg.norm(along))
+        u = along / length
+        pw, ph = float(rng.uniform(0.5, 0.9)), float(rng.uniform(0.6, 1.0))
+        t = float(rng.uniform(pw / 2 + 0.2, length - pw / 2 - 0.2))
+        c = np.array(a) + u * t
+        zc = float(rng.uniform(1.1, 1.6))
+        if any(
+            abs((np.array(tag.center[:2]) - c) @ u) < pw / 2 + 0.4
+            and abs((np.array(tag.center[:2]) - c) @ np.array(nrm)) < 0.1
+            for tag in layout.tags
+        ) or any(np.linalg.norm(p.corners.mean(axis=0)[:2] - c) < 1.2 for p in out):
+            continue
+        # a viewer facing the wall sees "right" as -normal x up
+        right = np.cross(-np.array([nrm[0], nrm[1], 0.0]), [0.0, 0.0, 1.0])
+        ctr = np.array([c[0], c[1], zc]) + 0.002 * np.array([nrm[0], nrm[1], 0.0])
+        up = np.array([0.0, 0.0, 1.0])
+        corners = np.stack(
+            [
+                ctr - right * pw / 2 + up * ph / 2,
+                ctr + right * pw / 2 + up * ph / 2,
+                ctr + right * pw / 2 - up * ph / 2,
+                ctr - right * pw / 2 - up * ph / 2,
+            ]
+        )
+        tex = signage_texture(rng, int(pw * 500), int(ph * 500))
+        out.append(Poster(corners, nrm, tex))
+    return out
+
+
+def _lamps(
+    layout: Layout, real: Realism, rng: np.random.Generator
+) -> list[tuple[float, float, float]]:
+    """Wall lamps at 2.3 m where an infrastructure camera sees them."""
+    w, h = layout.size
+    pins = [PinholeCamera(c) for c in layout.cameras]
+    out: list[tuple[float, float, float]] = []
+    for _ in range(200):
+        if len(out) >= real.lamps:
+            break
+        side = int(rng.integers(2))
+        p = (float(rng.uniform(0.5, w - 0.5)), h - 0.05 if side else 0.05, 2.3)
+        if layout.size == (6.0, 7.0):  # office: on the tag's wall
+            p = (w - 0.05, float(rng.uniform(0.5, h - 0.5)), 2.3)
+        for pin in pins:
+            px, front = pin.project(np.array([p]))
+            if front[0] and 20 < px[0, 0] < 620 and 20 < px[0, 1] < 460:
+                out.append(p)
+                break
+    return out
+
+
+def _perturbed(tf: Transform, rng: np.random.Generator, deg: float, metres: float) -> Transform:
+    """``tf`` rotated by a small random rotation (std ``deg`` per axis) and moved (``metres``)."""
+    from scipy.spatial.transform import Rotation
+
+    q = tf.rotation
+    rot = Rotation.from_rotvec(np.radians(rng.normal(0.0, deg, 3))) * Rotation.from_quat(
+        [q.x, q.y, q.z, q.w]
+    )
+    t = tf.translation
+    p = np.array([t.x, t.y, t.z]) + rng.normal(0.0, metres, 3)
+    return Transform(Vec3(*map(float, p)), Quat(*map(float, rot.as_quat())))
+
+
+def _smooth_noise(rng: np.random.Generator, n: int, sigma: float, corr: int) -> np.ndarray:
+    """A zero-mean series of std ``sigma`` correlated over ~``corr`` samples (AR(1))."""
+    if sigma <= 0 or n == 0:
+        return np.zeros(n)
+    a = math.exp(-1.0 / max(corr, 1))
+    e = rng.normal(0.0, sigma * math.sqrt(1 - a * a), n)
+    out = np.empty(n)
+    acc = rng.normal(0.0, sigma)
+    for i in range(n):
+        acc = a * acc + e[i]
+        out[i] = acc
+    return out
+
+
+def _vignette(model: CameraModel, strength: float) -> np.ndarray | None:
+    if strength <= 0:
+        return None
+    yy, xx = np.mgrid[0 : model.height_px, 0 : model.width_px].astype(np.float32)
+    r2 = ((xx - model.cx_px) ** 2 + (yy - model.cy_px) ** 2) / (model.cx_px**2 + model.cy_px**2)
+    return (1.0 - strength * r2).astype(np.float32)
 
 
 def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) -> dict[str, int]:
@@ -504,6 +743,22 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
     rrend = _Renderer(rcam, rng, cfg)
     backgrounds = {c.camera: _background(c, rng, False) for c in layout.cameras}
     rbg = _background(rcam, rng, True)
+    # the realistic preset's models draw from their own stream: the paper preset's bytes stay
+    real = cfg.realism
+    rrng = np.random.default_rng([cfg.seed, 4_2])
+    posters = tuple(_posters(layout, real, rrng, cfg.field)) if real.posters else ()
+    lamps = tuple(_lamps(layout, real, rrng)) if real.lamps else ()
+    true_pose = {
+        c.camera: _perturbed(c.world_from_camera, rrng, real.infra_calib_deg, real.infra_calib_m)
+        if real.infra_calib_deg or real.infra_calib_m
+        else c.world_from_camera
+        for c in layout.cameras
+        if c.world_from_camera is not None
+    }
+    true_mount = (
+        _perturbed(base_from_cam, rrng, real.mount_deg, 0.0) if real.mount_deg else base_from_cam
+    )
+    vignettes = {c.camera: _vignette(c, real.vignetting) for c in [*layout.cameras, rcam]}
     wheel_base, ticks_per_m = 0.30, 2000.0
     counts: dict[str, int] = {}
     events: list[tuple[int, int, str, object]] = []
@@ -533,40 +788,69 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
         k = min(len(poses) - 1, int(round(t / dt)))
         return float(poses[k, 0]), float(poses[k, 1]), float(poses[k, 2])
 
-    for tk in np.arange(0.0, duration - 1e-9, 1.0 / cfg.robot_fps):
+    robot_times = np.arange(0.0, duration - 1e-9, 1.0 / cfg.robot_fps)
+    infra_times = np.arange(0.0, duration - 1e-9, 1.0 / cfg.infra_fps)
+    tilt_corr = max(1, int(round(0.5 * cfg.robot_fps)))
+    pitch = np.radians(_smooth_noise(rrng, len(robot_times), real.tilt_deg, tilt_corr))
+    roll = np.radians(_smooth_noise(rrng, len(robot_times), real.tilt_deg, tilt_corr))
+    # lighting: a slow drift per camera (period 40-120 s) around the nominal exposure
+    phase = {c.camera: float(rrng.uniform(0, 2 * math.pi)) for c in [*layout.cameras, rcam]}
+    period = {c.camera: float(rrng.uniform(40, 120)) for c in [*layout.cameras, rcam]}
+
+    def shade(camera: str, t: float) -> np.ndarray | None:
+        v = vignettes[camera]
+        if not real.light_drift and v is None:
+            return None
+        g = 1.0 + real.light_drift * math.sin(2 * math.pi * t / period[camera] + phase[camera])
+        return np.full((1, 1), g, np.float32) if v is None else np.float32(g) * v
+
+    yaw_rate = np.gradient(np.unwrap(poses[:, 2]), dt)
+    for i, tk in enumerate(robot_times):
         t_ns = int(round(tk * S))
         x, y, yaw = pose_at(tk)
         ideal = render_view(
-            rcam, _compose(base_from_cam, x, y, yaw), layout.tags, rbg, rrend.texture
+            rcam,
+            _compose(true_mount, x, y, yaw, float(pitch[i]), float(roll[i])),
+            layout.tags,
+            rbg,
+            rrend.texture,
+            posters=posters,
+            lamps=lamps,
+            shade=shade(ROBOT_CAMERA, float(tk)),
         )
+        k = min(len(poses) - 1, int(round(tk / dt)))
+        smear = abs(float(yaw_rate[k])) * real.exposure_s * rcam.fx_px
         events.append(
             (
                 t_ns,
                 1,
                 topics.image(ROBOT_CAMERA),
-                make_compressed_image(t_ns, ROBOT_CAMERA, rrend.finish(ideal), "jpeg"),
+                make_compressed_image(t_ns, ROBOT_CAMERA, rrend.finish(ideal, smear), "jpeg"),
             )
         )
         ent = GroundTruthEntity(
             ROBOT, Vec3(x, y, 0.0), yaw_rad=float(math.atan2(math.sin(yaw), math.cos(yaw)))
         )
         events.append((t_ns, 3, topics.GROUND_TRUTH, GroundTruth(t_ns, (ent,))))
-    for tk in np.arange(0.0, duration - 1e-9, 1.0 / cfg.infra_fps):
+    for tk in infra_times:
         t_ns = int(round(tk * S))
         x, y, yaw = pose_at(tk)
         for cam in layout.cameras:
             occ = layout.occluded.get(cam.camera)
             robot = None if occ is not None and _in_poly(occ, x, y) else (x, y, yaw)
-            assert cam.world_from_camera is not None
             ideal = render_view(
                 cam,
-                cam.world_from_camera,
+                true_pose[cam.camera],
                 layout.tags,
                 backgrounds[cam.camera],
                 renderers[cam.camera].texture,
                 robot,
                 cfg.ir_height_m,
                 cfg.ir_range_m,
+                posters=posters,
+                lamps=lamps,
+                shade=shade(cam.camera, float(tk)),
+                ir_offset_m=real.ir_offset_m,
             )
             jpeg = renderers[cam.camera].finish(ideal)
             events.append(
@@ -583,6 +867,7 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
             "generator": "trackctl simulate bridgeloc",
             "field": cfg.field,
             "seed": str(cfg.seed),
+            "preset": cfg.preset,
             "robot": ROBOT,
             "robot_camera": ROBOT_CAMERA,
             "infra_cameras": ",".join(c.camera for c in layout.cameras),
