@@ -148,3 +148,30 @@ def test_csv_path_and_office_field(tmp_path: Path) -> None:
     bad.write_text("x_m,y_m\n1.0,oops\n")
     with pytest.raises(Exception, match="bad.csv:2"):
         simulate_bridgeloc(tmp_path / "b.mcap", BridgeLocScenario(path=str(bad)))
+
+
+def test_full_mode_without_ground_truth(tmp_path: Path) -> None:
+    """The truth is read only by the metrics: the same poses without /ground_truth, and a report
+    that still says how much of the run had a pose and a fix, which tags were mapped and seen,
+    and whether the filter's innovations matched its covariance."""
+    from trackctl.bridgeloc import BridgeLocConfig, BridgeLocProcessor
+    from trackctl.logs.copy import filter_log
+    from trackctl.processing import run_processors
+
+    bare = tmp_path / "no-truth.mcap"
+    filter_log(SAMPLE, bare, exclude=("/ground_truth",))
+    poses, reports = {}, {}
+    for name, log in (("with", SAMPLE), ("without", bare)):
+        out = tmp_path / f"{name}.mcap"
+        reports[name] = run_processors(log, out, [BridgeLocProcessor(BridgeLocConfig())])[0]
+        poses[name] = [(r.log_time_ns, bytes(r.data)) for r in LogReader(out).raw([POSE])]
+    assert poses["with"] and poses["with"] == poses["without"]
+    bare_metrics = reports["without"].metrics
+    assert bare_metrics["positions"] == 0 and bare_metrics["success_rate"] is None
+    assert 0.5 < bare_metrics["pose_share"] <= 1.0 and 0.0 < bare_metrics["fix_share"] <= 1.0
+    assert bare_metrics["tags_mapped"] == 6 and bare_metrics["tag0_infra_sightings"] >= 3
+    assert bare_metrics["nis_per_dof_mean"] is not None and bare_metrics["nis_within_95"] > 0.5
+    assert reports["with"].metrics["pose_share"] == bare_metrics["pose_share"]
+
+
+POSE = "/bridgeloc/pose"
