@@ -343,16 +343,15 @@ def bridge_branches(
     Eq. 4.9 (least squares on the corners in the base frame, known camera height), once per
     solution of the first tag's two-fold planar PnP ambiguity; a solution is kept unless its
     mapped corners reproject worse than the best by more than the noise explains (chi-square
-    in 3 dof, 99 %): a small tag seen near head-on keeps both. (Refining it by minimising the reprojection
-    error over (x, y, yaw) was tried: one small far tag leaves a valley in which the refined
-    pose wanders farther than Eq. 4.9's, 0.12 against 0.08 m on the office log: the map's
-    corners are not exact, and Eq. 4.9 leans less on the tag's mapped tilt.)
-
-    Covariance: for one tag, ``sigma_px`` on each corner pixel propagated through the whole
-    chain (planar PnP, mount, Eq. 4.9) by finite differences that follow the chosen PnP branch;
-    for several tags ``sigma_px``^2 (J^T J)^-1 of the reprojection. Either is long along the
-    valley a far tag leaves. ``floor_m`` / ``floor_rad`` are added for what pixel noise does
-    not explain (camera mount, tag map, robot tilt).
+    in 3 dof, 99 %): a small tag seen near head-on keeps both. (Refining it by minimising the
+    reprojection error over (x, y, yaw) was tried: one small far tag leaves a valley in which
+    the refined pose wanders farther than Eq. 4.9's, 0.12 against 0.08 m on the office log: the
+    map's corners are not exact, and Eq. 4.9 leans less on the tag's mapped tilt.) Covariance:
+    for one tag, ``sigma_px`` on each corner pixel propagated through the whole chain (planar
+    PnP, mount, Eq. 4.9) by finite differences that follow the chosen PnP branch; for several
+    tags ``sigma_px``^2 (J^T J)^-1 of the reprojection. Either is long along the valley a far
+    tag leaves. ``floor_m`` / ``floor_rad`` are added for what pixel noise does not explain
+    (camera mount, tag map, robot tilt).
     """
     if not observations:
         return []

@@ -102,7 +102,11 @@ def ir_light(gray: np.ndarray, threshold: int, min_area: int) -> np.ndarray | No
 
 
 def ir_blobs(
-    gray: np.ndarray, threshold: int, min_area: int, isolation: float = 0.75
+    gray: np.ndarray,
+    threshold: int,
+    min_area: int,
+    isolation: float = 0.75,
+    rejected: list[np.ndarray] | None = None,
 ) -> list[tuple[np.ndarray, int]]:
     """Every saturated blob that stands alone (centroid px, area px): the robot's IR light and
     whatever else glows as it does (lamps, reflections; the caller tells them apart).
@@ -111,7 +115,9 @@ def ir_blobs(
     bright surface (white paper under strong light) only crosses the threshold in noisy
     fragments. And it is a compact spot whose surroundings are dark: the median grey of an
     annulus at 2.5-4 blob radii must stay below ``isolation`` x ``threshold`` (a window or a
-    large bright patch is not a light)."""
+    large bright patch is not a light). Blobs of 12 px or more must be round (a disk's aspect
+    and fill). Centroids of the blobs turned down are appended to
+    ``rejected`` (the static-fixture test counts every bright spot, kept or not)."""
     _, binary = cv2.threshold(gray, threshold, 255, cv2.THRESH_BINARY)
     n, labels, stats, cents = cv2.connectedComponentsWithStats(binary)
     h, w = gray.shape
@@ -121,6 +127,13 @@ def ir_blobs(
     for k in range(1, n):
         area = int(stats[k, cv2.CC_STAT_AREA])
         if area < min_area or clipped[k] < 1:
+            if rejected is not None and area >= min_area:
+                rejected.append(cents[k])
+            continue
+        bw, bh = int(stats[k, cv2.CC_STAT_WIDTH]), int(stats[k, cv2.CC_STAT_HEIGHT])
+        if area >= 12 and not _round(area, bw, bh):
+            if rejected is not None:
+                rejected.append(cents[k])
             continue
         cx, cy = cents[k]
         r = math.sqrt(area / math.pi) + 1.5
@@ -131,9 +144,18 @@ def ir_blobs(
         d2 = (xx - cx) ** 2 + (yy - cy) ** 2
         ring = gray[y0:y1, x0:x1][(d2 >= r_in * r_in) & (d2 <= r_out * r_out)]
         if ring.size and float(np.median(ring)) >= isolation * threshold:
+            if rejected is not None:
+                rejected.append(cents[k])
             continue
         out.append((cents[k], area))
     return out
+
+
+def _round(area: int, width: int, height: int) -> bool:
+    """A light's glow is a disk: about as wide as high, filling ~pi/4 of its bounding box (a
+    clipped patch of paper is a rectangle or a fragment cut by print)."""
+    fill = area / max(width * height, 1)
+    return max(width, height) <= 1.6 * min(width, height) and 0.55 <= fill <= 0.92
 
 
 def _models(reader: LogReader) -> dict[str, CameraModel]:
@@ -283,11 +305,15 @@ class IcamFixes:
     def frame(self, camera: str) -> None:
         self._frames[camera] = self._frames.get(camera, 0) + 1
 
-    def add(self, t_ns: int, px: np.ndarray, fix: IcamFix) -> None:
+    def lit(self, camera: str, px: np.ndarray) -> tuple[int, int]:
+        """Count a bright spot at pixel ``px`` of one of ``camera``'s frames."""
         cell = (int(px[0]) // self.CELL_PX, int(px[1]) // self.CELL_PX)
-        counts = self._cells.setdefault(fix.camera, {})
+        counts = self._cells.setdefault(camera, {})
         counts[cell] = counts.get(cell, 0) + 1
-        self._pending.append((t_ns, cell, fix))
+        return cell
+
+    def add(self, t_ns: int, px: np.ndarray, fix: IcamFix) -> None:
+        self._pending.append((t_ns, self.lit(fix.camera, px), fix))
 
     def finalize(self, static_share: float = 0.5, min_frames: int = 20) -> None:
         for t_ns, (cx, cy), fix in self._pending:
@@ -373,10 +399,15 @@ def map_tags(
             annotations_topic(cam), _annotations(msg.log_time_ns, dets, labels), msg.log_time_ns
         )
         icam.frame(cam)
-        for px, area in ir_blobs(gray, cfg.ir_threshold, cfg.ir_min_area_px):
+        others: list[np.ndarray] = []
+        for px, area in ir_blobs(gray, cfg.ir_threshold, cfg.ir_min_area_px, rejected=others):
             fix = _icam_fix(pins[cam], px, area, setup.ir_height_m, cfg, max_ir_m)
             if fix is not None:
                 icam.add(msg.log_time_ns, px, fix)
+            else:
+                others.append(px)
+        for px in others:  # bright spots that are no fix still show where the fixtures are
+            icam.lit(cam, px)
         if cam in last_t:
             infra_period.setdefault(cam, msg.log_time_ns - last_t[cam])
         last_t[cam] = msg.log_time_ns
