@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 from hypothesis import given
@@ -117,3 +118,30 @@ def test_cli_sheets(tmp_path) -> None:
         app, ["bridgeloc", "tags", "--n", "2", "--out", str(tmp_path / "s.txt")]
     )
     assert bad.exit_code == 2 and "error:" in bad.output
+
+
+def _pdf_pages(path: Path) -> tuple[int, set[bytes]]:
+    import re
+
+    data = path.read_bytes()
+    return len(re.findall(rb"/Type /Page\b", data)), set(re.findall(rb"/MediaBox \[[^\]]*\]", data))
+
+
+@pytest.mark.parametrize(
+    ("paper", "size_cm", "pages", "box"),
+    [
+        ("a4", 30, 12, b"/MediaBox [ 0 0 595.44 841.68 ]"),  # 3 tags x 2 x 2 tiles
+        ("a3", 30, 6, b"/MediaBox [ 0 0 841.68 1190.88 ]"),  # 36 cm tags: 2 x 1 tiles
+        ("a4", 8, 2, b"/MediaBox [ 0 0 595.44 841.68 ]"),  # small tags packed, 2 a page
+    ],
+)
+def test_pdf_tiles_onto_office_paper(
+    tmp_path: Path, paper: str, size_cm: int, pages: int, box: bytes
+) -> None:
+    """Tags larger than the page are tiled over A4/A3 pages; small ones share pages."""
+    pytest.importorskip("matplotlib")
+    pdf = tmp_path / "s.pdf"
+    args = ["bridgeloc", "tags", "--n", "2", "--out", str(pdf), "--size-cm", str(size_cm)]
+    res = CliRunner().invoke(app, [*args, "--paper", paper])
+    assert res.exit_code == 0, res.output
+    assert _pdf_pages(pdf) == (pages, {box})

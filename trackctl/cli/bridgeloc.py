@@ -26,6 +26,13 @@ def tags(
     border_ratio: Annotated[float, typer.Option("--b", help="Code width / border width.")] = 5.0,
     count: Annotated[bool, typer.Option("--count", help="Print the set sizes only.")] = False,
     out: Annotated[Path | None, typer.Option(help="Sheet to write: *.png or *.pdf.")] = None,
+    paper: Annotated[
+        str,
+        typer.Option(
+            help="PDF page: a4, a3 or letter (tags larger than a page are tiled with crop "
+            "marks and a 1 cm glue overlap), or fit (one custom-size page per tag)."
+        ),
+    ] = "a4",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Enumerate unique tag sets (checked against Theorems 5 and 6) and print tag sheets."""
@@ -52,7 +59,7 @@ def tags(
         sheet = list(iter_sheet_tags(n, practical))
         if len(sheet) > 512:
             raise InputError(f"--n {n}: {len(sheet)} tags are too many for one sheet (N <= 3)")
-        write_sheet(sheet, n, out, size_cm, border_ratio)
+        write_sheet(sheet, n, out, size_cm, border_ratio, paper)
         result_out = {"out": str(out), "printed": len(sheet)}
     if json_out:
         print_json(result)  # the documented object: {"n", "universal", "practical"}
@@ -84,7 +91,14 @@ def eval_(
         str, typer.Option(help="Robot pose from bridged corners: lstsq (Eq. 4.9) or pnp.")
     ] = "lstsq",
     max_sigma: Annotated[
-        float, typer.Option(help="Full mode: localized while the EKF position std is below (m).")
+        float,
+        typer.Option(
+            help="Full mode: a pose is confident while the EKF position std is below this (m); "
+            "a bridged pose must be this good to start the filter or to be a Basic fix."
+        ),
+    ] = 0.5,
+    success_m: Annotated[
+        float, typer.Option(help="Scoring: a pose within this distance of the truth is a success.")
     ] = 0.5,
     site: Annotated[Path | None, typer.Option(help=SITE_HELP)] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
@@ -104,7 +118,11 @@ def eval_(
     pose_value = parse_choice(PoseMethod, pose, "--pose")
     proc = BridgeLocProcessor(
         BridgeLocConfig(
-            mode=mode_value, pose=pose_value, max_sigma_m=max_sigma, site=load_site_file(site)
+            mode=mode_value,
+            pose=pose_value,
+            max_sigma_m=max_sigma,
+            success_m=success_m,
+            site=load_site_file(site),
         )
     )
     draw = figures_from_output(out, plot, "bridgeloc")
