@@ -201,3 +201,33 @@ def test_ekf_learns_heading_bias_and_gates_outliers() -> None:
     assert not ekf.update_pose((before[0] + 3.0, before[1], before[2]), cov)  # a wrong tag
     assert ekf.pose == pytest.approx(before)
     assert len(ekf.nis_values) == 20 + 1  # every tested update leaves its NIS
+
+
+@pytest.mark.parametrize("view_deg", [68.0, 70.0])
+@pytest.mark.parametrize("code", [(1, 0, 0, 0), (0, 1, 1, 1), (1, 0, 1, 1)])
+def test_diamond_seen_obliquely_is_read_as_a_diamond(view_deg: float, code) -> None:  # noqa: ANN001
+    """Foreshortening makes a diamond's edges look steep at 65-70° view angles, and the image
+    rule (an edge within 20° of vertical) reads it as a square tag: a different symbol, often
+    a different code. Its 3-D pose against the world's up direction reads it right."""
+    from dataclasses import replace
+
+    from trackctl.bridgeloc.detect import DetectorConfig, read_oriented
+    from trackctl.logs.messages import Quat, Transform, Vec3
+    from trackctl.sim.bridgeloc import BridgeLocScenario, _infra, _Renderer, render_view
+
+    level = Transform(Vec3(0.0, 0.0, 1.0), Quat(0.5, -0.5, 0.5, -0.5))  # looking along +x
+    model = replace(_infra("c", (0.0, 0.0, 1.0), (5.0, 0.0, 1.0)), world_from_camera=level)
+    a = math.radians(view_deg)
+    tag = WallTag(
+        "t", code, Placement.DIAMOND, Mount.ABOVE, (2.0, 0.0, 1.0), (-math.cos(a), math.sin(a)), 0.3
+    )
+    ren = _Renderer(model, np.random.default_rng(0), BridgeLocScenario(preset="paper"))
+    ideal = render_view(model, level, [tag], np.full((480, 640), 110, np.uint8), ren.texture)
+    img = cv2.imdecode(np.frombuffer(ren.finish(ideal), np.uint8), cv2.IMREAD_GRAYSCALE)
+    (det,) = detect_tags(img, DetectorConfig())
+    assert det.placement is Placement.SQUARE  # the image rule is fooled
+    geo = CameraGeometry.from_model(model)
+    corners = tag_corners_in_camera(det, geo, 0.3)
+    assert corners is not None
+    got = read_oriented(img, det, corners, geo.R.T @ np.array([0.0, 0.0, 1.0]), DetectorConfig())
+    assert got is not None and got.placement is Placement.DIAMOND and got.code == code

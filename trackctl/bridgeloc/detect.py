@@ -22,7 +22,7 @@ import numpy as np
 from trackctl.bridgeloc.tags import BORDER_RATIO, Code, Placement, tag_geometry
 from trackctl.bridgeloc.tinyfit import TinyFitConfig, fit_tiny_tag
 
-__all__ = ["DetectorConfig", "TagDetection", "detect_tags", "order_corners"]
+__all__ = ["DetectorConfig", "TagDetection", "read_oriented", "detect_tags", "order_corners"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,6 +166,53 @@ def _decode(
     if all(bits) or not any(bits):
         return None  # uniform codes are not tags (practical rule: too many false positives)
     return tuple(bits), contrast
+
+
+def read_oriented(
+    gray: np.ndarray,
+    det: TagDetection,
+    corners_3d: np.ndarray,
+    up: np.ndarray,
+    cfg: DetectorConfig,
+) -> TagDetection | None:
+    """The detection re-read with its placement from 3-D geometry instead of image edges.
+
+    ``corners_3d`` are the detection's corners in the camera frame (in ``det.corners``' order),
+    ``up`` the world's up direction in that frame. A square-mounted tag has two edges along
+    ``up`` (within 12°), a diamond none (all >= 33° off): unlike the image test (an edge within
+    20° of vertical) this holds at any view angle, where foreshortening makes a diamond's edges
+    look steep. A tag seen nearly edge-on (> 75°) or between the two keeps the image's
+    reading. Corners are then
+    reordered (square: TL starts the top edge; diamond: TL is the top corner, keeping the
+    image's clockwise order) and the code read again; None when that reading fails.
+    """
+    p = np.asarray(corners_3d, np.float64)
+    u = np.asarray(up, np.float64) / float(np.linalg.norm(up))
+    edges = np.roll(p, -1, axis=0) - p
+    along_up = np.abs(edges @ u) / np.maximum(np.linalg.norm(edges, axis=1), 1e-12)
+    height = p @ u
+    normal = np.cross(p[1] - p[0], p[3] - p[0])
+    view = p.mean(axis=0)
+    incidence = abs(float(normal @ view)) / max(
+        float(np.linalg.norm(normal) * np.linalg.norm(view)), 1e-12
+    )
+    if incidence < math.cos(math.radians(75.0)):
+        return det  # seen edge-on: its 3-D pose says less than its image
+    if along_up.max() >= math.cos(math.radians(12.0)):
+        placement = Placement.SQUARE
+        k = int(np.argmax(height + np.roll(height, -1)))  # the top edge: corners k, k+1
+    elif along_up.max() <= math.cos(math.radians(33.0)):
+        placement = Placement.DIAMOND
+        k = int(np.argmax(height))
+    else:
+        return det  # neither clearly: keep the image's reading
+    if placement is det.placement and k == 0:
+        return det
+    corners = np.roll(np.asarray(det.corners, np.float64), -k, axis=0)
+    dec = _decode(gray, corners, cfg, check_sides=False)  # the quad itself passed already
+    if dec is None:
+        return None
+    return TagDetection(dec[0], placement, corners, dec[1])
 
 
 def _parallel_enough(corners: np.ndarray, cfg: DetectorConfig) -> bool:

@@ -40,7 +40,7 @@ from trackctl.bridgeloc.config import (
     PoseMethod,
     annotations_topic,
 )
-from trackctl.bridgeloc.detect import DetectorConfig, TagDetection, detect_tags
+from trackctl.bridgeloc.detect import DetectorConfig, TagDetection, detect_tags, read_oriented
 from trackctl.bridgeloc.ekf import RobotEkf
 from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
@@ -390,7 +390,7 @@ def map_tags(
         cam = frame_id if frame_id in infra else msg.topic.strip("/").split("/")[0]
         gray = _imdecode(msg.message.data)
         t0 = time.perf_counter()
-        dets = detect_tags(gray, setup.det_cfg)
+        dets = _oriented(gray, detect_tags(gray, setup.det_cfg), geos[cam], setup)
         det_times.append(time.perf_counter() - t0)
         for d in dets:
             tag_map.add(d, geos[cam], setup.tag_size_m)
@@ -415,6 +415,21 @@ def map_tags(
     icam.half_period_ns = max(infra_period.values(), default=200_000_000) // 2
     icam.finalize()
     return tag_map, icam, n_msgs
+
+
+def _oriented(
+    gray: np.ndarray, dets: list[TagDetection], geo: CameraGeometry, setup: Setup
+) -> list[TagDetection]:
+    """Detections re-read with their mount (square or diamond) from their 3-D pose against the
+    world's up direction (``geo.R`` maps the camera to a frame with z up: world or robot base)."""
+    up = geo.R.T @ np.array([0.0, 0.0, 1.0])
+    out = []
+    for d in dets:
+        pc = tag_corners_in_camera(d, geo, setup.tag_size_m)
+        got = d if pc is None else read_oriented(gray, d, pc, up, setup.det_cfg)
+        if got is not None:
+            out.append(got)
+    return out
 
 
 def _icam_fix(
@@ -651,7 +666,7 @@ class RobotPass:
         assert rgeo is not None
         gray = _imdecode(data)
         t0 = time.perf_counter()
-        dets = detect_tags(gray, setup.det_cfg)
+        dets = _oriented(gray, detect_tags(gray, setup.det_cfg), rgeo, setup)
         det_times.append(time.perf_counter() - t0)
         labels = []
         obs = []
