@@ -22,7 +22,7 @@ from scipy.stats import chi2
 
 from trackctl.geometry.odometry_ekf import DiffDriveEkf, OdometryNoise, nis, wrap
 
-__all__ = ["EkfConfig", "RobotEkf", "wrap", "chi2_95", "gate"]
+__all__ = ["EkfConfig", "RobotEkf", "pose_cov", "wrap", "chi2_95", "gate"]
 
 
 @cache
@@ -64,6 +64,9 @@ class EkfConfig:
     """Std of the IR light's centroid in an infrastructure image (px)."""
     icam_floor_m: float = 0.05
     """Position std added to every I-Cam fix: light not over the base centre, camera pose."""
+    ambiguity_nis: float = 9.0
+    """A tag whose pattern several mapped tags share is used only if the best candidate's NIS
+    beats the next by this much (a likelihood ratio of e^4.5, ~90:1)."""
     max_rejects: int = 3
     """After this many robot frames in a row whose tags were all gated out, a pose bridged
     from uniquely identified tags restarts the filter (wheel slip or a wrong start: the state,
@@ -175,7 +178,7 @@ class RobotEkf:
         """An I-Cam position fix with its 2x2 covariance; False when gated out."""
         if not self.initialized:
             # position known, heading not: a wide prior until a tag gives it
-            self.init((float(xy[0]), float(xy[1]), 0.0), _block(cov, math.pi**2))
+            self.init((float(xy[0]), float(xy[1]), 0.0), pose_cov(cov, math.pi**2))
             return True
         if not self._gate(self.position_nis(xy, cov), 2):
             return False
@@ -190,7 +193,8 @@ class RobotEkf:
         return d2 <= gate(dof)
 
 
-def _block(cov2: np.ndarray, var_yaw: float) -> np.ndarray:
+def pose_cov(cov2: np.ndarray, var_yaw: float) -> np.ndarray:
+    """A 3x3 pose covariance from a 2x2 position covariance and a heading variance."""
     out = np.zeros((3, 3))
     out[:2, :2] = cov2
     out[2, 2] = var_yaw

@@ -41,7 +41,7 @@ from trackctl.bridgeloc.config import (
     annotations_topic,
 )
 from trackctl.bridgeloc.detect import DetectorConfig, TagDetection, detect_tags, read_oriented
-from trackctl.bridgeloc.ekf import RobotEkf
+from trackctl.bridgeloc.ekf import RobotEkf, pose_cov
 from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.geometry.odometry import DiffDrive, increment
@@ -468,13 +468,6 @@ def _in_front(pose: Pose, world: np.ndarray, cam: CameraGeometry, min_depth_m: f
     return bool((depth > min_depth_m).all())
 
 
-def _position_cov(cov2: np.ndarray, var_yaw: float) -> np.ndarray:
-    out = np.zeros((3, 3))
-    out[:2, :2] = cov2
-    out[2, 2] = var_yaw
-    return out
-
-
 def _usable_start(cov: np.ndarray, max_sigma_m: float) -> bool:
     """A bridged pose good enough to start (or restart) the filter: position std within
     ``max_sigma_m`` (a far tag seen near head-on is two-fold ambiguous and is not)."""
@@ -542,6 +535,7 @@ class RobotPassStats:
     frames_with_fix: int = 0
     icam_fused: int = 0
     restarts: int = 0
+    ambiguous_skipped: int = 0
 
 
 class RobotPass:
@@ -640,7 +634,7 @@ class RobotPass:
             if self._icam_rejects >= self.cfg.ekf.max_rejects and len(cands) == 1:
                 # the one light the cameras see keeps disagreeing (a wrong start, slip): the
                 # position is the fix's, the heading kept but no longer trusted
-                ekf.init((*best.xy, ekf.pose[2]), _position_cov(best.cov, 0.5**2))
+                ekf.init((*best.xy, ekf.pose[2]), pose_cov(best.cov, 0.5**2))
                 self._icam_rejects = 0
                 self.stats.restarts += 1
 
@@ -816,7 +810,13 @@ class RobotPass:
             scored.append((ekf.measurement_nis(z, hx, jac, r), tag, hx, jac, r))
         if not scored:
             return False, mapped[0]
-        _, tag, hx, jac, r = min(scored, key=lambda o: o[0])
+        scored.sort(key=lambda o: o[0])
+        if len(scored) > 1 and scored[1][0] - scored[0][0] < cfg.ekf.ambiguity_nis:
+            # two mapped tags explain the corners about equally well: taking either could
+            # pull the robot towards the wrong one (Eq. 4.11's nearest rule, with a margin)
+            self.stats.ambiguous_skipped += 1
+            return False, scored[0][1]
+        _, tag, hx, jac, r = scored[0]
         ok = ekf.update_measurement(z, hx, jac, r)
         if ok:
             ekf.floor_position(tag.sigma_m)
