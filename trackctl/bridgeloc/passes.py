@@ -674,7 +674,8 @@ class RobotPass:
             mount = "above" if ctr[2] > setup.cam_h else "below"
             sig = f"{d.pattern_id}/{mount}"
             labels.append(sig)
-            if math.hypot(ctr[0], ctr[1]) <= self.cfg.max_range_m:
+            cap = self.cfg.max_range_m
+            if cap is None or math.hypot(ctr[0], ctr[1]) <= cap:
                 obs.append((d, sig, pb))
         self.writer.write(
             annotations_topic(setup.rcam_name), _annotations(t_ns, dets, labels), t_ns

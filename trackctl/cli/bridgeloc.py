@@ -100,6 +100,10 @@ def eval_(
     success_m: Annotated[
         float, typer.Option(help="Scoring: a pose within this distance of the truth is a success.")
     ] = 0.5,
+    max_range: Annotated[
+        float | None,
+        typer.Option(help="Ignore tags the robot sees farther than this (m); default: none."),
+    ] = None,
     site: Annotated[Path | None, typer.Option(help=SITE_HELP)] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     plot: Annotated[
@@ -122,6 +126,7 @@ def eval_(
             pose=pose_value,
             max_sigma_m=max_sigma,
             success_m=success_m,
+            max_range_m=max_range,
             site=load_site_file(site),
         )
     )
