@@ -145,3 +145,37 @@ def test_pdf_tiles_onto_office_paper(
     res = CliRunner().invoke(app, [*args, "--paper", paper])
     assert res.exit_code == 0, res.output
     assert _pdf_pages(pdf) == (pages, {box})
+
+
+@given(st.integers(0, 2**7 - 1), st.integers(0, 8))
+def test_parity_family_catches_every_single_misread_cell(data: int, flip: int) -> None:
+    from trackctl.bridgeloc.tags import parity_ok
+
+    d = [(data >> i) & 1 for i in range(7)]
+    code = (*d, sum(d[0::2]) % 2, sum(d[1::2]) % 2)
+    assert parity_ok(code, 3)
+    misread = list(code)
+    misread[flip] ^= 1
+    assert not parity_ok(misread, 3)
+
+
+def test_parity_family_needs_three_cells_a_side() -> None:
+    from trackctl.bridgeloc.tags import check_family, iter_sheet_tags
+    from trackctl.errors import InputError
+
+    with pytest.raises(InputError, match="N >= 3"):
+        check_family("parity", 2)
+    sheet = list(iter_sheet_tags(3, practical=False, family="parity"))
+    assert sheet and len(sheet) < len(list(iter_sheet_tags(3, practical=False)))
+
+
+def test_parity_tags_read_no_ghosts_in_signage() -> None:
+    """The plain N=3 family reads one ghost in the 40 signage images; with check cells, none."""
+    from trackctl.bridgeloc.detect import DetectorConfig, detect_tags
+    from trackctl.sim.clutter import signage_image
+
+    plain = DetectorConfig(n=3)
+    parity = DetectorConfig(n=3, family="parity")
+    images = [signage_image(seed) for seed in range(40)]
+    assert sum(len(detect_tags(img, parity)) for img in images) == 0
+    assert sum(len(detect_tags(img, plain)) for img in images) >= 1

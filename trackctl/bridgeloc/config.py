@@ -44,6 +44,8 @@ class BridgeLocConfig:
     robot_camera: str | None = None
     tag_n: int | None = None
     tag_size_m: float | None = None
+    tag_family: str | None = None
+    """``plain`` (default) or ``parity`` (N >= 3 codes with two check cells)."""
     ir_height_m: float | None = None
     max_sigma_m: float = 0.5
     """Full mode: a pose counts as confident while the EKF's position std is below this."""

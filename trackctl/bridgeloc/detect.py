@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from trackctl.bridgeloc.tags import BORDER_RATIO, Code, Placement, tag_geometry
+from trackctl.bridgeloc.tags import BORDER_RATIO, Code, Placement, parity_ok, tag_geometry
 from trackctl.bridgeloc.tinyfit import TinyFitConfig, fit_tiny_tag
 
 __all__ = ["DetectorConfig", "TagDetection", "read_oriented", "detect_tags", "order_corners"]
@@ -31,6 +31,8 @@ class DetectorConfig:
 
     n: int = 2
     border_ratio: float = BORDER_RATIO
+    family: str = "plain"
+    """``plain`` or ``parity`` (codes must pass :func:`~trackctl.bridgeloc.tags.parity_ok`)."""
     min_side_px: float = 6.0
     """Quads with a shorter side are ignored (too few pixels per cell)."""
     min_contrast: float = 25.0
@@ -165,6 +167,8 @@ def _decode(
             bits.append(1 if v < mid else 0)
     if all(bits) or not any(bits):
         return None  # uniform codes are not tags (practical rule: too many false positives)
+    if cfg.family == "parity" and not parity_ok(bits, cfg.n):
+        return None  # a misread cell (or not a tag at all)
     return tuple(bits), contrast
 
 

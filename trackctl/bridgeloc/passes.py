@@ -42,6 +42,7 @@ from trackctl.bridgeloc.config import (
 )
 from trackctl.bridgeloc.detect import DetectorConfig, TagDetection, detect_tags, read_oriented
 from trackctl.bridgeloc.ekf import RobotEkf, pose_cov
+from trackctl.bridgeloc.tags import check_family
 from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.geometry.odometry import DiffDrive, increment
@@ -211,6 +212,8 @@ def load_setup(reader: LogReader, cfg: BridgeLocConfig) -> Setup:
             f"pose; bridgeloc needs at least one"
         )
     n = cfg.tag_n or int(meta.get("tag_n", 2))
+    family = cfg.tag_family or meta.get("tag_family", "plain")
+    check_family(family, n)
     rgeo = CameraGeometry.from_model(models[rcam_name]) if needs_robot else None
     _warn_defaults(reader, cfg, meta)
     return Setup(
@@ -222,7 +225,7 @@ def load_setup(reader: LogReader, cfg: BridgeLocConfig) -> Setup:
         ir_height_m=cfg.ir_height_m or float(meta.get("ir_height_m", 0.65)),
         needs_robot=needs_robot,
         infra=infra,
-        det_cfg=DetectorConfig(n=n),
+        det_cfg=DetectorConfig(n=n, family=family),
         rgeo=rgeo,
         cam_h=float(rgeo.t[2]) if rgeo is not None else 0.5,
         present=set(tops),

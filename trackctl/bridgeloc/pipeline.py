@@ -78,6 +78,7 @@ def run(
             "robot": setup.robot,
             "robot_camera": setup.rcam_name,
             "tag_n": setup.tag_n,
+            "tag_family": setup.det_cfg.family,
             "tag_size_m": setup.tag_size_m,
             "max_sigma_m": cfg.max_sigma_m,
             "success_m": cfg.success_m,

@@ -27,6 +27,10 @@ import numpy as np
 
 __all__ = [
     "BORDER_RATIO",
+    "FAMILIES",
+    "check_family",
+    "in_family",
+    "parity_ok",
     "MAX_ENUMERATION_N",
     "Mount",
     "Placement",
@@ -290,12 +294,45 @@ def tag_texture(
     return img
 
 
-def iter_sheet_tags(n: int, practical: bool) -> Iterator[tuple[str, Code, Placement]]:
+FAMILIES = ("plain", "parity")
+"""``plain``: every code (no error detection); ``parity``: N >= 3 codes whose last two cells
+are check bits (:func:`parity_ok`)."""
+
+
+def parity_ok(code: Sequence[int], n: int) -> bool:
+    """The ``parity`` family's check: with d the first N^2 - 2 cells (row-major, as printed), the
+    second-to-last cell is the XOR of d's even positions and the last the XOR of its odd ones.
+    Any single misread cell, and any two misread neighbours in reading order, break it."""
+    bits = [int(b) for b in code]
+    if n < 3 or len(bits) != n * n:
+        return False
+    data = bits[:-2]
+    return bits[-2] == sum(data[0::2]) % 2 and bits[-1] == sum(data[1::2]) % 2
+
+
+def check_family(family: str, n: int) -> None:
+    """Raise InputError for an unknown family or a parity family with N < 3."""
+    from trackctl.errors import InputError
+
+    if family not in FAMILIES:
+        raise InputError(f"tag family {family!r}: expected one of {', '.join(FAMILIES)}")
+    if family == "parity" and n < 3:
+        raise InputError(f"tag family parity needs N >= 3 (two check cells), got N={n}")
+
+
+def in_family(code: Sequence[int], n: int, family: str) -> bool:
+    return family == "plain" or parity_ok(code, n)
+
+
+def iter_sheet_tags(
+    n: int, practical: bool, family: str = "plain"
+) -> Iterator[tuple[str, Code, Placement]]:
     """(label, code, placement) of every tag of a printable sheet (mount is how it is hung)."""
     if practical:
         for tag in enumerate_practical(n):
-            if tag.mount is Mount.ABOVE:  # the same print serves both heights
-                yield tag.pattern_id, tag.code, tag.placement
+            if tag.mount is Mount.ABOVE and in_family(tag.code, n, family):
+                yield tag.pattern_id, tag.code, tag.placement  # one print serves both heights
     else:
         for code in enumerate_universal(n):
-            yield f"{n}:{''.join(map(str, code))}", code, Placement.SQUARE
+            if in_family(code, n, family):
+                yield f"{n}:{''.join(map(str, code))}", code, Placement.SQUARE

@@ -26,6 +26,10 @@ def tags(
     border_ratio: Annotated[float, typer.Option("--b", help="Code width / border width.")] = 5.0,
     count: Annotated[bool, typer.Option("--count", help="Print the set sizes only.")] = False,
     out: Annotated[Path | None, typer.Option(help="Sheet to write: *.png or *.pdf.")] = None,
+    family: Annotated[
+        str,
+        typer.Option(help="plain, or parity (N >= 3: two check cells that catch misreads)."),
+    ] = "plain",
     paper: Annotated[
         str,
         typer.Option(
@@ -39,6 +43,7 @@ def tags(
     from trackctl.bridgeloc.sheets import write_sheet
     from trackctl.bridgeloc.tags import (
         MAX_ENUMERATION_N,
+        check_family,
         count_practical,
         count_universal,
         iter_sheet_tags,
@@ -56,7 +61,8 @@ def tags(
         result["universal"] = count_universal(n)
         result["practical"] = count_practical(n)
     if out is not None:
-        sheet = list(iter_sheet_tags(n, practical))
+        check_family(family, n)
+        sheet = list(iter_sheet_tags(n, practical, family))
         if len(sheet) > 512:
             raise InputError(f"--n {n}: {len(sheet)} tags are too many for one sheet (N <= 3)")
         write_sheet(sheet, n, out, size_cm, border_ratio, paper)
@@ -100,6 +106,10 @@ def eval_(
     success_m: Annotated[
         float, typer.Option(help="Scoring: a pose within this distance of the truth is a success.")
     ] = 0.5,
+    tag_family: Annotated[
+        str | None,
+        typer.Option(help="plain or parity; default: the site's or the log's, else plain."),
+    ] = None,
     max_range: Annotated[
         float | None,
         typer.Option(help="Ignore tags the robot sees farther than this (m); default: none."),
@@ -127,6 +137,7 @@ def eval_(
             max_sigma_m=max_sigma,
             success_m=success_m,
             max_range_m=max_range,
+            tag_family=tag_family,
             site=load_site_file(site),
         )
     )
@@ -166,6 +177,10 @@ def simulate_bridgeloc(
             "or paper (the dissertation's idealised scene)."
         ),
     ] = "realistic",
+    n: Annotated[int, typer.Option("--n", help="Code cells per side (N) of the tags.")] = 2,
+    family: Annotated[
+        str, typer.Option(help="Tag family: plain, or parity (N >= 3, two check cells).")
+    ] = "plain",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
@@ -182,6 +197,8 @@ def simulate_bridgeloc(
         robot_fps=robot_fps,
         infra_fps=infra_fps,
         preset=preset,
+        n=n,
+        family=family,
     )
     counts = simulate(str(out), cfg)
     if json_out:

@@ -26,6 +26,7 @@ log's own records (the file wins). Every key is optional; a processor names what
       robot_camera: r1cam    # the camera on the robot (/r1cam/image)
       tag_n: 2               # N x N code cells of the rotation-symmetric tags
       tag_size_m: 0.30       # printed tag side
+      tag_family: plain      # plain, or parity (N >= 3: two check cells catch misreads)
       border_ratio: 5.0
       ir_height_m: 0.65      # height of the IR light on the robot
 """
@@ -55,6 +56,7 @@ BRIDGELOC_KEYS = {
     "robot_camera": str,
     "tag_n": int,
     "tag_size_m": float,
+    "tag_family": str,
     "border_ratio": float,
     "ir_height_m": float,
 }

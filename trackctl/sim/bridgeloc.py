@@ -24,7 +24,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from trackctl.bridgeloc.tags import Code, Mount, Placement, enumerate_practical, tag_texture
+from trackctl.bridgeloc.tags import (
+    Code,
+    Mount,
+    Placement,
+    check_family,
+    enumerate_practical,
+    in_family,
+    tag_texture,
+)
 from trackctl.errors import InputError
 from trackctl.geometry.camera import PinholeCamera, ideal_camera, look_at
 from trackctl.ingest.video import make_compressed_image
@@ -146,12 +154,15 @@ class BridgeLocScenario:
     turn_rps: float = 1.0
     preset: str = "realistic"
     """``realistic`` (default) or ``paper``: see :class:`Realism` and :data:`PRESETS`."""
+    family: str = "plain"
+    """Tag family: ``plain`` or ``parity`` (N >= 3, two check cells)."""
 
     @property
     def realism(self) -> Realism:
         return PRESETS[self.preset]
 
     def __post_init__(self) -> None:
+        check_family(self.family, self.n)
         if self.preset not in PRESETS:
             raise InputError(f"--preset {self.preset!r}: expected one of {', '.join(PRESETS)}")
         if self.field not in ("office", "lobby"):
@@ -236,9 +247,11 @@ def _infra(
     return _model(name, look_at(np.array(eye), np.array(target)), 50.0, (-0.02, 0.0, 0, 0, 0))
 
 
-def _symbols(n: int) -> list[tuple[Code, Placement]]:
+def _symbols(n: int, family: str = "plain") -> list[tuple[Code, Placement]]:
     seen: list[tuple[Code, Placement]] = []
     for t in enumerate_practical(n):
+        if not in_family(t.code, n, family):
+            continue
         key = (t.code, t.placement)
         if key not in seen:
             seen.append(key)
@@ -297,7 +310,7 @@ def lobby_layout(cfg: BridgeLocScenario) -> Layout:
     while len(chosen) < cfg.tags:
         d = np.min(np.linalg.norm(pts[:, None] - pts[chosen][None], axis=2), axis=1)
         chosen.append(int(np.argmax(d)))
-    symbols = _symbols(cfg.n)
+    symbols = _symbols(cfg.n, cfg.family)
     order = rng.permutation(len(symbols))
     tags = []
     for k, idx in enumerate(chosen):
@@ -872,6 +885,7 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
             "robot_camera": ROBOT_CAMERA,
             "infra_cameras": ",".join(c.camera for c in layout.cameras),
             "tag_n": str(cfg.n),
+            "tag_family": cfg.family,
             "tag_size_m": str(cfg.tag_size_m),
             "border_ratio": "5.0",
             "ir_height_m": str(cfg.ir_height_m),
