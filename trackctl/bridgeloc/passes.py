@@ -581,6 +581,11 @@ class RobotPass:
         """Map tag (index in the map) -> robot frames that used it."""
         self.stats = RobotPassStats()
         self._icam_next = 0
+        self.max_range_m = (
+            cfg.max_range_m
+            if cfg.max_range_m is not None
+            else float(setup.meta.get("max_range_m", 4.5))
+        )
         self._bad_frames = 0
         self._icam_rejects = 0
         self.prev_odom: WheelOdometry | None = None
@@ -677,8 +682,7 @@ class RobotPass:
             mount = "above" if ctr[2] > setup.cam_h else "below"
             sig = f"{d.pattern_id}/{mount}"
             labels.append(sig)
-            cap = self.cfg.max_range_m
-            if cap is None or math.hypot(ctr[0], ctr[1]) <= cap:
+            if math.hypot(ctr[0], ctr[1]) <= self.max_range_m:
                 obs.append((d, sig, pb))
         self.writer.write(
             annotations_topic(setup.rcam_name), _annotations(t_ns, dets, labels), t_ns

@@ -82,7 +82,9 @@ def run(
             "tag_size_m": setup.tag_size_m,
             "max_sigma_m": cfg.max_sigma_m,
             "success_m": cfg.success_m,
-            "max_range_m": cfg.max_range_m,
+            "max_range_m": robot_pass.max_range_m
+            if math.isfinite(robot_pass.max_range_m)
+            else None,
         },
     )
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -112,7 +113,10 @@ def eval_(
     ] = None,
     max_range: Annotated[
         float | None,
-        typer.Option(help="Ignore tags the robot sees farther than this (m); default: none."),
+        typer.Option(
+            help="Ignore tags the robot sees farther than this (m); 0 = no limit; "
+            "default: the site's max_range_m, else 4.5."
+        ),
     ] = None,
     site: Annotated[Path | None, typer.Option(help=SITE_HELP)] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
@@ -136,7 +140,7 @@ def eval_(
             pose=pose_value,
             max_sigma_m=max_sigma,
             success_m=success_m,
-            max_range_m=max_range,
+            max_range_m=None if max_range is None else (max_range if max_range > 0 else math.inf),
             tag_family=tag_family,
             site=load_site_file(site),
         )

@@ -29,6 +29,7 @@ log's own records (the file wins). Every key is optional; a processor names what
       tag_family: plain      # plain, or parity (N >= 3: two check cells catch misreads)
       border_ratio: 5.0
       ir_height_m: 0.65      # height of the IR light on the robot
+      max_range_m: 4.5       # tags the robot sees farther than this are not used
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ BRIDGELOC_KEYS = {
     "tag_family": str,
     "border_ratio": float,
     "ir_height_m": float,
+    "max_range_m": float,
 }
 _SMIRROR_KEYS = ("requesters", "floorplan")
 _TOP = ("robots", "smirror", "bridgeloc")
