@@ -54,9 +54,10 @@ class BridgeLocConfig:
     max_range_m: float | None = None
     """Tags seen by the robot farther than this are not used (``--max-range``; None = the site's
     ``max_range_m``, else 4.5 m; ``math.inf`` = every tag read). Far tags carry little
-    information (their corner measurement's covariance says so) but more chances of a wrong association: on the realistic
-    lobby, 60 s x 2 seeds, dropping the cap gave Full 91.2 % success with 10 tags against 99.0 %
-    with it (0.123 against 0.138 m error with 8 tags). The paper's prototype read tags to ~4 m."""
+    information (their corner measurement's covariance says so) but more chances of a wrong
+    association: on the realistic lobby, 60 s x 2 seeds, dropping the cap gave Full 91.2 %
+    success with 10 tags against 99.0 % with it (0.123 against 0.138 m error with 8 tags). The
+    paper's prototype read tags to ~4 m."""
     ir_threshold: int = 235
     ir_min_area_px: int = 2
     ekf: EkfConfig = field(default_factory=EkfConfig)
