@@ -62,7 +62,6 @@ __all__ = [
     "ir_blobs",
     "map_tags",
     "RobotPass",
-    "ir_light",
     "Pose",
     "Estimates",
 ]
@@ -94,12 +93,6 @@ def _annotations(t_ns: int, dets: list[TagDetection], labels: list[str]) -> Imag
         ta.text_color.r = ta.text_color.g = ta.text_color.a = 1.0
         msg.texts.append(ta)
     return msg
-
-
-def ir_light(gray: np.ndarray, threshold: int, min_area: int) -> np.ndarray | None:
-    """Pixel of the largest saturated blob, or None (kept for callers that want one blob)."""
-    blobs = ir_blobs(gray, threshold, min_area)
-    return None if not blobs else max(blobs, key=lambda b: b[1])[0]
 
 
 def ir_blobs(
