@@ -87,6 +87,11 @@ def video_mp4(tmp_path: Path) -> Path:
     return path
 
 
+# a camera 3 m above the floor at (0, 0) looking at (4, 1) on the floor, as OpenCV's rvec/tvec
+CALIB_RVEC = np.array([1.8129, -1.4154, 0.7206])
+CALIB_TVEC = np.array([0.0, 2.4258, 1.765])
+
+
 @pytest.fixture
 def calib_yaml(tmp_path: Path) -> Path:
     path = tmp_path / "cam0.yaml"
@@ -95,8 +100,8 @@ def calib_yaml(tmp_path: Path) -> Path:
     fs.write("image_height", 48)
     fs.write("camera_matrix", np.array([[50.0, 0, 32], [0, 50.0, 24], [0, 0, 1]]))
     fs.write("distortion_coefficients", np.array([[0.01, -0.02, 0.0, 0.0, 0.0]]))
-    fs.write("rvec", np.array([[0.1], [0.2], [0.3]]))
-    fs.write("tvec", np.array([[1.0], [2.0], [3.0]]))
+    fs.write("rvec", CALIB_RVEC.reshape(3, 1))
+    fs.write("tvec", CALIB_TVEC.reshape(3, 1))
     fs.release()
     return path
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
+from tests.conftest import CALIB_RVEC, CALIB_TVEC
 from trackctl.errors import InputError
 from trackctl.ingest.calibration import read_calibration, to_foxglove_calibration
 from trackctl.ingest.video import read_frames
@@ -56,8 +57,8 @@ def test_opencv_calibration_with_extrinsics(calib_yaml: Path) -> None:
     assert (model.fx_px, model.cx_px) == (50.0, 32.0)
     assert model.distortion == pytest.approx((0.01, -0.02, 0.0, 0.0, 0.0))
     # world <- camera is the inverse of OpenCV's camera <- world (rvec, tvec)
-    r_cw, _ = cv2.Rodrigues(np.array([0.1, 0.2, 0.3]))
-    cam_center = -r_cw.T @ np.array([1.0, 2.0, 3.0])
+    r_cw, _ = cv2.Rodrigues(CALIB_RVEC)
+    cam_center = -r_cw.T @ CALIB_TVEC
     t = model.world_from_camera.translation
     assert (t.x, t.y, t.z) == pytest.approx(tuple(cam_center))
     cal = to_foxglove_calibration(model)

@@ -6,6 +6,7 @@ import typer
 
 from trackctl import __version__
 from trackctl.cli.bridgeloc import bridgeloc_app, simulate_bridgeloc
+from trackctl.cli.calib import calib_app
 from trackctl.cli.common import TrackctlGroup
 from trackctl.cli.evmatch import ev_match, simulate_ev
 from trackctl.cli.info import info
@@ -57,6 +58,7 @@ simulate_app.command("smirror")(simulate_smirror)
 simulate_app.command("bridgeloc")(simulate_bridgeloc)
 app.add_typer(simulate_app, name="simulate")
 app.add_typer(bridgeloc_app, name="bridgeloc")
+app.add_typer(calib_app, name="calib")
 
 
 def main() -> None:

@@ -16,6 +16,16 @@ from trackctl.errors import InputError
 from trackctl.logs.writer import COMPRESSIONS, LogWriter
 
 
+def _calib_units(units: str | None) -> float | None:
+    from trackctl.geometry.calib import UNITS
+
+    if units is None:
+        return None
+    if units not in UNITS:
+        raise InputError(f"--calib-units {units!r}: expected one of {', '.join(UNITS)}")
+    return UNITS[units]
+
+
 def record(
     out: Annotated[Path, typer.Argument(help="MCAP log to write (atomically).")],
     imu: Annotated[
@@ -86,7 +96,37 @@ def record(
     ] = None,
     fps: Annotated[
         float | None,
-        typer.Option(help="Frame rate of image folders (overrides a video's own rate)."),
+        typer.Option(
+            help="Frame rate of image folders; for a video, restamps every frame at this rate "
+            "(a file with a wrong rate; to keep fewer frames use --rate or --every)."
+        ),
+    ] = None,
+    every: Annotated[
+        int, typer.Option(help="Keep one video frame in N (timestamps stay true).")
+    ] = 1,
+    rate: Annotated[
+        float | None,
+        typer.Option(help="Keep video frames at most this often, Hz (timestamps stay true)."),
+    ] = None,
+    start: Annotated[
+        float | None, typer.Option(help="First second of the video to keep (video time).")
+    ] = None,
+    end: Annotated[
+        float | None, typer.Option(help="Last second of the video to keep (video time).")
+    ] = None,
+    frame_times: Annotated[
+        str | None,
+        typer.Option(
+            metavar="CSV|names",
+            help="Stamp an image folder's files from a CSV file,t or from their numeric names "
+            "('names'); t in --time-unit.",
+        ),
+    ] = None,
+    calib_units: Annotated[
+        str | None,
+        typer.Option(
+            help="Unit of the calibration files' translation: m (default), cm or mm (Tsai XML: mm)."
+        ),
     ] = None,
     time_unit: Annotated[
         str,
@@ -127,6 +167,7 @@ def record(
         record_live,
         write_site,
     )
+    from trackctl.ingest.video import FrameSelection
 
     plan = _ros2_plan(ros2, ros2_map, quiet or json_out)
     cfg = RecordConfig(
@@ -141,6 +182,13 @@ def record(
         calib=parse_named(calib or [], "--calib"),
         fps=fps,
         video_start_s=video_start,
+        selection=FrameSelection(every, rate, start, end),
+        frame_times=None
+        if frame_times is None
+        else "names"
+        if frame_times == "names"
+        else Path(frame_times),
+        calib_units=_calib_units(calib_units),
         time_unit=time_unit,
     )
     if time_unit not in ("s", "ms", "us", "ns"):

@@ -1,11 +1,16 @@
-"""Camera calibration files: OpenCV YAML (``cv2.FileStorage``) and ROS ``camera_info`` YAML.
+"""Camera calibration files: OpenCV YAML/XML (``cv2.FileStorage``), ROS ``camera_info`` YAML and
+Tsai camera XML (the PETS datasets' format).
 
 OpenCV files may carry the extrinsics as ``rvec``/``tvec`` in OpenCV's convention (camera <-
-world, as ``cv2.solvePnP`` returns them); trackctl stores the inverse, world <- camera.
+world, as ``cv2.solvePnP`` returns them), in metres unless ``metres_per_unit`` says otherwise;
+trackctl stores the inverse, world <- camera. Frames and units: docs/cameras.md.
 """
 
 from __future__ import annotations
 
+import os
+import tempfile
+import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
@@ -15,10 +20,26 @@ import yaml
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from scipy.spatial.transform import Rotation
 
-from trackctl.errors import InputError
+from trackctl.errors import InputError, OutputError
+from trackctl.geometry.calib import (
+    GroundFit,
+    TsaiCamera,
+    ground_pose,
+    pose_vectors,
+    scale_translation,
+    tsai_model,
+)
 from trackctl.logs.messages import CameraModel, Quat, Transform, Vec3
 
-__all__ = ["read_calibration", "to_foxglove_calibration", "camera_matrix"]
+__all__ = [
+    "read_calibration",
+    "read_tsai_xml",
+    "write_calibration",
+    "read_point_pairs",
+    "calibrate_ground",
+    "to_foxglove_calibration",
+    "camera_matrix",
+]
 
 _K_KEYS = ("camera_matrix", "cameraMatrix", "K", "intrinsics")
 _D_KEYS = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "D", "distortion")
@@ -176,12 +197,82 @@ def _read_opencv_storage(path: Path, camera: str) -> CameraModel:
         fs.release()
 
 
-def read_calibration(path: str | Path, camera: str) -> CameraModel:
-    """A camera model from an OpenCV or ROS calibration YAML file.
+def _tsai_attr(path: Path, node: ET.Element | None, element: str, name: str) -> float:
+    if node is None:
+        raise InputError(f"{path}: Tsai camera XML without a <{element}> element")
+    value = node.get(name)
+    if value is None:
+        raise InputError(f"{path}: <{element}> has no attribute {name}")
+    try:
+        number = float(value)
+    except ValueError:
+        raise InputError(
+            f"{path}: <{element}> attribute {name}: not a number ({value!r})"
+        ) from None
+    if not np.isfinite(number):
+        raise InputError(f"{path}: <{element}> attribute {name}: not finite ({value!r})")
+    return number
+
+
+def read_tsai_xml(path: str | Path) -> TsaiCamera:
+    """A Tsai camera (PETS ``<Camera><Geometry/><Intrinsic/><Extrinsic/></Camera>``, mm).
+
+    Raises:
+        InputError: not such a file, or an attribute is missing or not a number.
+    """
+    path = Path(path)
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as err:
+        raise InputError(f"{path}: not a readable XML file ({err})") from None
+    geo, intr, extr = (root.find(e) for e in ("Geometry", "Intrinsic", "Extrinsic"))
+
+    def g(e: str, n: str) -> float:
+        node = {"Geometry": geo, "Intrinsic": intr, "Extrinsic": extr}[e]
+        return _tsai_attr(path, node, e, n)
+
+    dpx = g("Geometry", "dpx") if geo is not None and geo.get("dpx") else None
+    if dpx is None:  # Tsai: dpx = dx * ncx / nfx
+        dpx = g("Geometry", "dx") * g("Geometry", "ncx") / g("Geometry", "nfx")
+    tsai = TsaiCamera(
+        width=int(g("Geometry", "width")),
+        height=int(g("Geometry", "height")),
+        dpx=dpx,
+        dpy=g("Geometry", "dpy"),
+        focal=g("Intrinsic", "focal"),
+        kappa1=g("Intrinsic", "kappa1"),
+        cx=g("Intrinsic", "cx"),
+        cy=g("Intrinsic", "cy"),
+        sx=g("Intrinsic", "sx"),
+        t=(g("Extrinsic", "tx"), g("Extrinsic", "ty"), g("Extrinsic", "tz")),
+        r=(g("Extrinsic", "rx"), g("Extrinsic", "ry"), g("Extrinsic", "rz")),
+    )
+    for name in ("width", "height", "dpx", "dpy", "focal", "sx"):
+        if not getattr(tsai, name) > 0:
+            raise InputError(f"{path}: Tsai {name} must be positive, got {getattr(tsai, name)}")
+    return tsai
+
+
+def _is_tsai(text: str) -> bool:
+    return "<Camera" in text and "<Intrinsic" in text and "<opencv_storage>" not in text
+
+
+def read_calibration(
+    path: str | Path, camera: str, metres_per_unit: float | None = None
+) -> CameraModel:
+    """A camera model from an OpenCV or ROS calibration YAML file or a Tsai camera XML.
+
+    ``metres_per_unit`` converts the file's translation to metres (``1e-3``: millimetres); None
+    takes metres for OpenCV/ROS files and millimetres for Tsai XML (Tsai's own unit).
 
     Raises:
         InputError: the file is missing or holds no usable calibration.
     """
+    model = _read_calibration(Path(path), camera, metres_per_unit)
+    return model
+
+
+def _read_calibration(path: Path, camera: str, metres_per_unit: float | None) -> CameraModel:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such calibration file (camera {camera})")
@@ -191,8 +282,18 @@ def read_calibration(path: str | Path, camera: str) -> CameraModel:
         raise InputError(f"{path}: cannot read ({err.strerror})") from None
     if not text.strip():
         raise InputError(f"{path}: empty calibration file (camera {camera})")
+    if _is_tsai(text):
+        return tsai_model(read_tsai_xml(path), camera, metres_per_unit or 1e-3)
+    model = _read_calibration_text(path, text, camera)
+    return scale_translation(model, metres_per_unit or 1.0)
+
+
+def _read_calibration_text(path: Path, text: str, camera: str) -> CameraModel:
     if path.suffix.lower() == ".xml" and "<opencv_storage>" not in text:
-        raise InputError(f"{path}: not an OpenCV XML calibration (no <opencv_storage> element)")
+        raise InputError(
+            f"{path}: not an OpenCV XML calibration (no <opencv_storage> element) nor a Tsai "
+            "camera XML (<Camera> with <Geometry>, <Intrinsic>, <Extrinsic>)"
+        )
     if text.lstrip().startswith("%YAML") or "!!opencv-matrix" in text or path.suffix == ".xml":
         return _read_opencv(path, camera)
     try:
@@ -207,6 +308,87 @@ def read_calibration(path: str | Path, camera: str) -> CameraModel:
     if any(isinstance(doc.get(k), list) for k in _K_KEYS):
         return _read_plain(path, camera, doc)
     return _read_opencv(path, camera)
+
+
+def read_point_pairs(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Floor point pairs from a CSV ``u_px,v_px,x_m,y_m[,z_m]`` (a header row is optional):
+    pixels (N, 2) and world points (N, 3, metres; z = 0 when not given).
+
+    Raises:
+        InputError: missing file, a row that is not 4 or 5 numbers (named by line).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such point file")
+    rows: list[list[float]] = []
+    for lineno, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+        cells = [c.strip() for c in line.replace(";", ",").split(",")]
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        try:
+            values = [float(c) for c in cells]
+        except ValueError:
+            if not rows and lineno == 1:
+                continue  # header
+            raise InputError(f"{path}:{lineno}: expected numbers u_px,v_px,x_m,y_m[,z_m]") from None
+        if len(values) not in (4, 5) or not np.isfinite(values).all():
+            raise InputError(
+                f"{path}:{lineno}: expected 4 or 5 finite numbers u_px,v_px,x_m,y_m[,z_m], "
+                f"got {line.strip()!r}"
+            )
+        rows.append(values + [0.0] * (5 - len(values)))
+    if not rows:
+        raise InputError(f"{path}: no point pairs")
+    arr = np.array(rows)
+    return arr[:, :2], arr[:, 2:5]
+
+
+def calibrate_ground(
+    intrinsics: str | Path,
+    camera: str,
+    image_px: np.ndarray,
+    world_m: np.ndarray,
+    points_name: str = "points",
+) -> GroundFit:
+    """Place a camera on the floor: intrinsics from a calibration file (any format
+    :func:`read_calibration` reads; its pose, if any, is ignored) and floor point pairs.
+
+    Raises:
+        InputError: unreadable intrinsics, or point pairs that fix no pose (named).
+    """
+    model = read_calibration(intrinsics, camera)
+    try:
+        return ground_pose(model, image_px, world_m)
+    except ValueError as err:
+        raise InputError(f"{points_name}: {err}") from None
+
+
+def write_calibration(model: CameraModel, path: str | Path) -> None:
+    """Write ``model`` as the OpenCV YAML that :func:`read_calibration` reads (atomically: the
+    file appears whole or not at all)."""
+    path = Path(path)
+    d = np.asarray(model.distortion or (0.0,) * 5, float).reshape(1, -1)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".yaml", dir=path.parent or ".")
+    os.close(fd)
+    try:
+        fs = cv2.FileStorage(tmp, cv2.FILE_STORAGE_WRITE)
+        fs.writeComment(
+            f"trackctl camera {model.camera}: world metres, z up, floor z = 0; rvec/tvec are "
+            "camera <- world (OpenCV solvePnP)"
+        )
+        fs.write("image_width", int(model.width_px))
+        fs.write("image_height", int(model.height_px))
+        fs.write("camera_matrix", camera_matrix(model))
+        fs.write("distortion_coefficients", d)
+        if model.world_from_camera is not None:
+            rvec, tvec = pose_vectors(model)
+            fs.write("rvec", rvec.reshape(3, 1))
+            fs.write("tvec", tvec.reshape(3, 1))
+        fs.release()
+        os.replace(tmp, path)
+    except (OSError, cv2.error) as err:
+        Path(tmp).unlink(missing_ok=True)
+        raise OutputError(f"{path}: cannot write the calibration ({err})") from None
 
 
 def to_foxglove_calibration(model: CameraModel, t_ns: int | None = None) -> CameraCalibration:

@@ -7,6 +7,7 @@ import os
 import select
 import socket
 import time
+import warnings
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
@@ -14,10 +15,11 @@ from pathlib import Path
 from typing import Any
 
 from trackctl.errors import InputError, TrackctlError
+from trackctl.geometry.calib import camera_problems
 from trackctl.ingest.calibration import read_calibration, to_foxglove_calibration
 from trackctl.ingest.ros2 import TopicPlan, read_ros2
 from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv, seconds_to_ns
-from trackctl.ingest.video import read_frames
+from trackctl.ingest.video import FrameSelection, frame_size, read_frames
 from trackctl.logs import topics
 from trackctl.logs.jsonl import AttachmentLine, JsonlRecord, MetadataLine, parse_line
 from trackctl.logs.writer import LogWriter
@@ -45,6 +47,13 @@ class RecordConfig:
     calib: Mapping[str, Path] = field(default_factory=dict)
     fps: float | None = None
     video_start_s: float = 0.0
+    selection: FrameSelection = field(default_factory=FrameSelection)
+    """Which video frames to keep (``--every``, ``--rate``, ``--start``, ``--end``)."""
+    frame_times: Path | str | None = None
+    """CSV ``file,t`` stamping an image folder's files, or ``"names"`` (numeric file names);
+    times in ``time_unit``."""
+    calib_units: float | None = None
+    """Metres per unit of the calibration files' translation (None: metres; Tsai XML: mm)."""
     jpeg_quality: int = 90
     time_unit: str = "s"
     """Unit of the CSV files' ``t_s`` column: s, ms, us or ns."""
@@ -98,6 +107,9 @@ def _frames(path: Path, name: str, cfg: RecordConfig, order: int) -> Iterator[St
         name,
         fps=cfg.fps,
         start_ns=seconds_to_ns(cfg.video_start_s),
+        select=cfg.selection,
+        frame_times=cfg.frame_times,
+        time_unit=cfg.time_unit,
         jpeg_quality=cfg.jpeg_quality,
     ):
         yield (t_ns, order, topics.image(name), img)
@@ -128,9 +140,15 @@ def record_files(
             f"(cameras: {', '.join(sorted(cfg.video)) or 'none'})"
         )
     start_ns = seconds_to_ns(cfg.video_start_s)
+    cfg.selection.check()
     for name, path in cfg.calib.items():
-        model = read_calibration(path, name)
+        model = read_calibration(path, name, cfg.calib_units)
         model = replace(model, t_ns=start_ns)
+        errors, warns = camera_problems(model, frame_size(cfg.video[name], name))
+        if errors:
+            raise InputError(f"{path} (camera {name}): {errors[0]}")
+        for w in warns:
+            warnings.warn(f"{path} (camera {name}): {w}", UserWarning, stacklevel=2)
         writer.write(topics.calibration(name), to_foxglove_calibration(model), start_ns)
         writer.write(topics.camera_model(name), model)
         writer.add_attachment(
