@@ -14,6 +14,30 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE_LOG = ROOT / "sample_logs" / "demo.mcap"
+SHARED_DATA = Path(os.environ.get("TRACKCTL_SHARED_DATA", ROOT.parent / "shared" / "data"))
+"""Real data beside the repository (read at test time, never copied in)."""
+
+
+def shared_file(*parts: str) -> Path:
+    """A file of the shared real data; the test is skipped, saying why, when it is absent."""
+    path = SHARED_DATA.joinpath(*parts)
+    if not path.exists():
+        pytest.skip(f"real data {path} is absent (set TRACKCTL_SHARED_DATA to its folder)")
+    return path
+
+
+def vtest_video() -> Path:
+    """PETS 2009 S2L1 view 001 (OpenCV's vtest.avi); skipped when absent. Not committed: get it
+    with `apt-get download opencv-doc` (see ../shared/data/footage/README.md) and point
+    TRACKCTL_VTEST at it."""
+    candidates = [
+        os.environ.get("TRACKCTL_VTEST", ""),
+        "/usr/share/doc/opencv-doc/examples/data/vtest.avi",
+    ]
+    for c in candidates:
+        if c and Path(c).is_file():
+            return Path(c)
+    pytest.skip("vtest.avi (PETS 2009 S2L1 view 001) is absent: set TRACKCTL_VTEST")
 
 
 def trackctl_exe() -> list[str]:

@@ -27,7 +27,8 @@ def test_video_frames_are_jpeg_stamped_by_fps(video_mp4: Path) -> None:
 
 
 def test_fps_overrides_video_rate(video_mp4: Path) -> None:
-    frames = list(read_frames(video_mp4, "cam0", fps=2.0))
+    with pytest.warns(UserWarning, match="restamps"):
+        frames = list(read_frames(video_mp4, "cam0", fps=2.0))
     assert frames[1][0] == 500_000_000
 
 
@@ -94,3 +95,40 @@ def test_calibration_without_matrix(tmp_path: Path) -> None:
     path.write_text("%YAML:1.0\nimage_width: 10\n")
     with pytest.raises(InputError, match="no camera matrix"):
         read_calibration(path, "cam0")
+
+
+def test_every_and_rate_subsample_with_true_timestamps(video_mp4: Path) -> None:
+    from trackctl.ingest.video import FrameSelection
+
+    every = [t for t, _ in read_frames(video_mp4, "c", select=FrameSelection(every=3))]
+    assert every == [0, 300_000_000, 600_000_000, 900_000_000]
+    rate = [t for t, _ in read_frames(video_mp4, "c", select=FrameSelection(rate_hz=4))]
+    # 10 fps kept at most 4 times a second: the first frame at or after each 0.25 s step
+    assert rate == [0, 300_000_000, 500_000_000, 800_000_000, 1_000_000_000]
+    window = FrameSelection(start_s=0.35, end_s=0.7)
+    assert [t for t, _ in read_frames(video_mp4, "c", select=window)] == [
+        400_000_000,
+        500_000_000,
+        600_000_000,
+        700_000_000,
+    ]
+    with pytest.raises(InputError, match="window"):
+        list(read_frames(video_mp4, "c", select=FrameSelection(start_s=5.0)))
+    with pytest.raises(InputError, match="--every"):
+        list(read_frames(video_mp4, "c", select=FrameSelection(every=0)))
+
+
+def test_image_folder_stamped_by_names_or_csv(tmp_path: Path) -> None:
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    for ms in (1000, 1250, 1600):
+        cv2.imwrite(str(folder / f"{ms}.png"), np.zeros((8, 8, 3), np.uint8))
+    named = list(read_frames(folder, "c", frame_times="names", time_unit="ms"))
+    assert [t for t, _ in named] == [0, 250_000_000, 600_000_000]
+    csv = tmp_path / "times.csv"
+    csv.write_text("file,t_s\n1000.png,10.0\n1250.png,10.5\n1600.png,11.0\n")
+    stamped = list(read_frames(folder, "c", frame_times=csv))
+    assert [t for t, _ in stamped] == [0, 500_000_000, 1_000_000_000]
+    csv.write_text("file,t_s\n1000.png,10.0\n")
+    with pytest.raises(InputError, match="no time for image 1250.png"):
+        list(read_frames(folder, "c", frame_times=csv))

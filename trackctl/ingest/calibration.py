@@ -321,6 +321,7 @@ def read_point_pairs(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     if not path.is_file():
         raise InputError(f"{path}: no such point file")
     rows: list[list[float]] = []
+    header = False
     for lineno, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
         cells = [c.strip() for c in line.replace(";", ",").split(",")]
         if not line.strip() or line.lstrip().startswith("#"):
@@ -328,8 +329,9 @@ def read_point_pairs(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         try:
             values = [float(c) for c in cells]
         except ValueError:
-            if not rows and lineno == 1:
-                continue  # header
+            if not rows and not header:
+                header = True
+                continue
             raise InputError(f"{path}:{lineno}: expected numbers u_px,v_px,x_m,y_m[,z_m]") from None
         if len(values) not in (4, 5) or not np.isfinite(values).all():
             raise InputError(
