@@ -105,22 +105,18 @@ def test_record_rejects_a_calibration_for_another_size_or_in_mm(
     mm = _calib(tmp_path / "mm.yaml", (64, 48), 1000.0)
     proc = run_cli("record", str(out), "--video", f"cam0={video_mp4}", "--calib", f"cam0={mm}")
     assert proc.returncode == 2 and "millimetres" in proc.stderr.decode()
-    proc = (
-        run_cli("record", str(out), "--video", f"cam0={video_mp4}", "--calib", f"cam0={mm}")
-        if False
-        else run_cli(
-            "record",
-            str(out),
-            "--video",
-            f"cam0={video_mp4}",
-            "--calib",
-            f"cam0={mm}",
-            "--calib-units",
-            "mm",
-            "--every",
-            "2",
-            "--json",
-        )
+    proc = run_cli(
+        "record",
+        str(out),
+        "--video",
+        f"cam0={video_mp4}",
+        "--calib",
+        f"cam0={mm}",
+        "--calib-units",
+        "mm",
+        "--every",
+        "2",
+        "--json",
     )
     assert proc.returncode == 0, proc.stderr.decode()
     counts = json.loads(proc.stdout)
