@@ -7,6 +7,7 @@ from enum import StrEnum
 
 from trackctl.vmtrack.frames import FrameConfig
 from trackctl.vmtrack.motion import MotionConfig
+from trackctl.vmtrack.stitch import StitchConfig
 from trackctl.vmtrack.tracker import TrackerConfig
 
 __all__ = ["Mode", "Source", "VmTrackConfig"]
@@ -66,3 +67,5 @@ class VmTrackConfig:
     source: Source = Source.AUTO
     """Detections from camera frames or from detections topics (auto: frames when present)."""
     frames: FrameConfig = field(default_factory=FrameConfig)
+    stitch: StitchConfig = field(default_factory=StitchConfig)
+    """Offline clean-up of visual-only tracks (coasting tails, fragments, short tracks)."""

@@ -59,6 +59,11 @@ class DetectorConfig:
     """Body height used to predict a person's image height from the ground position."""
     height_tolerance: float = 1.45
     """A window may be this factor taller or shorter than a person standing at its foot point."""
+    refine_feet: bool = True
+    """Move each box's bottom to the lowest foreground row connected to the body (the window
+    score favours the torso: legs are thin and often close to the floor's colour)."""
+    feet_threshold: int = 18
+    """Grey-level difference that counts as foreground when looking for the feet."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -208,6 +213,8 @@ def detect_people(
     )
     idx = np.array(keep, int).reshape(-1)
     boxes, scores = _suppress_parts(boxes[idx], scores[idx], cfg.contained)
+    if cfg.refine_feet:
+        boxes = refine_feet(image, background, boxes, cfg)
     # a person cut by the bottom edge has no visible foot point to place on the ground
     keep = boxes[:, 1] + boxes[:, 3] < image.shape[0] - 2
     if expected_height is not None and len(boxes):
@@ -217,6 +224,38 @@ def detect_people(
         tol = cfg.height_tolerance
         keep &= (ratio > 1 / tol) & (ratio < tol)
     return boxes[keep], scores[keep]
+
+
+def refine_feet(
+    image: np.ndarray, background: BackgroundModel, boxes: np.ndarray, cfg: DetectorConfig
+) -> np.ndarray:
+    """Boxes whose bottom is moved to the person's real lowest point: in the central half of the
+    box's width, from 60% of its height down to 40% below it, the lowest row with foreground
+    (at the lower ``feet_threshold``) reached from the body without a gap of more than 3 rows."""
+    if len(boxes) == 0:
+        return boxes
+    h_img, w_img = image.shape[:2]
+    low = DetectorConfig(diff_threshold=cfg.feet_threshold)
+    out = boxes.copy()
+    for b in out:
+        x, y, w, h = b
+        x0, x1 = int(max(0, x + 0.25 * w)), int(min(w_img, x + 0.75 * w + 1))
+        y0, y1 = int(max(0, y + 0.6 * h)), int(min(h_img, y + 1.4 * h + 1))
+        if x1 - x0 < 2 or y1 - y0 < 4:
+            continue
+        strip = background.foreground(image, low, Region(x0, y0, x1, y1, h))
+        on = strip.mean(axis=1) > 0.15
+        last, gap = -1, 0
+        for r, flag in enumerate(on):
+            if flag:
+                last, gap = r, 0
+            elif last >= 0:
+                gap += 1
+                if gap > 3:
+                    break
+        if last >= 0:
+            b[3] = max(0.5 * h, y0 + last + 1 - y)
+    return out
 
 
 def _suppress_parts(

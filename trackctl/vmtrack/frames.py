@@ -52,6 +52,12 @@ class FrameConfig:
     """Velocity uncertainty of a track without a phone (its prediction is visual only)."""
     background_frames: int = 25
     """Frames sampled across the log for each camera's median background."""
+    foot_sigma_frac: float = 0.05
+    """Std of a detected foot point's row as a share of the box height (legs, shoes, shadow)."""
+    foot_sigma_px: float = 1.5
+    """Pixel std added to both axes of the foot point (JPEG, blur)."""
+    ground_sigma_m: float = 0.15
+    """Ground std added on top of the pixel noise (a body is not a point; calibration)."""
     detector: DetectorConfig = field(default_factory=DetectorConfig)
 
 
@@ -146,8 +152,10 @@ class FrameDetector:
         camera: str,
         data: bytes,
         predictions: list[tuple[np.ndarray, float, bool]] | None,
-    ) -> tuple[Detections, list[np.ndarray]]:
-        """People in one frame: the Detections message and their ground points.
+    ) -> tuple[Detections, list[np.ndarray], list[np.ndarray]]:
+        """People in one frame: the Detections message, their ground points and the points'
+        2x2 covariances (pixel noise through the camera geometry: far people are uncertain
+        along the line of sight).
 
         ``predictions`` None asks for a full search; otherwise only their regions are searched.
         A frame that does not decode is skipped and counted.
@@ -158,7 +166,7 @@ class FrameDetector:
         self.seconds_decode += t1 - t0
         if image is None:
             self.bad_frames += 1
-            return Detections(t_ns, camera, ()), []
+            return Detections(t_ns, camera, ()), [], []
         cam = self.cams[camera]
         regions = None if predictions is None else self.regions(camera, predictions)
         if regions is None:
@@ -175,11 +183,13 @@ class FrameDetector:
         )
         feet = np.column_stack([boxes[:, 0] + boxes[:, 2] / 2, boxes[:, 1] + boxes[:, 3]])
         ground = cam.ground_point(feet)
+        covs = self._ground_covariances(cam, feet, boxes)
         self.seconds_detect += time.perf_counter() - t1
         dets = []
         points = []
-        for box, score, g in zip(boxes, scores, ground, strict=True):
-            if np.isnan(g).any():
+        point_covs = []
+        for box, score, g, c in zip(boxes, scores, ground, covs, strict=True):
+            if np.isnan(g).any() or not np.isfinite(c).all():
                 continue
             dets.append(
                 Detection(
@@ -190,4 +200,26 @@ class FrameDetector:
                 )
             )
             points.append(g[:2])
-        return Detections(t_ns, camera, tuple(dets)), points
+            point_covs.append(c)
+        return Detections(t_ns, camera, tuple(dets)), points, point_covs
+
+    def _ground_covariances(
+        self, cam: PinholeCamera, feet: np.ndarray, boxes: np.ndarray
+    ) -> np.ndarray:
+        """2x2 ground covariance of each foot point: J diag(su^2, sv^2) J^T + ground_sigma^2 I,
+        J the pixel -> floor Jacobian (central differences through the calibrated camera)."""
+        if len(feet) == 0:
+            return np.empty((0, 2, 2))
+        cfg = self.config
+        eps = 0.5
+        du = np.array([eps, 0.0])
+        dv = np.array([0.0, eps])
+        jx = (cam.ground_point(feet + du)[:, :2] - cam.ground_point(feet - du)[:, :2]) / (2 * eps)
+        jy = (cam.ground_point(feet + dv)[:, :2] - cam.ground_point(feet - dv)[:, :2]) / (2 * eps)
+        jac = np.stack([jx, jy], axis=2)  # (N, 2 ground, 2 pixel)
+        su = cfg.foot_sigma_px + 0.1 * boxes[:, 2]
+        sv = cfg.foot_sigma_px + cfg.foot_sigma_frac * boxes[:, 3]
+        pix = np.zeros((len(feet), 2, 2))
+        pix[:, 0, 0] = su**2
+        pix[:, 1, 1] = sv**2
+        return jac @ pix @ jac.transpose(0, 2, 1) + np.eye(2) * cfg.ground_sigma_m**2

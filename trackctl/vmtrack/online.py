@@ -19,7 +19,7 @@ import numpy as np
 from trackctl.logs.messages import TrackState
 from trackctl.vmtrack.config import Mode, VmTrackConfig
 from trackctl.vmtrack.identity import IdentityBinder
-from trackctl.vmtrack.tracker import GroundTrack, associate, merge_detections
+from trackctl.vmtrack.tracker import GroundTrack, associate, merge_with_covariance
 
 __all__ = ["FrameOut", "OnlineTracker", "Prediction"]
 
@@ -56,19 +56,32 @@ class OnlineTracker:
         self.frame_index = 0
         self.seconds = 0.0
         self._next_vid = 0
-        self._pending_new: list[np.ndarray] = []  # unmatched detections of the current frame
+        # unmatched detections of the current frame, with their covariances
+        self._pending_new: list[tuple[np.ndarray, np.ndarray | None]] = []
+
+    @property
+    def tracks_started(self) -> int:
+        """Tracks started so far (tentative ones included)."""
+        return self._next_vid
 
     def _new_vid(self) -> str:
         self._next_vid += 1
         return f"v{self._next_vid}"
 
-    def process_frame(self, t_ns: int, points: list[tuple[str, np.ndarray]]) -> None:
-        """Update the tracks with one instant's ground points (camera, xy)."""
+    def process_frame(
+        self,
+        t_ns: int,
+        points: list[tuple[str, np.ndarray]],
+        covs: list[np.ndarray] | None = None,
+    ) -> None:
+        """Update the tracks with one instant's ground points (camera, xy) and, when known, their
+        2x2 covariances (from the camera geometry; None: ``det_sigma_m`` for all)."""
         t0 = time.perf_counter()
         self.frame_count += 1
-        dets = merge_detections(points, self.cfg.merge_m)
+        cov_arr = None if covs is None else np.array(covs, float).reshape(-1, 2, 2)
+        dets, det_covs = merge_with_covariance(points, cov_arr, self.cfg.merge_m)
         self.raw_points[t_ns] = np.array([xy for _, xy in points]).reshape(-1, 2)
-        self._associate(t_ns, dets)
+        self._associate(t_ns, dets, det_covs)
         self._retire(t_ns)
         self._prune_duplicates()
         if self.mode is Mode.VM:
@@ -76,25 +89,26 @@ class OnlineTracker:
         self._snapshot(t_ns)
         self.seconds += time.perf_counter() - t0
 
-    def _associate(self, t_ns: int, dets: np.ndarray) -> None:
+    def _associate(self, t_ns: int, dets: np.ndarray, covs: np.ndarray | None) -> None:
         tcfg, tracks = self.tcfg, self.tracks
         v_m = [self.identity.velocity(self.identity.owner(trk), t_ns) for trk in tracks]
         dts = [(t_ns - trk.t_ns) / 1e9 for trk in tracks]
-        pairs, lost_idx, new_idx = associate(tracks, dets, dts, v_m, tcfg)
+        pairs, lost_idx, new_idx = associate(tracks, dets, dts, v_m, tcfg, covs)
         for i, trk in enumerate(tracks):
             trk.history.append((trk.t_ns, trk.kf.x.copy(), trk.kf.P.copy(), False))
             trk.advance(t_ns, tcfg, v_m[i])
         for i, j, _ in pairs:
             trk = tracks[i]
-            trk.correct(dets[j])
+            trk.correct(dets[j], None if covs is None else covs[j])
             trk.hits += 1
             trk.last_hit_ns = t_ns
+            trk.hit_ns.append(t_ns)
             if trk.hits >= tcfg.confirm_hits:
                 trk.state = TrackState.TRACKED
         for i in lost_idx:
             if tracks[i].state is not TrackState.TENTATIVE:
                 tracks[i].state = TrackState.PREDICTED
-        self._pending_new = [dets[j] for j in new_idx]
+        self._pending_new = [(dets[j], None if covs is None else covs[j]) for j in new_idx]
 
     def _retire(self, t_ns: int) -> None:
         """Drop tentative tracks that missed, and tracks unseen for too long; then start tracks
@@ -113,9 +127,9 @@ class OnlineTracker:
                 continue
             keep.append(trk)
         self.tracks[:] = keep
-        for det in self._pending_new:
+        for det, cov in self._pending_new:
             if all(np.linalg.norm(trk.xy - det) > self.cfg.spawn_m for trk in self.tracks):
-                self.tracks.append(GroundTrack.start(self._new_vid(), det, t_ns, tcfg))
+                self.tracks.append(GroundTrack.start(self._new_vid(), det, t_ns, tcfg, cov))
 
     def _prune_duplicates(self) -> None:
         """Two tracks on one person: keep the bound one, else the older one."""

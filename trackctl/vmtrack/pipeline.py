@@ -47,6 +47,7 @@ from trackctl.vmtrack.identity import IdentityBinder
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.online import FrameOut, OnlineTracker
 from trackctl.vmtrack.scene import scene_update
+from trackctl.vmtrack.stitch import Publication, plan_publication
 from trackctl.vmtrack.tracker import GroundTrack, TrackerConfig
 
 __all__ = ["Mode", "Source", "VmTrackConfig", "run", "TRACKS_TOPIC", "SCENE_TOPIC"]
@@ -195,6 +196,7 @@ def _track_log(
     truth: dict[int, GroundTruth] = {}
     frame_t: int | None = None
     points: list[tuple[str, np.ndarray]] = []
+    covs: list[np.ndarray] | None = None if detector is None else []
     search_full = True
     for n_msgs, msg in enumerate(reader.messages(inputs.stream_topics(reader.topics())), 1):
         if progress is not None and n_msgs % 2000 == 0:
@@ -206,8 +208,9 @@ def _track_log(
             online.identity.pending_rssi.append(msg.message)
             continue
         if frame_t is not None and msg.log_time_ns != frame_t:
-            online.process_frame(frame_t, points)
+            online.process_frame(frame_t, points, covs)
             points = []
+            covs = None if detector is None else []
             online.frame_index += 1
         if msg.log_time_ns != frame_t:
             search_full = online.plan_search() if detector is not None else True
@@ -217,11 +220,15 @@ def _track_log(
             continue
         camera = msg.topic.strip("/").split("/")[0]
         preds = None if search_full else online.predictions(msg.log_time_ns)
-        found, ground = detector.detect(msg.log_time_ns, camera, bytes(msg.message.data), preds)
+        found, ground, ground_covs = detector.detect(
+            msg.log_time_ns, camera, bytes(msg.message.data), preds
+        )
         writer.write(detections_topic(camera), found, msg.log_time_ns)
         points.extend((camera, g) for g in ground)
+        if covs is not None:
+            covs.extend(ground_covs)
     if frame_t is not None:
-        online.process_frame(frame_t, points)
+        online.process_frame(frame_t, points, covs)
     online.close()
     return truth
 
@@ -359,6 +366,45 @@ def _track_message(
     )
 
 
+def _frame_tracks(
+    fr: FrameOut,
+    plan: Publication,
+    positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+) -> list[Track]:
+    """The tracks published at one frame: the online rows the clean-up keeps, under their
+    published ids, plus interpolated positions across stitched gaps."""
+    tracks: list[Track] = []
+    names: set[str] = set()
+    for trk, mid_now, state, k in fr.rows:
+        if (id(trk), fr.t_ns) in plan.hidden:
+            continue
+        out_id = mid_now or plan.name.get(id(trk), trk.vid)
+        if (
+            mid_now is None
+            and trk.first_mid is not None
+            and trk.identity_from_ns <= fr.t_ns < (trk.first_bound_ns or 0)
+        ):
+            # offline: the identity found later holds back to where the track's motion
+            # stops agreeing with the phone (the track's birth, unless it switched people)
+            out_id = trk.first_mid
+        # entry k of a track's history is its state at this frame (snapshotted before the
+        # next frame's prediction, or when the log ends)
+        tracks.append(_track_message(out_id, trk, state, positions.get((id(trk), k))))
+        names.add(out_id)
+    for out_id, xy, v in plan.fills.get(fr.t_ns, ()):
+        if out_id not in names:
+            names.add(out_id)
+            tracks.append(
+                Track(
+                    out_id,
+                    Vec3(float(xy[0]), float(xy[1]), 0.0),
+                    Vec3(float(v[0]), float(v[1]), 0.0),
+                    state=TrackState.PREDICTED,
+                )
+            )
+    return tracks
+
+
 def _write_and_score(
     writer: LogWriter,
     online: OnlineTracker,
@@ -385,24 +431,16 @@ def _write_and_score(
     lost_at: dict[str, int] = {}
     first_loss: dict[str, float] = {}
     t_start = frames[0].t_ns if frames else 0
+    plan = plan_publication(frames, positions, cfg.stitch)
+    published: dict[str, int] = {}
+    coasting = shown = 0
     for fr in frames:
-        tracks = []
-        hyp: dict[str, tuple[float, float]] = {}
-        for trk, mid_now, state, k in fr.rows:
-            out_id = mid_now or trk.vid
-            if (
-                mid_now is None
-                and trk.first_mid is not None
-                and trk.identity_from_ns <= fr.t_ns < (trk.first_bound_ns or 0)
-            ):
-                # offline: the identity found later holds back to where the track's motion
-                # stops agreeing with the phone (the track's birth, unless it switched people)
-                out_id = trk.first_mid
-            # entry k of a track's history is its state at this frame (snapshotted before the
-            # next frame's prediction, or when the log ends)
-            msg = _track_message(out_id, trk, state, positions.get((id(trk), k)))
-            tracks.append(msg)
-            hyp[out_id] = (msg.position_m.x, msg.position_m.y)
+        tracks = _frame_tracks(fr, plan, positions)
+        hyp = {m.track_id: (m.position_m.x, m.position_m.y) for m in tracks}
+        for msg in tracks:
+            published[msg.track_id] = published.get(msg.track_id, 0) + 1
+            coasting += msg.state is TrackState.PREDICTED
+        shown += len(tracks)
         writer.write(TRACKS_TOPIC, Tracks(fr.t_ns, tuple(tracks)))
         writer.write(SCENE_TOPIC, scene_update(fr.t_ns, tracks, set(phones)), fr.t_ns)
         gt = truth.get(fr.t_ns)
@@ -475,4 +513,25 @@ def _write_and_score(
         "offline_bindings": stats.offline_bindings,
         "det_error_m_mean": round(float(np.mean(det_err)), 4) if det_err else None,
         "det_recall": round(det_hits / det_people, 4) if det_people else None,
+        **_no_truth_metrics(online, published, coasting, shown, plan),
+    }
+
+
+def _no_truth_metrics(
+    online: OnlineTracker, published: dict[str, int], coasting: int, shown: int, plan: Publication
+) -> dict[str, float | int | None]:
+    """What a log without ground truth can say: detections, tracks and their lengths."""
+    counts = np.array([len(p) for p in online.raw_points.values()] or [0])
+    lengths = np.array(sorted(published.values()) or [0])
+    return {
+        "detections_per_frame_mean": round(float(counts.mean()), 3),
+        "detections_per_frame_max": int(counts.max()),
+        "tracks_started": online.tracks_started,
+        "tracks_published": len(published),
+        "tracks_stitched": plan.links,
+        "tracks_dropped_short": plan.dropped,
+        "track_frames_median": float(np.median(lengths)),
+        "track_frames_p10": float(np.percentile(lengths, 10)),
+        "track_frames_p90": float(np.percentile(lengths, 90)),
+        "coasting_share": round(coasting / shown, 4) if shown else None,
     }

@@ -22,7 +22,14 @@ from scipy.optimize import linear_sum_assignment
 
 from trackctl.logs.messages import TrackState
 
-__all__ = ["TrackerConfig", "GroundTrack", "associate", "fused_probability"]
+__all__ = [
+    "TrackerConfig",
+    "GroundTrack",
+    "associate",
+    "fused_probability",
+    "merge_detections",
+    "merge_with_covariance",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,15 +72,26 @@ class GroundTrack:
     identity_from_ns: int = 0
     """Offline: from when before its binding the track carries ``first_mid``."""
     history: list[tuple[int, np.ndarray, np.ndarray, bool]] = field(default_factory=list)
+    hit_ns: list[int] = field(default_factory=list)
+    """Times of the frames in which a detection corrected this track."""
 
     @classmethod
-    def start(cls, vid: str, xy: np.ndarray, t_ns: int, cfg: TrackerConfig) -> GroundTrack:
+    def start(
+        cls,
+        vid: str,
+        xy: np.ndarray,
+        t_ns: int,
+        cfg: TrackerConfig,
+        cov: np.ndarray | None = None,
+    ) -> GroundTrack:
         kf = KalmanFilter(dim_x=4, dim_z=2)
         kf.x = np.array([[xy[0]], [xy[1]], [0.0], [0.0]])
         kf.P = np.diag([cfg.det_sigma_m**2] * 2 + [1.0, 1.0])
+        if cov is not None:
+            kf.P[:2, :2] = cov
         kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
         kf.R = np.eye(2) * cfg.det_sigma_m**2
-        return cls(vid, kf, t_ns, last_hit_ns=t_ns)
+        return cls(vid, kf, t_ns, last_hit_ns=t_ns, hit_ns=[t_ns])
 
     @property
     def xy(self) -> np.ndarray:
@@ -116,12 +134,15 @@ class GroundTrack:
         self.kf.predict(F=f, Q=q)
         self.t_ns = t_ns
 
-    def correct(self, xy: np.ndarray) -> None:
-        self.kf.update(np.asarray(xy, float).reshape(2, 1))
+    def correct(self, xy: np.ndarray, cov: np.ndarray | None = None) -> None:
+        """Update with a ground point; ``cov`` is its 2x2 covariance (None: ``det_sigma_m``)."""
+        self.kf.update(np.asarray(xy, float).reshape(2, 1), R=cov)
 
 
-def _gaussian(d2: np.ndarray, var: np.ndarray | float) -> np.ndarray:
-    return np.exp(-0.5 * d2 / var)
+def _mahalanobis2(diff: np.ndarray, var: float, covs: np.ndarray) -> np.ndarray:
+    """Squared Mahalanobis distances of ``diff`` (N, 2) under ``var`` I + ``covs`` (N, 2, 2)."""
+    s = covs + var * np.eye(2)
+    return np.einsum("ni,nij,nj->n", diff, np.linalg.inv(s), diff)
 
 
 def associate(
@@ -130,8 +151,12 @@ def associate(
     dt: list[float],
     v_m: list[np.ndarray | None],
     cfg: TrackerConfig,
+    covs: np.ndarray | None = None,
 ) -> tuple[list[tuple[int, int, float]], list[int], list[int]]:
     """Global one-to-one association of tracks and detections.
+
+    ``covs`` (N, 2, 2) are the detections' ground covariances (from the camera geometry); None
+    takes ``det_sigma_m`` for every detection.
 
     Returns:
         (track index, detection index, probability) pairs, unmatched track and detection indices.
@@ -139,14 +164,15 @@ def associate(
     if not tracks or len(dets) == 0:
         return [], list(range(len(tracks))), list(range(len(dets)))
     prob = np.zeros((len(tracks), len(dets)))
-    r2 = cfg.det_sigma_m**2
+    if covs is None:
+        covs = np.broadcast_to(np.eye(2) * cfg.det_sigma_m**2, (len(dets), 2, 2))
+    r2 = np.trace(covs, axis1=1, axis2=2) / 2  # per-axis variance, for the fusion weights
     for i, trk in enumerate(tracks):
         pv, sv2 = trk.predicted(dt[i], cfg)
-        d2v = np.sum((dets - pv) ** 2, axis=1)
-        q = _gaussian(d2v, sv2 + r2)
+        q = np.exp(-0.5 * _mahalanobis2(dets - pv, sv2, covs))
         if v_m[i] is not None:
             pm, sm2 = trk.motion_predicted(dt[i], v_m[i], cfg)  # type: ignore[arg-type]
-            r = _gaussian(np.sum((dets - pm) ** 2, axis=1), sm2 + r2)
+            r = np.exp(-0.5 * _mahalanobis2(dets - pm, sm2, covs))
             prob[i] = fused_probability(q, r, sv2 + r2, sm2 + r2)
         else:
             prob[i] = q
@@ -168,24 +194,39 @@ def associate(
 
 def merge_detections(points: list[tuple[str, np.ndarray]], merge_m: float) -> np.ndarray:
     """Merge detections of one instant seen by several cameras (overlapping views): points from
-    different cameras closer than ``merge_m`` are averaged (greedy, nearest pairs first).
+    different cameras closer than ``merge_m`` are averaged (greedy, nearest pairs first)."""
+    return merge_with_covariance(points, None, merge_m)[0]
+
+
+def merge_with_covariance(
+    points: list[tuple[str, np.ndarray]], covs: np.ndarray | None, merge_m: float
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`merge_detections` with each point's 2x2 covariance: merged points are fused by
+    their information (the plain average when no covariances are given, or they are equal).
 
     Hand-written agglomeration because it needs a cannot-link rule (two detections of one camera
     are two people) that scipy's hierarchical clustering does not take; groups are few per frame,
     and each step is one vectorised distance matrix.
     """
     if not points:
-        return np.empty((0, 2))
+        return np.empty((0, 2)), None if covs is None else np.empty((0, 2, 2))
     cam_bit: dict[str, int] = {}
     bits = np.array([1 << cam_bit.setdefault(cam, len(cam_bit)) for cam, _ in points], dtype=object)
-    sums = np.array([xy for _, xy in points], float).reshape(-1, 2)
-    counts = np.ones(len(points))
+    xy = np.array([p for _, p in points], float).reshape(-1, 2)
+    info = (
+        np.broadcast_to(np.eye(2), (len(xy), 2, 2)).copy() if covs is None else np.linalg.inv(covs)
+    )
+    sums = np.einsum("nij,nj->ni", info, xy)  # information vectors
     alive = np.ones(len(points), bool)
+
+    def centroids(idx: np.ndarray) -> np.ndarray:
+        return np.linalg.solve(info[idx], sums[idx][:, :, None])[:, :, 0]
+
     while True:
         idx = np.flatnonzero(alive)
         if len(idx) < 2:
             break
-        cent = sums[idx] / counts[idx, None]
+        cent = centroids(idx)
         d = np.linalg.norm(cent[:, None, :] - cent[None, :, :], axis=2)
         shared = np.array([[(bits[a] & bits[b]) != 0 for b in idx] for a in idx])
         d[shared] = np.inf  # same camera (this also masks the diagonal)
@@ -195,7 +236,8 @@ def merge_detections(points: list[tuple[str, np.ndarray]], merge_m: float) -> np
             break
         a, b = idx[i], idx[j]
         sums[a] += sums[b]
-        counts[a] += counts[b]
+        info[a] += info[b]
         bits[a] |= bits[b]
         alive[b] = False
-    return sums[alive] / counts[alive, None]
+    idx = np.flatnonzero(alive)
+    return centroids(idx), None if covs is None else np.linalg.inv(info[idx])

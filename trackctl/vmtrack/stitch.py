@@ -1,0 +1,202 @@
+"""Offline track clean-up: what a published track is, once the whole log has been seen.
+
+The online tracker (:mod:`~trackctl.vmtrack.online`) must coast a track through missed
+detections without knowing whether the person comes back, and starts a new track when they
+reappear too far from the coasting prediction. Offline we know both ends, so for tracks without
+a phone (non-users, and everyone in ``v-af`` mode):
+
+* **coasting tails are not published**: after a track's last detection its positions are pure
+  prediction (a ghost walking on where nobody is); coasting *between* detections stays, smoothed;
+* **fragments are stitched**: a track that ends and one that starts later near where the first
+  would have walked become one identity; the links are chosen together by a global one-to-one
+  assignment (scipy's ``linear_sum_assignment``) over a motion-gated cost, and the gap between
+  them is filled by linear interpolation (published as ``predicted``);
+* **short tracks are dropped**: an identity with fewer than ``min_hits`` detections in all is
+  clutter (a car boot, a shadow), not a person.
+
+Tracks bound to a phone keep the identity stage's decisions (their coasting is the paper's
+motion-sensor prediction and is published).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from trackctl.vmtrack.tracker import GroundTrack
+
+if TYPE_CHECKING:  # online imports the configuration, which imports this module
+    from trackctl.vmtrack.online import FrameOut
+
+__all__ = ["StitchConfig", "Tracklet", "stitch", "Publication", "plan_publication"]
+
+
+@dataclass(frozen=True, slots=True)
+class StitchConfig:
+    """Offline clean-up parameters (metres, seconds)."""
+
+    enabled: bool = True
+    max_gap_s: float = 4.0
+    """Longest gap between a track's end and another's start that may be the same person."""
+    gate_m: float = 1.0
+    """Distance allowed between the extrapolated end and the start, on top of ``speed_sigma``."""
+    speed_sigma_mps: float = 0.5
+    """Growth of the allowed distance with the gap (walking speed uncertainty)."""
+    min_hits: int = 5
+    """Identities with fewer detections than this are dropped."""
+    publish_coasting_tails: bool = False
+    """Publish positions after a track's last detection (the online prediction)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Tracklet:
+    """A track reduced to what stitching needs: its first and last detected states."""
+
+    key: int
+    hits: int
+    first_ns: int
+    last_ns: int
+    first_xy: np.ndarray
+    last_xy: np.ndarray
+    first_v: np.ndarray
+    last_v: np.ndarray
+
+
+def _link_cost(a: Tracklet, b: Tracklet, cfg: StitchConfig) -> float:
+    """Normalised squared miss distance of ``b`` continuing ``a`` (inf when gated out): the
+    least of ``a`` walking on, ``b`` walking back, and the person having stood still."""
+    gap = (b.first_ns - a.last_ns) / 1e9
+    if not 0 < gap <= cfg.max_gap_s:
+        return np.inf
+    # both extrapolations (a forward, b backward), capped at a brisk walk each way
+    va = a.last_v * min(1.0, 2.0 / max(1e-9, float(np.linalg.norm(a.last_v))))
+    vb = b.first_v * min(1.0, 2.0 / max(1e-9, float(np.linalg.norm(b.first_v))))
+    fwd = float(np.linalg.norm(a.last_xy + va * gap - b.first_xy))
+    back = float(np.linalg.norm(b.first_xy - vb * gap - a.last_xy))
+    still = float(np.linalg.norm(b.first_xy - a.last_xy))  # people stop, too
+    miss = min(fwd, back, still)
+    allowed = cfg.gate_m + cfg.speed_sigma_mps * gap
+    if miss > allowed:
+        return np.inf
+    return (miss / allowed) ** 2 + 0.05 * gap
+
+
+def stitch(tracklets: Sequence[Tracklet], cfg: StitchConfig) -> dict[int, int]:
+    """Chain head of every tracklet (its own key when not continued from another).
+
+    Links are one-to-one (an end continues into at most one start and vice versa) and chosen
+    together to minimise the summed cost.
+    """
+    heads = {t.key: t.key for t in tracklets}
+    if not cfg.enabled or len(tracklets) < 2:
+        return heads
+    big = 1e6
+    cost = np.full((len(tracklets), len(tracklets)), big)
+    for i, a in enumerate(tracklets):
+        for j, b in enumerate(tracklets):
+            if i != j:
+                c = _link_cost(a, b, cfg)
+                if np.isfinite(c):
+                    cost[i, j] = c
+    rows, cols = linear_sum_assignment(cost)
+    nxt = {
+        tracklets[i].key: tracklets[j].key
+        for i, j in zip(rows, cols, strict=True)
+        if cost[i, j] < big
+    }
+    prev = {b: a for a, b in nxt.items()}
+    for t in tracklets:
+        if t.key in prev:
+            continue
+        k = t.key
+        seen = {k}
+        while k in nxt and nxt[k] not in seen:  # links go forward in time: no cycles
+            k = nxt[k]
+            seen.add(k)
+            heads[k] = t.key
+    return heads
+
+
+@dataclass
+class Publication:
+    """What the writer publishes for visual-only tracks (the result of the clean-up)."""
+
+    name: dict[int, str]
+    """Published id of a track (by ``id(track)``): its chain head's visual id."""
+    hidden: set[tuple[int, int]]
+    """(``id(track)``, frame ns) rows not published (coasting tails, dropped identities)."""
+    fills: dict[int, list[tuple[str, np.ndarray, np.ndarray]]]
+    """Frame ns -> (id, position, velocity) interpolated across stitched gaps."""
+    dropped: int = 0
+    """Identities dropped as too short."""
+    links: int = 0
+    """Fragments joined to an earlier one."""
+
+
+def plan_publication(
+    frames: Sequence[FrameOut],
+    positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+    cfg: StitchConfig,
+) -> Publication:
+    """Coasting tails, stitched identities and short identities of visual-only tracks."""
+    rows: dict[int, list[tuple[int, int]]] = {}
+    tracks: dict[int, GroundTrack] = {}
+    for fr in frames:
+        for trk, mid_now, _, k in fr.rows:
+            if mid_now is None and trk.first_mid is None:
+                rows.setdefault(id(trk), []).append((fr.t_ns, k))
+                tracks[id(trk)] = trk
+    hidden: set[tuple[int, int]] = set()
+    tracklets = []
+    for key, seq in rows.items():
+        trk = tracks[key]
+        last_hit = trk.hit_ns[-1]
+        if not cfg.publish_coasting_tails:
+            hidden.update((key, t) for t, _ in seq if t > last_hit)
+        shown = [(t, k) for t, k in seq if t <= last_hit] or seq[:1]
+
+        def state(t_k: tuple[int, int], trk: GroundTrack = trk) -> np.ndarray:
+            est = positions.get((id(trk), t_k[1]))
+            return trk.kf.x[:, 0] if est is None else est[0]
+
+        s0, s1 = state(shown[0]), state(shown[-1])
+        hits = sum(1 for t in trk.hit_ns if shown[0][0] <= t <= shown[-1][0])
+        tracklets.append(
+            Tracklet(key, hits, shown[0][0], shown[-1][0], s0[:2], s1[:2], s0[2:4], s1[2:4])
+        )
+    heads = stitch(tracklets, cfg) if cfg.enabled else {t.key: t.key for t in tracklets}
+    by_key = {t.key: t for t in tracklets}
+    chain_hits: dict[int, int] = {}
+    for t in tracklets:
+        chain_hits[heads[t.key]] = chain_hits.get(heads[t.key], 0) + t.hits
+    name = {key: tracks[heads[key]].vid for key in rows}
+    dropped = {h for h, n in chain_hits.items() if n < cfg.min_hits}
+    for key, seq in rows.items():
+        if heads[key] in dropped:
+            hidden.update((key, t) for t, _ in seq)
+    # fill stitched gaps by interpolation between the end and the start
+    times = [fr.t_ns for fr in frames]
+    fills: dict[int, list[tuple[str, np.ndarray, np.ndarray]]] = {}
+    members: dict[int, list[Tracklet]] = {}
+    for tl in tracklets:
+        members.setdefault(heads[tl.key], []).append(tl)
+    links = 0
+    for head, chain in members.items():
+        if head in dropped:
+            continue
+        chain.sort(key=lambda t: t.first_ns)
+        for a, b in zip(chain, chain[1:], strict=False):
+            links += 1
+            span = (b.first_ns - a.last_ns) / 1e9
+            v = (b.first_xy - a.last_xy) / span
+            lo = int(np.searchsorted(times, a.last_ns, side="right"))
+            hi = int(np.searchsorted(times, b.first_ns, side="left"))
+            for t_ns in times[lo:hi]:
+                w = (t_ns - a.last_ns) / (b.first_ns - a.last_ns)
+                xy = (1 - w) * a.last_xy + w * b.first_xy
+                fills.setdefault(t_ns, []).append((name[by_key[head].key], xy, v))
+    return Publication(name, hidden, fills, len(dropped), links)
