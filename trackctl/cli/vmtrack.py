@@ -111,6 +111,24 @@ def simulate_vm(
     jpeg_quality: Annotated[
         int, typer.Option(help="JPEG quality of rendered frames (1-100).", min=1, max=100)
     ] = 60,
+    light_drop: Annotated[
+        str | None,
+        typer.Option(
+            metavar="FRACTION[@SECONDS]",
+            help="With --frames: the scene gets darker by FRACTION from SECONDS (default 60), "
+            "e.g. 0.25@60.",
+        ),
+    ] = None,
+    flicker: Annotated[
+        float, typer.Option(help="With --frames: exposure gain per frame uniform in 1 +- this.")
+    ] = 0.0,
+    shadows: Annotated[
+        bool, typer.Option("--shadows", help="With --frames: people cast shadows on the floor.")
+    ] = False,
+    standing: Annotated[
+        float,
+        typer.Option(help="An extra person walks in, stands still this many seconds, walks out."),
+    ] = 0.0,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
@@ -124,6 +142,14 @@ def simulate_vm(
     except ValueError:
         raise InputError(f"--speed {speed!r}: expected MIN,MAX or one number") from None
     rng = (parts[0], parts[-1])
+    drop, drop_at = 0.0, 60.0
+    if light_drop is not None:
+        value, _, at = light_drop.partition("@")
+        try:
+            drop = float(value)
+            drop_at = float(at) if at else 60.0
+        except ValueError:
+            raise InputError(f"--light-drop {light_drop!r}: expected FRACTION[@SECONDS]") from None
     cfg = VmScenario(
         field=field,
         users=users,
@@ -136,7 +162,16 @@ def simulate_vm(
         phones=tuple(p.strip() for p in (phones or "").split(",") if p.strip()),
         frames=frames,
         jpeg_quality=jpeg_quality,
+        light_drop=drop,
+        light_drop_at_s=drop_at,
+        flicker=flicker,
+        shadows=shadows,
+        standing_s=standing,
     )
+    if not frames and (drop or flicker or shadows):
+        raise InputError(
+            "--light-drop, --flicker and --shadows act on rendered frames: add --frames"
+        )
     counts = simulate(str(out), cfg)
     if json_out:
         print_json({"out": str(out), "topics": counts})

@@ -7,6 +7,7 @@ deterministic for a given random generator.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -14,7 +15,7 @@ import numpy as np
 
 from trackctl.geometry.camera import PinholeCamera
 
-__all__ = ["PersonLook", "floor_image", "render_frame", "person_outline"]
+__all__ = ["PersonLook", "floor_image", "render_frame", "person_outline", "draw_shadow"]
 
 PERSON_HEIGHT_M = 1.7
 SHOULDER_M = 0.46
@@ -84,15 +85,47 @@ def person_outline(cam: PinholeCamera, xy: np.ndarray) -> tuple[np.ndarray, np.n
     return px[0], px[1], width_px
 
 
+SHADOW_AZIMUTH_RAD = math.radians(35.0)
+"""Direction the shadows fall in (world frame), from a lamp at ``SHADOW_ELEVATION_RAD``."""
+SHADOW_ELEVATION_RAD = math.radians(50.0)
+SHADOW_DARKNESS = 0.55
+"""Floor brightness inside a shadow (indoor lamps: 40-60% of the lit floor)."""
+
+
+def draw_shadow(img: np.ndarray, cam: PinholeCamera, xy: np.ndarray) -> None:
+    """Darken the floor where a person at ``xy`` casts their shadow: a body-wide strip from the
+    feet, PERSON_HEIGHT / tan(elevation) long, soft-edged."""
+    d = np.array([math.cos(SHADOW_AZIMUTH_RAD), math.sin(SHADOW_AZIMUTH_RAD)])
+    n = np.array([-d[1], d[0]])
+    length = PERSON_HEIGHT_M / math.tan(SHADOW_ELEVATION_RAD)
+    half = SHOULDER_M / 2
+    corners = [xy + n * half, xy - n * half, xy + d * length - n * half * 0.6]
+    corners.append(xy + d * length + n * half * 0.6)
+    ground = np.column_stack([np.array(corners), np.zeros(4)])
+    px, front = cam.project(ground)
+    if not front.all():
+        return
+    mask = np.zeros(img.shape[:2], np.float32)
+    cv2.fillConvexPoly(mask, np.round(px).astype(np.int32), 1.0, cv2.LINE_AA)
+    soft = cv2.GaussianBlur(mask, (5, 5), 0)
+    factor = 1.0 - (1.0 - SHADOW_DARKNESS) * soft
+    img[:] = np.clip(img.astype(np.float32) * factor[:, :, None], 0, 255).astype(np.uint8)
+
+
 def render_frame(
     cam: PinholeCamera,
     background: np.ndarray,
     people: list[tuple[np.ndarray, PersonLook]],
     rng: np.random.Generator,
     noise_std: float = 3.0,
+    shadows: bool = False,
 ) -> np.ndarray:
-    """One frame: ``people`` (ground xy, look) drawn far to near over ``background``."""
+    """One frame: ``people`` (ground xy, look) drawn far to near over ``background``; with
+    ``shadows``, each casts a shadow on the floor first (see :func:`draw_shadow`)."""
     img = background.copy()
+    if shadows:
+        for xy, _ in people:
+            draw_shadow(img, cam, xy)
     order = []
     for xy, look in people:
         depth = float(cam.to_camera(np.array([[xy[0], xy[1], 0.0]]))[0, 2])

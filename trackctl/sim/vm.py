@@ -88,6 +88,15 @@ class VmScenario:
     frames: bool = False
     """Render JPEG frames (/camN/image) instead of writing simulated detections."""
     jpeg_quality: int = 60
+    light_drop: float = 0.0
+    """Rendered frames: the scene gets this much darker (0.25: 25%) from ``light_drop_at_s``."""
+    light_drop_at_s: float = 60.0
+    flicker: float = 0.0
+    """Rendered frames: exposure gain of each frame uniform in 1 +- ``flicker``."""
+    shadows: bool = False
+    """Rendered frames: each person casts a shadow on the floor (a lamp at 50 deg elevation)."""
+    standing_s: float = 0.0
+    """An extra person (non-user ``s0``) walks in, stands still this long, and walks out."""
 
     def __post_init__(self) -> None:
         if self.field not in FIELDS:
@@ -96,6 +105,14 @@ class VmScenario:
             raise InputError("--users and --nonusers must be >= 0")
         if self.duration_s <= 0:
             raise InputError(f"--duration must be positive, got {self.duration_s}")
+        if not 0 <= self.light_drop < 1:
+            raise InputError(f"--light-drop must be in [0, 1), got {self.light_drop}")
+        if not 0 <= self.flicker < 1:
+            raise InputError(f"--flicker must be in [0, 1), got {self.flicker}")
+        if self.standing_s < 0 or self.standing_s > self.duration_s:
+            raise InputError(
+                f"--standing {self.standing_s}: must be between 0 and --duration {self.duration_s}"
+            )
 
 
 @dataclass(frozen=True, slots=True)
@@ -257,6 +274,8 @@ def _site(cfg: VmScenario, rng: np.random.Generator) -> _Site:
     if cfg.cameras_grid is not None:
         grid = cfg.cameras_grid
     trajs, phones = _people(cfg, rng, size)
+    if cfg.standing_s > 0:
+        trajs.append(_stander(cfg, size))
     if cfg.trajectories:
         allxy = np.vstack([t.xy for t in trajs])
         lo, hi = allxy.min(axis=0) - 1.0, allxy.max(axis=0) + 1.0
@@ -277,6 +296,24 @@ def _site(cfg: VmScenario, rng: np.random.Generator) -> _Site:
         aps = [(f"ap-entry-{k}", xy) for k, xy in enumerate(_entries(trajs, size))]
     cams = [PinholeCamera(m) for m in models]
     return _Site(size, trajs, phones, duration, models, cams, aps)
+
+
+def _stander(cfg: VmScenario, size: tuple[float, float]) -> Trajectory:
+    """A person who walks in from the field's left edge (1.2 m/s), stands still for
+    ``standing_s`` in the field, and walks back out: a static person a background model must
+    not absorb. Its own random stream keeps every other person and sensor unchanged."""
+    rng = np.random.default_rng([cfg.seed, 7])
+    dt = 0.05
+    spot = np.array([rng.uniform(0.3, 0.7) * size[0], rng.uniform(0.3, 0.7) * size[1]])
+    door = np.array([0.3, spot[1]])
+    walk_s = float(np.linalg.norm(spot - door) / 1.2)
+    start = max(0.0, (cfg.duration_s - cfg.standing_s) / 2 - walk_s)
+    t = np.arange(0.0, cfg.duration_s + dt, dt)
+    a = np.clip((t - start) / walk_s, 0, 1)[:, None]
+    b = np.clip((t - start - walk_s - cfg.standing_s) / walk_s, 0, 1)[:, None]
+    xy = door + (spot - door) * a - (spot - door) * b
+    xy[(t < start) | (t > start + 2 * walk_s + cfg.standing_s)] = np.nan
+    return Trajectory("s0", 0.0, dt, xy)
 
 
 def _truth_event(t_ns: int, present: dict[str, np.ndarray], phones: dict[str, str]) -> Event:
@@ -399,6 +436,7 @@ class _Renderer:
     def __init__(self, site: _Site, cfg: VmScenario) -> None:
         self.site, self.cfg = site, cfg
         self.rng = np.random.default_rng([cfg.seed, 1])
+        self.light_rng = np.random.default_rng([cfg.seed, 2])  # options keep other draws
         self.looks = {tr.person: PersonLook.random(self.rng) for tr in site.trajs}
         self.floors = (
             {id(cam): floor_image(cam, self.rng) for cam in site.cams} if cfg.frames else {}
@@ -410,7 +448,14 @@ class _Renderer:
             xy = tr.at(frame.t_s)[0]
             if not np.isnan(xy).any():
                 people.append((xy, self.looks[tr.person]))
-        img = render_frame(frame.cam, self.floors[id(frame.cam)], people, self.rng)
+        img = render_frame(
+            frame.cam, self.floors[id(frame.cam)], people, self.rng, shadows=self.cfg.shadows
+        )
+        gain = 1.0 - (self.cfg.light_drop if frame.t_s >= self.cfg.light_drop_at_s else 0.0)
+        if self.cfg.flicker > 0:
+            gain *= 1.0 + self.light_rng.uniform(-self.cfg.flicker, self.cfg.flicker)
+        if gain != 1.0:
+            img = np.clip(img.astype(np.float32) * gain, 0, 255).astype(np.uint8)
         quality = [cv2.IMWRITE_JPEG_QUALITY, self.cfg.jpeg_quality]
         ok, buf = cv2.imencode(".jpg", img, quality)
         if not ok:  # pragma: no cover - OpenCV always encodes a uint8 BGR image
@@ -460,4 +505,9 @@ def _scenario_metadata(site: _Site, cfg: VmScenario) -> dict[str, object]:
         "imu_hz": cfg.imu_hz,
         "trajectories": cfg.trajectories or "random-waypoint",
         "frames": cfg.frames,
+        "light_drop": cfg.light_drop,
+        "light_drop_at_s": cfg.light_drop_at_s,
+        "flicker": cfg.flicker,
+        "shadows": cfg.shadows,
+        "standing_s": cfg.standing_s,
     }

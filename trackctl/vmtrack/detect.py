@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -64,6 +64,15 @@ class DetectorConfig:
     score favours the torso: legs are thin and often close to the floor's colour)."""
     feet_threshold: int = 18
     """Grey-level difference that counts as foreground when looking for the feet."""
+    shadows: bool = True
+    """Cast shadows (darker, same chromaticity) are not foreground."""
+    shadow_ratio: tuple[float, float] = (0.45, 0.92)
+    """Brightness against the background that a shadow may have."""
+    shadow_chroma: float = 0.08
+    """Largest per-channel deviation of the brightness ratio from its mean, in a shadow."""
+    ghost_edge_ratio: float = 1.0
+    """A detection whose outline has more edge strength in the background than in the frame
+    by this factor is a ghost (dropped)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,16 +89,37 @@ class Region:
 
 
 class BackgroundModel:
-    """Per-camera background: the temporal median of frames sampled across the log.
+    """Per-camera background that survives light changes and people who stand still.
 
-    Offline we can sample the whole recording, so people who stand still for a while do not burn
-    into the background as they would in a running average.
+    * **Start**: the per-pixel temporal median of frames sampled from the start of the log
+      (people walking through the samples do not survive the median).
+    * **Exposure**: each frame's global gain against the background (the median ratio over a
+      coarse grid; people are a minority of the pixels) is divided out before differencing, so a
+      dimmed scene or auto-exposure flicker does not turn the floor into foreground.
+    * **Adaptation**: :meth:`update` blends every frame into the background (time constant
+      ``tau_s``) *except* where people are (the tracker's predictions and the detections: the
+      feedback that keeps a person who stops from being absorbed).
+    * **Shadows**: a pixel darker than the background by a factor in ``shadow_ratio`` with its
+      chromaticity kept is a cast shadow, not foreground (Prati et al. 2003, the rule OpenCV's
+      MOG2 uses).
     """
 
     def __init__(self, frames: list[np.ndarray]) -> None:
         if not frames:
             raise ValueError("BackgroundModel needs at least one frame")
-        self.image = np.median(np.stack(frames), axis=0).astype(np.uint8)
+        self._float = np.median(np.stack(frames), axis=0).astype(np.float32)
+        self.gain = 1.0
+        self._last_ns: int | None = None
+
+    def set_frame(self, image: np.ndarray) -> float:
+        """Estimate (and keep, for :meth:`foreground`) the exposure gain of ``image``."""
+        small = cv2.resize(image, (64, 48), interpolation=cv2.INTER_AREA).astype(np.float32)
+        bg = cv2.resize(self._float, (64, 48), interpolation=cv2.INTER_AREA)
+        if small.ndim == 3:
+            small, bg = small.mean(axis=2), bg.mean(axis=2)
+        valid = bg > 20
+        self.gain = float(np.median(small[valid] / bg[valid])) if valid.any() else 1.0
+        return self.gain
 
     def foreground(
         self, image: np.ndarray, cfg: DetectorConfig, box: Region | None = None
@@ -100,16 +130,83 @@ class BackgroundModel:
         as the floor still differ in hue.
         """
         if box is None:
-            img, bg = image, self.image
+            img, bg = image, self._float
         else:
             img = image[box.y0 : box.y1, box.x0 : box.x1]
-            bg = self.image[box.y0 : box.y1, box.x0 : box.x1]
-        diff = cv2.absdiff(img, bg)
-        if diff.ndim == 3:
-            diff = np.max(diff, axis=2)
+            bg = self._float[box.y0 : box.y1, box.x0 : box.x1]
+        ref = cv2.convertScaleAbs(bg, alpha=self.gain)  # background at this frame's exposure
+        diff = cv2.absdiff(img, ref)
+        if diff.ndim == 3:  # OpenCV per-channel max: numpy's axis reductions are slow here
+            b, g, r = cv2.split(diff)
+            diff = cv2.max(cv2.max(b, g), r)
         _, mask = cv2.threshold(diff, cfg.diff_threshold, 1, cv2.THRESH_BINARY)
-        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-        return mask.astype(np.float32)
+        if cfg.shadows:
+            ys, xs = np.nonzero(mask)  # only changed pixels can be shadows
+            if len(ys):
+                ratio = img[ys, xs].astype(np.float32) / (ref[ys, xs].astype(np.float32) + 1.0)
+                if ratio.ndim == 2:
+                    mean = ratio.mean(axis=1)
+                    chroma = np.abs(ratio - mean[:, None]).max(axis=1)
+                else:
+                    mean, chroma = ratio, np.zeros_like(ratio)
+                lo, hi = cfg.shadow_ratio
+                shadow = (mean >= lo) & (mean <= hi) & (chroma <= cfg.shadow_chroma)
+                mask[ys[shadow], xs[shadow]] = 0
+        opened = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+        return np.asarray(opened, np.float32)
+
+    def ghost(self, image: np.ndarray, box: np.ndarray, cfg: DetectorConfig) -> bool:
+        """Whether the foreground in ``box`` (x, y, w, h) is a ghost: floor revealed where the
+        background still holds someone who has left. An object's outline has edges in the
+        frame; a ghost's outline has them in the background instead (Cucchiara et al. 2003)."""
+        h_img, w_img = image.shape[:2]
+        x, y, w, h = box
+        reg = Region(
+            max(0, int(x - 0.2 * w)),
+            max(0, int(y - 0.1 * h)),
+            min(w_img, int(x + 1.2 * w) + 1),
+            min(h_img, int(y + 1.1 * h) + 1),
+            h,
+        )
+        if reg.x1 - reg.x0 < 6 or reg.y1 - reg.y0 < 6:
+            return False
+        mask = self.foreground(image, cfg, reg).astype(np.uint8)
+        kernel = np.ones((3, 3), np.uint8)
+        outline = cv2.dilate(mask, kernel) - cv2.erode(mask, kernel)
+        if outline.sum() < 8:
+            return False
+
+        def edges(img: np.ndarray) -> float:
+            grey = img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+            grey = grey.astype(np.float32)
+            mag = cv2.magnitude(
+                cv2.Sobel(grey, cv2.CV_32F, 1, 0), cv2.Sobel(grey, cv2.CV_32F, 0, 1)
+            )
+            return float(mag[outline > 0].mean())
+
+        crop = image[reg.y0 : reg.y1, reg.x0 : reg.x1]
+        bg = np.clip(self._float[reg.y0 : reg.y1, reg.x0 : reg.x1] * self.gain, 0, 255)
+        return edges(bg.astype(np.uint8)) > cfg.ghost_edge_ratio * edges(crop)
+
+    def update(
+        self, image: np.ndarray, t_ns: int, keep_out: list[Region], tau_s: float | None
+    ) -> None:
+        """Blend ``image`` (at the background's exposure) into the background outside
+        ``keep_out``, with time constant ``tau_s`` (None: never)."""
+        last, self._last_ns = self._last_ns, t_ns
+        if tau_s is None or last is None or t_ns <= last:
+            return
+        alpha = 1.0 - math.exp(-(t_ns - last) / 1e9 / tau_s)
+        mask = np.full(image.shape[:2], 255, np.uint8)
+        for r in keep_out:
+            mask[r.y0 : r.y1, r.x0 : r.x1] = 0
+        src = image.astype(np.float32) * (1.0 / max(self.gain, 1e-3))
+        cv2.accumulateWeighted(src, self._float, alpha, mask)
+
+    @property
+    def image(self) -> np.ndarray:
+        """The background now, as an 8-bit image."""
+        return np.clip(self._float, 0, 255).astype(np.uint8)
 
 
 def _level_boxes(
@@ -215,6 +312,9 @@ def detect_people(
     boxes, scores = _suppress_parts(boxes[idx], scores[idx], cfg.contained)
     if cfg.refine_feet:
         boxes = refine_feet(image, background, boxes, cfg)
+    if cfg.ghost_edge_ratio > 0 and len(boxes):
+        real = np.array([not background.ghost(image, b, cfg) for b in boxes])
+        boxes, scores = boxes[real], scores[real]
     # a person cut by the bottom edge has no visible foot point to place on the ground
     keep = boxes[:, 1] + boxes[:, 3] < image.shape[0] - 2
     if expected_height is not None and len(boxes):
@@ -235,7 +335,7 @@ def refine_feet(
     if len(boxes) == 0:
         return boxes
     h_img, w_img = image.shape[:2]
-    low = DetectorConfig(diff_threshold=cfg.feet_threshold)
+    low = replace(cfg, diff_threshold=cfg.feet_threshold)
     out = boxes.copy()
     for b in out:
         x, y, w, h = b

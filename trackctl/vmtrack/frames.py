@@ -51,7 +51,16 @@ class FrameConfig:
     visual_speed_sigma_mps: float = 0.6
     """Velocity uncertainty of a track without a phone (its prediction is visual only)."""
     background_frames: int = 25
-    """Frames sampled across the log for each camera's median background."""
+    """Frames sampled for each camera's starting (median) background."""
+    background_init_s: float | None = 10.0
+    """The starting background is sampled from the log's first seconds (None: the whole log).
+    A person who stands still for most of the log would win a whole-log median."""
+    background_tau_s: float | None = 10.0
+    """Time constant of the background's adaptation outside people (None: static)."""
+    protect_moved_m: float = 1.0
+    """A track keeps the background from absorbing it once it has moved this far (or has a
+    phone): a ghost (floor revealed where the starting background holds a person) never moves,
+    so it heals."""
     foot_sigma_frac: float = 0.05
     """Std of a detected foot point's row as a share of the box height (legs, shoes, shadow)."""
     foot_sigma_px: float = 1.5
@@ -115,12 +124,21 @@ class FrameDetector:
 
     def _build_backgrounds(self, reader: LogReader) -> None:
         present = reader.topics()
+        init_s = self.config.background_init_s
         for name in self.cams:
             topic = topics.image(name)
-            count = present[topic].count if topic in present else 0
+            info = present.get(topic)
+            count = info.count if info is not None else 0
+            end_ns = None
+            if init_s is not None and info is not None and count > 1 and info.first_ns is not None:
+                span = max(1, (info.last_ns or info.first_ns) - info.first_ns)
+                end_ns = info.first_ns + int(init_s * 1e9)
+                count = max(1, min(count, round(count * init_s * 1e9 / span) + 1))
             step = max(1, count // max(1, self.config.background_frames))
             samples: list[np.ndarray] = []
             for k, m in enumerate(reader.messages([topic])):
+                if end_ns is not None and m.log_time_ns > end_ns:
+                    break
                 if k % step:
                     continue
                 image = _decode(bytes(m.message.data))
@@ -152,13 +170,16 @@ class FrameDetector:
         camera: str,
         data: bytes,
         predictions: list[tuple[np.ndarray, float, bool]] | None,
+        people: list[tuple[np.ndarray, float, bool]] | None = None,
     ) -> tuple[Detections, list[np.ndarray], list[np.ndarray]]:
         """People in one frame: the Detections message, their ground points and the points'
         2x2 covariances (pixel noise through the camera geometry: far people are uncertain
         along the line of sight).
 
         ``predictions`` None asks for a full search; otherwise only their regions are searched.
-        A frame that does not decode is skipped and counted.
+        ``people`` (the tracker's predictions of people who have walked, searched or not) are
+        kept out of the background's adaptation. A frame that does not decode is skipped and
+        counted.
         """
         t0 = time.perf_counter()
         image = _decode(data)
@@ -168,6 +189,8 @@ class FrameDetector:
             self.bad_frames += 1
             return Detections(t_ns, camera, ()), [], []
         cam = self.cams[camera]
+        background = self.backgrounds[camera]
+        background.set_frame(image)
         regions = None if predictions is None else self.regions(camera, predictions)
         if regions is None:
             self.full_searches += 1
@@ -176,7 +199,7 @@ class FrameDetector:
         dcfg = self.config.detector
         boxes, scores = detect_people(
             image,
-            self.backgrounds[camera],
+            background,
             dcfg,
             regions,
             lambda feet: person_height_px(cam, feet, dcfg.person_height_m),
@@ -184,6 +207,8 @@ class FrameDetector:
         feet = np.column_stack([boxes[:, 0] + boxes[:, 2] / 2, boxes[:, 1] + boxes[:, 3]])
         ground = cam.ground_point(feet)
         covs = self._ground_covariances(cam, feet, boxes)
+        keep_out = self.regions(camera, people) if people else []
+        background.update(image, t_ns, keep_out, self.config.background_tau_s)
         self.seconds_detect += time.perf_counter() - t1
         dets = []
         points = []

@@ -166,13 +166,17 @@ class OnlineTracker:
             trk.history.append((trk.t_ns, trk.kf.x.copy(), trk.kf.P.copy(), True))
 
     # -- search planning for camera frames --------------------------------------------------------
-    def predictions(self, t_ns: int) -> list[Prediction]:
+    def predictions(self, t_ns: int, moved_only: bool = False) -> list[Prediction]:
         """Where each live track can be at ``t_ns`` (ground xy, radius m, undetected in the last
-        frame): motion sensors for tracks with a phone, the visual velocity otherwise."""
+        frame): motion sensors for tracks with a phone, the visual velocity otherwise.
+        ``moved_only`` keeps the tracks that have walked ``frames.protect_moved_m`` from where
+        they were born (people the background must not absorb; not ghosts)."""
         fcfg = self.cfg.frames
         owner = self.identity.owners()
         out = []
         for trk in self.tracks:
+            if moved_only and trk.moved_m < fcfg.protect_moved_m and id(trk) not in owner:
+                continue
             dt = max(0.0, (t_ns - trk.t_ns) / 1e9)
             v = self.identity.velocity(owner.get(id(trk)), t_ns)
             sigma = self.tcfg.pdr_sigma_mps if v is not None else fcfg.visual_speed_sigma_mps

@@ -219,9 +219,10 @@ def _track_log(
             points.extend(_ground_points(reader, msg.topic, msg.message, inputs.cams))
             continue
         camera = msg.topic.strip("/").split("/")[0]
+        people = online.predictions(msg.log_time_ns, moved_only=True)
         preds = None if search_full else online.predictions(msg.log_time_ns)
         found, ground, ground_covs = detector.detect(
-            msg.log_time_ns, camera, bytes(msg.message.data), preds
+            msg.log_time_ns, camera, bytes(msg.message.data), preds, people
         )
         writer.write(detections_topic(camera), found, msg.log_time_ns)
         points.extend((camera, g) for g in ground)

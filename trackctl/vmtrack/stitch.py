@@ -48,6 +48,9 @@ class StitchConfig:
     """Growth of the allowed distance with the gap (walking speed uncertainty)."""
     min_hits: int = 5
     """Identities with fewer detections than this are dropped."""
+    min_motion_m: float = 0.7
+    """Identities that never get this far from where they were first seen are dropped: a
+    poster, a plant, or floor revealed where the starting background held a person."""
     publish_coasting_tails: bool = False
     """Publish positions after a track's last detection (the online prediction)."""
 
@@ -64,6 +67,7 @@ class Tracklet:
     last_xy: np.ndarray
     first_v: np.ndarray
     last_v: np.ndarray
+    moved_m: float = np.inf
 
 
 def _link_cost(a: Tracklet, b: Tracklet, cfg: StitchConfig) -> float:
@@ -166,15 +170,25 @@ def plan_publication(
         s0, s1 = state(shown[0]), state(shown[-1])
         hits = sum(1 for t in trk.hit_ns if shown[0][0] <= t <= shown[-1][0])
         tracklets.append(
-            Tracklet(key, hits, shown[0][0], shown[-1][0], s0[:2], s1[:2], s0[2:4], s1[2:4])
+            Tracklet(
+                key, hits, shown[0][0], shown[-1][0], s0[:2], s1[:2], s0[2:4], s1[2:4], trk.moved_m
+            )
         )
     heads = stitch(tracklets, cfg) if cfg.enabled else {t.key: t.key for t in tracklets}
     by_key = {t.key: t for t in tracklets}
     chain_hits: dict[int, int] = {}
-    for t in tracklets:
-        chain_hits[heads[t.key]] = chain_hits.get(heads[t.key], 0) + t.hits
+    chain_moved: dict[int, float] = {}
+    chain_start: dict[int, np.ndarray] = {}
+    for t in sorted(tracklets, key=lambda tl: tl.first_ns):
+        h = heads[t.key]
+        chain_hits[h] = chain_hits.get(h, 0) + t.hits
+        start = chain_start.setdefault(h, t.first_xy)
+        far = max(t.moved_m, float(np.linalg.norm(t.last_xy - start)))
+        chain_moved[h] = max(chain_moved.get(h, 0.0), far)
     name = {key: tracks[heads[key]].vid for key in rows}
-    dropped = {h for h, n in chain_hits.items() if n < cfg.min_hits}
+    dropped = {
+        h for h, n in chain_hits.items() if n < cfg.min_hits or chain_moved[h] < cfg.min_motion_m
+    }
     for key, seq in rows.items():
         if heads[key] in dropped:
             hidden.update((key, t) for t, _ in seq)

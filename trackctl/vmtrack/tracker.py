@@ -74,6 +74,10 @@ class GroundTrack:
     history: list[tuple[int, np.ndarray, np.ndarray, bool]] = field(default_factory=list)
     hit_ns: list[int] = field(default_factory=list)
     """Times of the frames in which a detection corrected this track."""
+    born_xy: np.ndarray | None = None
+    moved_m: float = 0.0
+    """Farthest the track's corrected position has been from where it was born: a track that
+    never moves is clutter or a ghost (revealed background), not a person who walked there."""
 
     @classmethod
     def start(
@@ -91,7 +95,7 @@ class GroundTrack:
             kf.P[:2, :2] = cov
         kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
         kf.R = np.eye(2) * cfg.det_sigma_m**2
-        return cls(vid, kf, t_ns, last_hit_ns=t_ns, hit_ns=[t_ns])
+        return cls(vid, kf, t_ns, last_hit_ns=t_ns, hit_ns=[t_ns], born_xy=np.array(xy[:2], float))
 
     @property
     def xy(self) -> np.ndarray:
@@ -137,6 +141,8 @@ class GroundTrack:
     def correct(self, xy: np.ndarray, cov: np.ndarray | None = None) -> None:
         """Update with a ground point; ``cov`` is its 2x2 covariance (None: ``det_sigma_m``)."""
         self.kf.update(np.asarray(xy, float).reshape(2, 1), R=cov)
+        if self.born_xy is not None:
+            self.moved_m = max(self.moved_m, float(np.linalg.norm(self.xy - self.born_xy)))
 
 
 def _mahalanobis2(diff: np.ndarray, var: float, covs: np.ndarray) -> np.ndarray:
