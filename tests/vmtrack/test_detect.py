@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from trackctl.geometry.camera import PinholeCamera
-from trackctl.sim.render import PersonLook, floor_image, render_frame
+from trackctl.sim.render import PersonLook, draw_shadow, floor_image, render_frame
 from trackctl.sim.vm import _cameras
 from trackctl.vmtrack.detect import (
     BackgroundModel,
@@ -103,3 +103,67 @@ def test_predicted_region_contains_the_person_image(
     for u, v in px[inside]:
         assert reg.x0 <= u <= reg.x1 and reg.y0 <= v <= reg.y1
     assert reg.height_px == pytest.approx(float(np.linalg.norm(px[0] - px[1])), rel=1e-6)
+
+
+def _detect(cam: PinholeCamera, bg: BackgroundModel, image: np.ndarray) -> np.ndarray:
+    cfg = DetectorConfig()
+    bg.set_frame(image)
+    boxes, _ = detect_people(
+        image, bg, cfg, None, lambda f: person_height_px(cam, f, cfg.person_height_m)
+    )
+    return _ground(cam, boxes)
+
+
+def _fresh(scene) -> BackgroundModel:
+    return BackgroundModel([scene[2].image])
+
+
+def test_a_darker_or_brighter_frame_finds_the_same_people(scene) -> None:
+    cam, floor, _ = scene
+    frame = _frame(cam, floor, PEOPLE)
+    for gain in (0.75, 1.2):
+        bg = _fresh(scene)
+        dimmed = np.clip(frame.astype(np.float32) * gain, 0, 255).astype(np.uint8)
+        ground = _detect(cam, bg, dimmed)
+        assert bg.gain == pytest.approx(gain, abs=0.05)
+        assert len(ground) == len(PEOPLE)
+        for p in PEOPLE:
+            assert np.min(np.linalg.norm(ground - p, axis=1)) < 0.3
+
+
+def test_cast_shadows_are_not_people_and_do_not_move_the_feet(scene) -> None:
+    cam, floor, _ = scene
+    rng = np.random.default_rng(1)
+    looks = [PersonLook.random(rng) for _ in PEOPLE]
+    img = render_frame(cam, floor, list(zip(PEOPLE, looks, strict=True)), rng, shadows=True)
+    ground = _detect(cam, _fresh(scene), img)
+    assert len(ground) == len(PEOPLE)
+    for p in PEOPLE:
+        assert np.min(np.linalg.norm(ground - p, axis=1)) < 0.3
+    # a shadow alone (its person outside the view) is no detection
+    shadow_only = floor.copy()
+    draw_shadow(shadow_only, cam, np.array([3.0, 2.5]))
+    assert len(_detect(cam, _fresh(scene), shadow_only)) == 0
+
+
+def test_floor_revealed_where_the_background_holds_a_person_is_a_ghost(scene) -> None:
+    cam, floor, _ = scene
+    with_person = _frame(cam, floor, [PEOPLE[0]])
+    bg = BackgroundModel([with_person])  # someone stood there while the background was made
+    ground = _detect(cam, bg, _frame(cam, floor, [PEOPLE[1]]))
+    assert len(ground) == 1  # the real person, not the ghost of the one who left
+    assert np.linalg.norm(ground[0] - PEOPLE[1]) < 0.3
+
+
+def test_background_adapts_except_where_people_are_kept_out(scene) -> None:
+    cam, floor, _ = scene
+    frame = _frame(cam, floor, PEOPLE[:2])
+    bg = _fresh(scene)
+    keep = [predict_region(cam, PEOPLE[0], 0.5)]
+    for k in range(60):  # 60 s of a scene where both people stand still
+        bg.set_frame(frame)
+        bg.update(frame, k * 1_000_000_000, keep, tau_s=10.0)  # type: ignore[list-item]
+    ground = _detect(cam, bg, frame)
+    # the protected person is still found; the other has become background
+    assert len(ground) == 1
+    assert np.linalg.norm(ground[0] - PEOPLE[0]) < 0.3

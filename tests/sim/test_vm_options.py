@@ -1,0 +1,73 @@
+"""simulate vm's light and stillness options: what they put in the log, and their checks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from trackctl.cli.main import app
+from trackctl.errors import InputError
+from trackctl.logs.reader import LogReader
+from trackctl.sim.vm import VmScenario, simulate_vm
+
+runner = CliRunner()
+
+
+def _brightness(path: Path, topic: str = "/cam0/image") -> list[float]:
+    out = []
+    for m in LogReader(path).messages([topic]):
+        img = cv2.imdecode(np.frombuffer(m.message.data, np.uint8), cv2.IMREAD_GRAYSCALE)
+        out.append(float(img.mean()))
+    return out
+
+
+def test_light_drop_and_flicker_change_only_the_pixels(tmp_path: Path) -> None:
+    base = VmScenario(field="office", users=1, nonusers=0, duration_s=8, seed=2, frames=True)
+    clean, dim, flick = tmp_path / "c.mcap", tmp_path / "d.mcap", tmp_path / "f.mcap"
+    simulate_vm(str(clean), base)
+    simulate_vm(str(dim), VmScenario(**{**_fields(base), "light_drop": 0.25, "light_drop_at_s": 4}))
+    simulate_vm(str(flick), VmScenario(**{**_fields(base), "flicker": 0.2}))
+    c, d, f = _brightness(clean), _brightness(dim), _brightness(flick)
+    assert len(c) == len(d) == len(f) == 24
+    assert np.allclose(d[:12], c[:12], atol=0.5)  # before 4 s (3 fps)
+    assert np.allclose(np.array(d[12:]) / np.array(c[12:]), 0.75, atol=0.02)
+    ratio = np.array(f) / np.array(c)
+    assert ratio.std() > 0.05 and ratio.min() > 0.75 and ratio.max() < 1.25
+    # every other topic is unchanged
+    imu = [m.message for m in LogReader(clean).messages(["/phone/020000000001/imu"])]
+    assert imu == [m.message for m in LogReader(flick).messages(["/phone/020000000001/imu"])]
+
+
+def _fields(cfg: VmScenario) -> dict:
+    return {k: getattr(cfg, k) for k in cfg.__dataclass_fields__}
+
+
+def test_standing_person_stands_still_for_the_time_asked(tmp_path: Path) -> None:
+    path = tmp_path / "s.mcap"
+    simulate_vm(
+        str(path),
+        VmScenario(field="office", users=1, nonusers=0, duration_s=30, seed=1, standing_s=20),
+    )
+    track = []
+    for m in LogReader(path).messages(["/ground_truth"]):
+        for e in m.message.entities:
+            if e.entity_id == "s0":
+                track.append((m.log_time_ns / 1e9, e.position_m.x, e.position_m.y))
+    arr = np.array(track)
+    steps = np.linalg.norm(np.diff(arr[:, 1:], axis=0), axis=1)
+    still = arr[1:][steps < 1e-6]
+    assert still[-1, 0] - still[0, 0] == pytest.approx(20, abs=0.7)
+    assert arr[-1, 0] - arr[0, 0] > 20  # it walks in and out too
+
+
+def test_option_checks() -> None:
+    with pytest.raises(InputError, match="--light-drop"):
+        VmScenario(light_drop=1.5)
+    with pytest.raises(InputError, match="--standing"):
+        VmScenario(duration_s=10, standing_s=20)
+    result = runner.invoke(app, ["simulate", "vm", "--out", "x.mcap", "--shadows"])
+    assert result.exit_code == 2 and "--frames" in result.output
