@@ -8,6 +8,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 from typer.testing import CliRunner
 
 from tests.conftest import ROOT, run_cli, shared_file
@@ -121,3 +122,32 @@ def test_record_rejects_a_calibration_for_another_size_or_in_mm(
     assert proc.returncode == 0, proc.stderr.decode()
     counts = json.loads(proc.stdout)
     assert counts["topics"]["/cam0/image"] == 6
+
+
+def test_record_takes_the_pets_tsai_xml_as_it_is(tmp_path: Path) -> None:
+    xml = shared_file("footage", "pets2009_View_001.xml")
+    video = tmp_path / "v.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 7.0, (768, 576))
+    for _ in range(3):
+        writer.write(np.full((576, 768, 3), 120, np.uint8))
+    writer.release()
+    out = tmp_path / "r.mcap"
+    proc = run_cli("record", str(out), "--video", f"cam0={video}", "--calib", f"cam0={xml}")
+    assert proc.returncode == 0, proc.stderr.decode()
+    from trackctl.logs.reader import LogReader
+
+    (model,) = [m.message for m in LogReader(out).messages(["/cam0/camera_model"])]
+    assert model.world_from_camera.translation.z == pytest.approx(7.07, abs=0.01)
+    # read as metres, the same file is a one-line unit error
+    proc = run_cli(
+        "record",
+        str(tmp_path / "m.mcap"),
+        "--video",
+        f"cam0={video}",
+        "--calib",
+        f"cam0={xml}",
+        "--calib-units",
+        "m",
+    )
+    err = proc.stderr.decode().strip()
+    assert proc.returncode == 2 and "millimetres" in err and len(err.splitlines()) == 1
