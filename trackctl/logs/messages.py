@@ -47,6 +47,7 @@ __all__ = [
     "MetricValue",
     "MetricReport",
     "MESSAGE_TYPES",
+    "Step",
     "EObservations",
     "VScenario",
     "EvMatch",
@@ -586,6 +587,33 @@ class MirrorTransmission(JsonMessage):
             )
 
 
+@dataclass(frozen=True, slots=True)
+class Step(JsonMessage):
+    """One step of a walker, found in a phone's accelerometer (pedestrian dead reckoning).
+
+    Attributes:
+        t_ns: Time of the step.
+        phone: The phone's name (the NAME of /phone/NAME/imu).
+        index: Steps so far, this one included (1-based).
+        cadence_hz: Step rate at this step, steps per second.
+        speed_mps: Walking speed (cadence x step length), m/s.
+        heading_rad: Walking direction in the world frame (yaw about +z from +x); null when the
+            phone gives no orientation (accelerometer only).
+        position_m: Dead-reckoned position from where the phone's first step was (z = 0); along
+            +x when the heading is unknown.
+    """
+
+    SCHEMA: ClassVar[str] = "trackctl.Step"
+    TOPIC: ClassVar[str] = "/pdr/<PHONE>/steps"
+    t_ns: int
+    phone: str
+    index: Annotated[int, Range(ge=1)]
+    cadence_hz: Annotated[float, Range(ge=0)]
+    speed_mps: Annotated[float, Range(ge=0)]
+    position_m: Vec3
+    heading_rad: float | None = None
+
+
 MESSAGE_TYPES: tuple[type, ...] = (
     Imu,
     RssiScan,
@@ -599,5 +627,6 @@ MESSAGE_TYPES: tuple[type, ...] = (
     VScenario,
     EvMatches,
     MirrorTransmission,
+    Step,
 )
 """Every message type with a schema in ``formats/`` (one registration each, in codecs)."""
