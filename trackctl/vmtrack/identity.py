@@ -190,7 +190,9 @@ class IdentityBinder:
 
     def _detect_losses(self, t_ns: int) -> None:
         """A bound track whose motion keeps disagreeing with its phone, or whose phone stopped
-        reporting (its carrier left, or the app was closed), loses its identity."""
+        reporting (its carrier left, or the app was closed), loses its identity. The track's
+        motion is judged from its detections alone (:meth:`GroundTrack.visual_velocity`): its
+        filter state holds the phone's own velocity and would always agree."""
         cfg = self.cfg
         for mid, trk in list(self.bound.items()):
             v = self.velocity(mid, t_ns)
@@ -199,8 +201,15 @@ class IdentityBinder:
                 continue
             if trk.last_hit_ns != t_ns:
                 continue
+            vis = trk.visual_velocity()
+            if vis is None:
+                continue
+            # the phone's velocity over the same detections' times (turns smooth alike)
+            phone = self.phones[mid]
+            at = [phone.velocity_at(int(t)) for t in vis[1]]
+            v_phone = np.mean([a for a in at if a is not None], axis=0)
             hist = self.disagreement[mid]
-            hist.append(float(np.sum((trk.v - v) ** 2)))
+            hist.append(float(np.sum((vis[0] - v_phone) ** 2)))
             del hist[: -cfg.bind_frames]
             if len(hist) == cfg.bind_frames and np.mean(hist) > (1.6 * cfg.reject_mps) ** 2:
                 del self.bound[mid]

@@ -14,6 +14,7 @@ and everyone in V-AF mode) are associated by q_ij alone.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,6 +75,8 @@ class GroundTrack:
     history: list[tuple[int, np.ndarray, np.ndarray, bool]] = field(default_factory=list)
     hit_ns: list[int] = field(default_factory=list)
     """Times of the frames in which a detection corrected this track."""
+    recent: deque[tuple[int, float, float]] = field(default_factory=lambda: deque(maxlen=16))
+    """The last detections this track took (time, x, y): its visual-only evidence."""
     born_xy: np.ndarray | None = None
     moved_m: float = 0.0
     """Farthest the track's corrected position has been from where it was born: a track that
@@ -104,6 +107,28 @@ class GroundTrack:
     @property
     def v(self) -> np.ndarray:
         return self.kf.x[2:, 0].copy()
+
+    def visual_velocity(
+        self, window_s: float = 2.5, min_hits: int = 4
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Velocity from the detections alone (least-squares slope of the last ``window_s`` of
+        hits) and the hit times it spans (ns), None with fewer than ``min_hits``. A track bound to
+        a phone also takes the phone's velocity into its filter state, so only this can tell
+        that the phone left it."""
+        if len(self.recent) < min_hits:
+            return None
+        pts = np.array(self.recent, float)
+        pts = pts[pts[:, 0] >= pts[-1, 0] - window_s * 1e9]
+        if len(pts) < min_hits:
+            return None
+        t = (pts[:, 0] - pts[:, 0].mean()) / 1e9
+        den = float(np.sum(t * t))
+        if den <= 0:
+            return None
+        slope = np.array(
+            [np.sum(t * (pts[:, 1] - pts[:, 1].mean())), np.sum(t * (pts[:, 2] - pts[:, 2].mean()))]
+        )
+        return slope / den, pts[:, 0].astype(np.int64)
 
     def transition(self, dt: float, cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
         f = np.eye(4)
@@ -140,6 +165,7 @@ class GroundTrack:
 
     def correct(self, xy: np.ndarray, cov: np.ndarray | None = None) -> None:
         """Update with a ground point; ``cov`` is its 2x2 covariance (None: ``det_sigma_m``)."""
+        self.recent.append((self.t_ns, float(xy[0]), float(xy[1])))
         self.kf.update(np.asarray(xy, float).reshape(2, 1), R=cov)
         if self.born_xy is not None:
             self.moved_m = max(self.moved_m, float(np.linalg.norm(self.xy - self.born_xy)))
