@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from trackctl.logs.messages import TrackState
 from trackctl.vmtrack.config import Mode, VmTrackConfig
@@ -127,28 +128,37 @@ class OnlineTracker:
                 continue
             keep.append(trk)
         self.tracks[:] = keep
+        if not self._pending_new:
+            return
+        tree = cKDTree(np.array([trk.xy for trk in keep])) if keep else None
         for det, cov in self._pending_new:
-            if all(np.linalg.norm(trk.xy - det) > self.cfg.spawn_m for trk in self.tracks):
-                self.tracks.append(GroundTrack.start(self._new_vid(), det, t_ns, tcfg, cov))
+            # a detection near a track (or near one started just now) is a duplicate view
+            if tree is not None and tree.query_ball_point(det, self.cfg.spawn_m):
+                continue
+            if any(
+                np.linalg.norm(trk.xy - det) <= self.cfg.spawn_m for trk in self.tracks[len(keep) :]
+            ):
+                continue
+            self.tracks.append(GroundTrack.start(self._new_vid(), det, t_ns, tcfg, cov))
 
     def _prune_duplicates(self) -> None:
         """Two tracks on one person: keep the bound one, else the older one."""
         tracks = self.tracks
         owner = self.identity.owners()
         doomed: set[int] = set()
-        for a in range(len(tracks)):
-            for b in range(a + 1, len(tracks)):
-                ta, tb = tracks[a], tracks[b]
-                if id(ta) in doomed or id(tb) in doomed:
-                    continue
-                if np.linalg.norm(ta.xy - tb.xy) >= self.cfg.duplicate_m:
-                    continue
-                if id(ta) in owner and id(tb) in owner:
-                    continue  # two phones side by side: both stay
-                loser = (
-                    tb if (id(ta) in owner or (id(tb) not in owner and ta.hits >= tb.hits)) else ta
-                )
-                doomed.add(id(loser))
+        if len(tracks) < 2:
+            return
+        xy = np.array([trk.xy for trk in tracks])
+        # only pairs closer than duplicate_m (k-d tree), in the order a full scan would meet them
+        pairs = cKDTree(xy).query_pairs(self.cfg.duplicate_m, output_type="ndarray")
+        for a, b in sorted(map(tuple, pairs.tolist())):
+            ta, tb = tracks[a], tracks[b]
+            if id(ta) in doomed or id(tb) in doomed:
+                continue
+            if id(ta) in owner and id(tb) in owner:
+                continue  # two phones side by side: both stay
+            loser = tb if (id(ta) in owner or (id(tb) not in owner and ta.hits >= tb.hits)) else ta
+            doomed.add(id(loser))
         if doomed:
             tracks[:] = [tr for tr in tracks if id(tr) not in doomed]
 

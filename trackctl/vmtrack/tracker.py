@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from filterpy.kalman import KalmanFilter
 from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
 
 from trackctl.logs.messages import TrackState
 
@@ -50,7 +51,9 @@ class TrackerConfig:
     lose_bound_after_s: float = 6.0
 
 
-def fused_probability(q: np.ndarray, r: np.ndarray, sv2: float, sm2: float) -> np.ndarray:
+def fused_probability(
+    q: np.ndarray, r: np.ndarray, sv2: float | np.ndarray, sm2: float | np.ndarray
+) -> np.ndarray:
     """The paper's fusion of visual (q) and motion (r) association probabilities."""
     a = sv2 / (sv2 + sm2)
     return np.power(q, a) * np.power(r, 1.0 - a)
@@ -171,10 +174,15 @@ class GroundTrack:
             self.moved_m = max(self.moved_m, float(np.linalg.norm(self.xy - self.born_xy)))
 
 
-def _mahalanobis2(diff: np.ndarray, var: float, covs: np.ndarray) -> np.ndarray:
-    """Squared Mahalanobis distances of ``diff`` (N, 2) under ``var`` I + ``covs`` (N, 2, 2)."""
-    s = covs + var * np.eye(2)
-    return np.einsum("ni,nij,nj->n", diff, np.linalg.inv(s), diff)
+def _mahalanobis2(diff: np.ndarray, var: np.ndarray, covs: np.ndarray) -> np.ndarray:
+    """Squared Mahalanobis distances of ``diff`` (n, m, 2) under ``var[i]`` I + ``covs[j]``
+    ((n,), (m, 2, 2)); the 2x2 inverse in closed form, for all pairs at once."""
+    a = covs[None, :, 0, 0] + var[:, None]
+    b = covs[None, :, 0, 1]
+    c = covs[None, :, 1, 1] + var[:, None]
+    det = a * c - b * b
+    dx, dy = diff[..., 0], diff[..., 1]
+    return np.asarray((c * dx * dx - 2 * b * dx * dy + a * dy * dy) / det)
 
 
 def associate(
@@ -188,26 +196,32 @@ def associate(
     """Global one-to-one association of tracks and detections.
 
     ``covs`` (N, 2, 2) are the detections' ground covariances (from the camera geometry); None
-    takes ``det_sigma_m`` for every detection.
+    takes ``det_sigma_m`` for every detection. The probabilities of all pairs are computed at
+    once (numpy); the assignment is scipy's Hungarian solver.
 
     Returns:
         (track index, detection index, probability) pairs, unmatched track and detection indices.
     """
     if not tracks or len(dets) == 0:
         return [], list(range(len(tracks))), list(range(len(dets)))
-    prob = np.zeros((len(tracks), len(dets)))
     if covs is None:
         covs = np.broadcast_to(np.eye(2) * cfg.det_sigma_m**2, (len(dets), 2, 2))
     r2 = np.trace(covs, axis1=1, axis2=2) / 2  # per-axis variance, for the fusion weights
-    for i, trk in enumerate(tracks):
-        pv, sv2 = trk.predicted(dt[i], cfg)
-        q = np.exp(-0.5 * _mahalanobis2(dets - pv, sv2, covs))
-        if v_m[i] is not None:
-            pm, sm2 = trk.motion_predicted(dt[i], v_m[i], cfg)  # type: ignore[arg-type]
-            r = np.exp(-0.5 * _mahalanobis2(dets - pm, sm2, covs))
-            prob[i] = fused_probability(q, r, sv2 + r2, sm2 + r2)
-        else:
-            prob[i] = q
+    preds = [trk.predicted(dt[i], cfg) for i, trk in enumerate(tracks)]
+    pv = np.array([p for p, _ in preds])
+    sv2 = np.array([v for _, v in preds])
+    q = np.exp(-0.5 * _mahalanobis2(dets[None, :, :] - pv[:, None, :], sv2, covs))
+    prob = q
+    moving = [i for i, v in enumerate(v_m) if v is not None]
+    if moving:
+        mp = [tracks[i].motion_predicted(dt[i], v_m[i], cfg) for i in moving]  # type: ignore[arg-type]
+        pm = np.array([p for p, _ in mp])
+        sm2 = np.array([v for _, v in mp])
+        r = np.exp(-0.5 * _mahalanobis2(dets[None, :, :] - pm[:, None, :], sm2, covs))
+        sv = sv2[moving][:, None] + r2[None, :]
+        sm = sm2[:, None] + r2[None, :]
+        prob = q.copy()
+        prob[moving] = fused_probability(q[moving], r, sv, sm)
     cost = np.where(prob >= cfg.gate_p, -np.log(np.maximum(prob, 1e-300)), 1e6)
     rows, cols = linear_sum_assignment(cost)
     pairs = [
@@ -237,39 +251,43 @@ def merge_with_covariance(
     their information (the plain average when no covariances are given, or they are equal).
 
     Hand-written agglomeration because it needs a cannot-link rule (two detections of one camera
-    are two people) that scipy's hierarchical clustering does not take; groups are few per frame,
-    and each step is one vectorised distance matrix.
+    are two people) that scipy's hierarchical clustering does not take. Candidate pairs come from
+    a k-d tree (scipy's ``cKDTree.query_pairs``: only points closer than ``merge_m``), are taken
+    nearest first, and join when their clusters share no camera and their fused centroids are
+    still within ``merge_m`` (union-find): O(n log n) in the detections of a frame.
     """
     if not points:
         return np.empty((0, 2)), None if covs is None else np.empty((0, 2, 2))
     cam_bit: dict[str, int] = {}
-    bits = np.array([1 << cam_bit.setdefault(cam, len(cam_bit)) for cam, _ in points], dtype=object)
+    bits = [1 << cam_bit.setdefault(cam, len(cam_bit)) for cam, _ in points]
     xy = np.array([p for _, p in points], float).reshape(-1, 2)
     info = (
         np.broadcast_to(np.eye(2), (len(xy), 2, 2)).copy() if covs is None else np.linalg.inv(covs)
     )
     sums = np.einsum("nij,nj->ni", info, xy)  # information vectors
-    alive = np.ones(len(points), bool)
+    cent = xy.copy()  # each cluster's fused position, kept at its root
+    parent = list(range(len(xy)))
 
-    def centroids(idx: np.ndarray) -> np.ndarray:
-        return np.linalg.solve(info[idx], sums[idx][:, :, None])[:, :, 0]
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
 
-    while True:
-        idx = np.flatnonzero(alive)
-        if len(idx) < 2:
-            break
-        cent = centroids(idx)
-        d = np.linalg.norm(cent[:, None, :] - cent[None, :, :], axis=2)
-        shared = np.array([[(bits[a] & bits[b]) != 0 for b in idx] for a in idx])
-        d[shared] = np.inf  # same camera (this also masks the diagonal)
-        flat = int(np.argmin(d))
-        i, j = divmod(flat, len(idx))
-        if d[i, j] >= merge_m:
-            break
-        a, b = idx[i], idx[j]
-        sums[a] += sums[b]
-        info[a] += info[b]
-        bits[a] |= bits[b]
-        alive[b] = False
-    idx = np.flatnonzero(alive)
-    return centroids(idx), None if covs is None else np.linalg.inv(info[idx])
+    if len(cam_bit) > 1 and len(xy) > 1:
+        pairs = cKDTree(xy).query_pairs(merge_m, output_type="ndarray")
+        if len(pairs):
+            dist = np.linalg.norm(xy[pairs[:, 0]] - xy[pairs[:, 1]], axis=1)
+            for i, j in pairs[np.argsort(dist, kind="stable")]:
+                a, b = find(int(i)), find(int(j))
+                if a == b or bits[a] & bits[b]:
+                    continue  # same cluster, or a camera would see one person twice
+                if float(np.hypot(*(cent[a] - cent[b]))) >= merge_m:
+                    continue
+                parent[b] = a
+                sums[a] += sums[b]
+                info[a] += info[b]
+                bits[a] |= bits[b]
+                cent[a] = np.linalg.solve(info[a], sums[a])
+    idx = np.array(sorted({find(i) for i in range(len(xy))}), int)
+    return cent[idx], None if covs is None else np.linalg.inv(info[idx])
