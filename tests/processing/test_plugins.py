@@ -15,7 +15,7 @@ from trackctl.processing import processors
 from trackctl.processing.base import ENTRY_POINT_GROUP
 
 PLUGIN = ROOT / "tests" / "data" / "trackctl-hello"
-BUILTIN = {"bridgeloc", "check", "dead-reckoning", "ev-match", "smirror", "vm-track"}
+BUILTIN = {"bridgeloc", "check", "dead-reckoning", "ev-match", "pdr", "smirror", "vm-track"}
 
 
 def test_builtins_are_registered_through_entry_points() -> None:

@@ -132,7 +132,7 @@ class IdentityBinder:
         self._checkpoints(t_ns, free)
         self._rssi_evidence(free)
         self.pending_rssi.clear()
-        self._detect_losses(t_ns)
+        self._detect_losses(t_ns, free)
         wants = {}
         for mid in self.phones:
             if mid not in self.bound:
@@ -188,7 +188,7 @@ class IdentityBinder:
                         self.evidence[mid].setdefault(trk.vid, Candidate()).add_rssi(z2)
                         self.by_vid[trk.vid] = trk
 
-    def _detect_losses(self, t_ns: int) -> None:
+    def _detect_losses(self, t_ns: int, free: Sequence[GroundTrack] = ()) -> None:
         """A bound track whose motion keeps disagreeing with its phone, or whose phone stopped
         reporting (its carrier left, or the app was closed), loses its identity. The track's
         motion is judged from its detections alone (:meth:`GroundTrack.visual_velocity`): its
@@ -211,10 +211,28 @@ class IdentityBinder:
             hist = self.disagreement[mid]
             hist.append(float(np.sum((vis[0] - v_phone) ** 2)))
             del hist[: -cfg.bind_frames]
-            if len(hist) == cfg.bind_frames and np.mean(hist) > (1.6 * cfg.reject_mps) ** 2:
-                del self.bound[mid]
-                hist.clear()
-                self.stats.losses += 1
+            limit = (1.6 * cfg.reject_mps) ** 2
+            if len(hist) < cfg.bind_frames or np.mean(hist) <= limit:
+                continue
+            mean = float(np.mean(hist))
+            if mean <= 2 * limit and not self._better_track(phone, free, 0.5 * mean):
+                continue
+            del self.bound[mid]
+            hist.clear()
+            self.stats.losses += 1
+
+    @staticmethod
+    def _better_track(phone: PhoneMotion, free: Sequence[GroundTrack], below: float) -> bool:
+        """Whether an unbound track's detections move with ``phone`` (squared velocity
+        disagreement under ``below``) over their last seconds."""
+        for trk in free:
+            vis = trk.visual_velocity()
+            if vis is None:
+                continue
+            at = [v for v in (phone.velocity_at(int(t)) for t in vis[1]) if v is not None]
+            if at and float(np.sum((vis[0] - np.mean(at, axis=0)) ** 2)) < below:
+                return True
+        return False
 
     def _filter_candidates(
         self, mid: str, t_ns: int, free: list[GroundTrack]
