@@ -37,13 +37,9 @@ def _points(text: str, option: str, width: int) -> list[list[float]]:
 
 
 def _units(units: str | None) -> float | None:
-    from trackctl.geometry.calib import UNITS
+    from trackctl.geometry.calib import metres_per_unit
 
-    if units is None:
-        return None
-    if units not in UNITS:
-        raise InputError(f"--units {units!r}: expected one of {', '.join(UNITS)}")
-    return UNITS[units]
+    return metres_per_unit(units, "--units")
 
 
 def _show(summary: Mapping[str, object], problems: tuple[list[str], list[str]]) -> None:

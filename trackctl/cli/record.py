@@ -16,16 +16,6 @@ from trackctl.errors import InputError
 from trackctl.logs.writer import COMPRESSIONS, LogWriter
 
 
-def _calib_units(units: str | None) -> float | None:
-    from trackctl.geometry.calib import UNITS
-
-    if units is None:
-        return None
-    if units not in UNITS:
-        raise InputError(f"--calib-units {units!r}: expected one of {', '.join(UNITS)}")
-    return UNITS[units]
-
-
 def record(
     out: Annotated[Path, typer.Argument(help="MCAP log to write (atomically).")],
     imu: Annotated[
@@ -167,6 +157,7 @@ def record(
         record_live,
         write_site,
     )
+    from trackctl.geometry.calib import metres_per_unit
     from trackctl.ingest.video import FrameSelection
 
     plan = _ros2_plan(ros2, ros2_map, quiet or json_out)
@@ -188,7 +179,7 @@ def record(
         else "names"
         if frame_times == "names"
         else Path(frame_times),
-        calib_units=_calib_units(calib_units),
+        calib_units=metres_per_unit(calib_units, "--calib-units"),
         time_unit=time_unit,
     )
     if time_unit not in ("s", "ms", "us", "ns"):

@@ -39,11 +39,28 @@ __all__ = [
     "camera_problems",
     "MAX_CAMERA_HEIGHT_M",
     "UNITS",
+    "metres_per_unit",
     "geometry_summary",
 ]
 
 UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 """Length units a calibration's translation may be given in, as metres per unit."""
+
+
+def metres_per_unit(unit: str | None, option: str = "--units") -> float | None:
+    """Metres per ``unit`` (None stays None: the file format's own unit).
+
+    Raises:
+        InputError: an unknown unit, named with the option that gave it.
+    """
+    from trackctl.errors import InputError
+
+    if unit is None:
+        return None
+    if unit not in UNITS:
+        raise InputError(f"{option} {unit!r}: expected one of {', '.join(UNITS)}")
+    return UNITS[unit]
+
 
 MAX_CAMERA_HEIGHT_M = 100.0
 """Above this a floor camera's height is taken as a unit error (millimetres read as metres)."""
