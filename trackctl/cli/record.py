@@ -148,6 +148,7 @@ def record(
 ) -> None:
     """Ingest video, calibration, IMU/RSSI/odometry CSV or live JSON lines into an MCAP log."""
     # Imported here: OpenCV/pandas/SciPy cost ~0.5 s and other commands do not need them.
+    from trackctl.geometry.calib import metres_per_unit
     from trackctl.ingest.record import (
         RecordConfig,
         StreamSource,
@@ -157,7 +158,6 @@ def record(
         record_live,
         write_site,
     )
-    from trackctl.geometry.calib import metres_per_unit
     from trackctl.ingest.video import FrameSelection
 
     plan = _ros2_plan(ros2, ros2_map, quiet or json_out)
