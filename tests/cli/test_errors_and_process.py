@@ -270,7 +270,15 @@ def _check_table(out: str, tmp: Path) -> None:
 
 def _check_list(out: str, tmp: Path) -> None:
     names = [line.split()[0] for line in out.splitlines()]
-    assert names == ["bridgeloc", "check", "dead-reckoning", "ev-match", "pdr", "smirror", "vm-track"]
+    assert names == [
+        "bridgeloc",
+        "check",
+        "dead-reckoning",
+        "ev-match",
+        "pdr",
+        "smirror",
+        "vm-track",
+    ]
 
 
 def _check_process(out: str, tmp: Path) -> None:
