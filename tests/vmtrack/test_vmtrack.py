@@ -180,3 +180,19 @@ def test_imu_nans_and_gaps_are_survived_and_counted(office_log: Path, tmp_path: 
     (rep,) = run_processors(damaged, tmp_path / "o.mcap", [VmTrackProcessor()])
     assert rep.metrics["imu_bad_samples"] == n_bad > 0
     assert rep.metrics["idf1"] > 0.7
+
+
+def test_a_log_without_ground_truth_still_reports_what_was_seen(
+    office_log: Path, tmp_path: Path
+) -> None:
+    stripped = tmp_path / "notruth.mcap"
+    proc = run_cli("filter", str(office_log), "--out", str(stripped), "--exclude", "/ground_truth")
+    assert proc.returncode == 0, proc.stderr.decode()
+    out = run_cli("vm-track", str(stripped), "--mode", "v-af", "--json", check=True)
+    obj = json.loads(out.stdout)
+    assert obj["idf1"] is None and obj["people"] == 0  # nothing to score against
+    assert obj["detections_per_frame_mean"] > 0.5
+    assert obj["detections_per_frame_max"] >= 1
+    assert obj["tracks_started"] >= obj["tracks_published"] >= 1
+    assert obj["track_frames_median"] > 10
+    assert 0 <= obj["coasting_share"] < 0.5
