@@ -251,43 +251,50 @@ def merge_with_covariance(
     their information (the plain average when no covariances are given, or they are equal).
 
     Hand-written agglomeration because it needs a cannot-link rule (two detections of one camera
-    are two people) that scipy's hierarchical clustering does not take. Candidate pairs come from
-    a k-d tree (scipy's ``cKDTree.query_pairs``: only points closer than ``merge_m``), are taken
-    nearest first, and join when their clusters share no camera and their fused centroids are
-    still within ``merge_m`` (union-find): O(n log n) in the detections of a frame.
+    are two people) that scipy's hierarchical clustering does not take. The two clusters with the
+    nearest fused centroids merge first, as long as they share no camera and are closer than
+    ``merge_m``. Only points with a neighbour from another camera within ``2 merge_m`` can take
+    part (a k-d tree finds them: scipy's ``cKDTree``), so the agglomeration runs on the few that
+    overlap; its distances and camera masks are numpy arrays.
     """
     if not points:
         return np.empty((0, 2)), None if covs is None else np.empty((0, 2, 2))
     cam_bit: dict[str, int] = {}
-    bits = [1 << cam_bit.setdefault(cam, len(cam_bit)) for cam, _ in points]
+    codes = [cam_bit.setdefault(cam, len(cam_bit)) for cam, _ in points]
     xy = np.array([p for _, p in points], float).reshape(-1, 2)
     info = (
         np.broadcast_to(np.eye(2), (len(xy), 2, 2)).copy() if covs is None else np.linalg.inv(covs)
     )
     sums = np.einsum("nij,nj->ni", info, xy)  # information vectors
-    cent = xy.copy()  # each cluster's fused position, kept at its root
-    parent = list(range(len(xy)))
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
+    cent = xy.copy()  # fused position of each cluster, kept at the cluster's first point
+    alive = np.ones(len(xy), bool)
     if len(cam_bit) > 1 and len(xy) > 1:
-        pairs = cKDTree(xy).query_pairs(merge_m, output_type="ndarray")
+        # a fused centroid moves at most half-way to its partner: 2 x merge_m bounds the reach
+        pairs = cKDTree(xy).query_pairs(2 * merge_m, output_type="ndarray")
+        codes_arr = np.array(codes)
         if len(pairs):
-            dist = np.linalg.norm(xy[pairs[:, 0]] - xy[pairs[:, 1]], axis=1)
-            for i, j in pairs[np.argsort(dist, kind="stable")]:
-                a, b = find(int(i)), find(int(j))
-                if a == b or bits[a] & bits[b]:
-                    continue  # same cluster, or a camera would see one person twice
-                if float(np.hypot(*(cent[a] - cent[b]))) >= merge_m:
-                    continue
-                parent[b] = a
+            pairs = pairs[codes_arr[pairs[:, 0]] != codes_arr[pairs[:, 1]]]
+        if len(pairs):
+            # cameras as bits: int64 up to 62 cameras (vectorised), object ints beyond
+            dtype = np.int64 if len(cam_bit) <= 62 else object
+            bits = np.array([1 << c for c in codes], dtype=dtype)
+            live = np.unique(pairs)
+            while len(live) >= 2:
+                c = cent[live]
+                d = np.hypot(c[:, None, 0] - c[None, :, 0], c[:, None, 1] - c[None, :, 1])
+                b_live = bits[live]
+                shared = (b_live[:, None] & b_live[None, :]) != 0
+                d[shared.astype(bool)] = np.inf  # same camera (this also masks the diagonal)
+                flat = int(np.argmin(d))
+                i, j = divmod(flat, len(live))
+                if d[i, j] >= merge_m:
+                    break
+                a, b = int(live[i]), int(live[j])
                 sums[a] += sums[b]
                 info[a] += info[b]
                 bits[a] |= bits[b]
                 cent[a] = np.linalg.solve(info[a], sums[a])
-    idx = np.array(sorted({find(i) for i in range(len(xy))}), int)
+                alive[b] = False
+                live = live[live != b]
+    idx = np.flatnonzero(alive)
     return cent[idx], None if covs is None else np.linalg.inv(info[idx])
