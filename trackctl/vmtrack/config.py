@@ -46,6 +46,11 @@ class VmTrackConfig:
     """Frames of consistent motion before a phone is bound to a visual track (Theorem 1)."""
     reject_mps: float = 0.45
     """A candidate whose mean velocity disagreement exceeds this is filtered away."""
+    loss_gross: float = 2.0
+    """A bound track whose detections disagree with its phone by this many times the loss limit
+    loses it even when no other track explains the phone better."""
+    loss_better: float = 0.5
+    """...or when an unbound track's detections disagree with the phone less than this share."""
     converge_hits: int = 6
     """Detections a track needs before its velocity is compared with phones."""
     ratio: float = 3.0

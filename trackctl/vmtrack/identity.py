@@ -92,6 +92,7 @@ class IdentityBinder:
         self.evidence: dict[str, dict[str, Candidate]] = defaultdict(dict)
         self.by_vid: dict[str, GroundTrack] = {}
         self.disagreement: dict[str, list[float]] = defaultdict(list)
+        self.visual_disagreement: dict[str, list[float]] = defaultdict(list)
         self.pending_rssi: list[RssiScan] = []
 
     # -- queries --------------------------------------------------------------------------------
@@ -190,10 +191,18 @@ class IdentityBinder:
 
     def _detect_losses(self, t_ns: int, free: Sequence[GroundTrack] = ()) -> None:
         """A bound track whose motion keeps disagreeing with its phone, or whose phone stopped
-        reporting (its carrier left, or the app was closed), loses its identity. The track's
-        motion is judged from its detections alone (:meth:`GroundTrack.visual_velocity`): its
-        filter state holds the phone's own velocity and would always agree."""
+        reporting (its carrier left, or the app was closed), loses its identity.
+
+        Two tests, each over ``bind_frames`` checks. The track's filter velocity (which takes
+        the phone's velocity in, so it only drifts away when the detections pull hard), as the
+        paper does; and the track's detections alone (:meth:`GroundTrack.visual_velocity`
+        against the phone's mean velocity at the same times), which notices a phone bound to
+        somebody else. The second needs a gross disagreement (``loss_gross`` times the limit) or
+        a better explanation — another unbound track whose detections move with the phone —
+        since one person's detections and phone briefly disagree at turns and stops.
+        """
         cfg = self.cfg
+        limit = (1.6 * cfg.reject_mps) ** 2
         for mid, trk in list(self.bound.items()):
             v = self.velocity(mid, t_ns)
             if v is None:
@@ -201,25 +210,33 @@ class IdentityBinder:
                 continue
             if trk.last_hit_ns != t_ns:
                 continue
+            blended = self.disagreement[mid]
+            blended.append(float(np.sum((trk.v - v) ** 2)))
+            del blended[: -cfg.bind_frames]
+            lost = len(blended) == cfg.bind_frames and float(np.mean(blended)) > limit
             vis = trk.visual_velocity()
-            if vis is None:
-                continue
-            # the phone's velocity over the same detections' times (turns smooth alike)
-            phone = self.phones[mid]
-            at = [phone.velocity_at(int(t)) for t in vis[1]]
-            v_phone = np.mean([a for a in at if a is not None], axis=0)
-            hist = self.disagreement[mid]
-            hist.append(float(np.sum((vis[0] - v_phone) ** 2)))
-            del hist[: -cfg.bind_frames]
-            limit = (1.6 * cfg.reject_mps) ** 2
-            if len(hist) < cfg.bind_frames or np.mean(hist) <= limit:
-                continue
-            mean = float(np.mean(hist))
-            if mean <= 2 * limit and not self._better_track(phone, free, 0.5 * mean):
-                continue
-            del self.bound[mid]
-            hist.clear()
-            self.stats.losses += 1
+            if not lost and vis is not None:
+                # the phone's velocity over the same detections' times (turns smooth alike)
+                phone = self.phones[mid]
+                at = [phone.velocity_at(int(t)) for t in vis[1]]
+                v_phone = np.mean([a for a in at if a is not None], axis=0)
+                visual = self.visual_disagreement[mid]
+                visual.append(float(np.sum((vis[0] - v_phone) ** 2)))
+                del visual[: -cfg.bind_frames]
+                mean = float(np.mean(visual))
+                lost = (
+                    len(visual) == cfg.bind_frames
+                    and mean > limit
+                    and (
+                        mean > cfg.loss_gross * limit
+                        or self._better_track(phone, free, cfg.loss_better * mean)
+                    )
+                )
+            if lost:
+                del self.bound[mid]
+                blended.clear()
+                self.visual_disagreement[mid].clear()
+                self.stats.losses += 1
 
     @staticmethod
     def _better_track(phone: PhoneMotion, free: Sequence[GroundTrack], below: float) -> bool:
@@ -286,6 +303,7 @@ class IdentityBinder:
             self._bind_track(mid, trk, t_ns)
             self.candidates.pop(mid, None)
             self.disagreement[mid].clear()
+            self.visual_disagreement[mid].clear()
             self.stats.bindings += 1
 
     # -- offline --------------------------------------------------------------------------------
