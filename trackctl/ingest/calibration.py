@@ -268,11 +268,6 @@ def read_calibration(
     Raises:
         InputError: the file is missing or holds no usable calibration.
     """
-    model = _read_calibration(Path(path), camera, metres_per_unit)
-    return model
-
-
-def _read_calibration(path: Path, camera: str, metres_per_unit: float | None) -> CameraModel:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such calibration file (camera {camera})")
