@@ -129,6 +129,22 @@ def simulate_vm(
         float,
         typer.Option(help="An extra person walks in, stands still this many seconds, walks out."),
     ] = 0.0,
+    preset: Annotated[
+        str,
+        typer.Option(
+            help="realistic: phones in pockets and bags, always on, own clocks; detections with "
+            "calibration bias, merged boxes, missed episodes, static false positives (docs/"
+            "vmtrack.md). paper: the dissertation's idealised setting."
+        ),
+    ] = "realistic",
+    carry_yaw: Annotated[
+        float | None,
+        typer.Option(help="Realistic: every phone's device-to-walk yaw, degrees (default: per carry)."),
+    ] = None,
+    clock_offset: Annotated[
+        float | None,
+        typer.Option(help="Realistic: phone clock offsets uniform in +- this many seconds (2)."),
+    ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
@@ -167,6 +183,9 @@ def simulate_vm(
         flicker=flicker,
         shadows=shadows,
         standing_s=standing,
+        preset=preset,
+        carry_yaw_deg=carry_yaw,
+        clock_offset_s=clock_offset,
     )
     if not frames and (drop or flicker or shadows):
         raise InputError(

@@ -13,12 +13,18 @@ Sensor models (documented in docs/vmtrack.md):
 * check-point APs at the entries: RSSI of every phone at 1 Hz, log-distance path loss
   (-40 dBm at 1 m, exponent 2.5) with 3 dB shadowing;
 * ground truth at every frame time: position and the phone MAC (EID) of each person.
+
+That is the ``paper`` preset: the dissertation's assumptions (phones report only in view, their
+yaw is the walking direction, clocks agree, 0.7 m steps), kept for its tables. The default
+``realistic`` preset replaces the phones by :mod:`trackctl.sim.phones` (carry, heading offsets,
+gait, always-on phones, clock offsets, sample rates) and the detector and APs by
+:class:`VmRealism`'s models; each draws from its own random stream.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import cv2
@@ -45,10 +51,11 @@ from trackctl.logs.messages import (
     Vec3,
 )
 from trackctl.logs.writer import LogWriter
+from trackctl.sim.phones import PhoneRealism, PhoneTruth, realistic_imu
 from trackctl.sim.render import PersonLook, floor_image, render_frame
 from trackctl.sim.walkers import Trajectory, load_trajectories_csv, random_waypoint
 
-__all__ = ["VmScenario", "simulate_vm", "FIELDS", "mac_of"]
+__all__ = ["VmScenario", "VmRealism", "PRESETS", "simulate_vm", "FIELDS", "mac_of"]
 
 G = 9.80665
 S = 1_000_000_000
@@ -63,6 +70,57 @@ _MOUNT = {"lobby": (6.0, 0.5, 1.5), "office": (4.0, 1.5, 1.5)}
 def mac_of(i: int) -> str:
     """The phone MAC of user ``i``."""
     return f"02:00:00:00:00:{i + 1:02x}"
+
+
+@dataclass(frozen=True, slots=True)
+class VmRealism:
+    """What the ``realistic`` preset adds to the paper's detector and APs (``paper``: all off).
+
+    * ``phones``: the phone models of :mod:`trackctl.sim.phones` (None: the paper's phones).
+    * ``calib_bias_m``: each camera's ground points are off by a fixed N(0, this) per axis (a
+      floor-point calibration at 1-2 px puts feet 0.1-0.2 m off at 10 m; measured with
+      ``trackctl calib ground`` on the PETS view: up to 0.2 m at the far edge).
+    * ``merge_m``: two people closer than this in one camera make one detection at their
+      middle (non-maximum suppression of overlapping boxes merges people walking together).
+    * ``miss_rate`` / ``miss_episode_s``: misses come in episodes (a person behind a pillar or
+      in a dark spot for a while), a two-state Markov chain per camera and person with this
+      stationary rate and mean episode length.
+    * ``static_fps`` / ``static_fp_rate``: fixed places per camera (a poster, a plant) that the
+      detector reports as a person in this share of frames.
+    * ``rssi_at_1m_dbm``, ``path_loss_exponent``, ``shadowing_db``: each AP's path loss drawn
+      from these ranges (indoor 2.0-3.5, Rappaport; per-device offsets of +-7 dB at 1 m), so
+      the pipeline's default model is not the simulator's.
+    """
+
+    phones: PhoneRealism | None = None
+    calib_bias_m: float = 0.0
+    merge_m: float = 0.0
+    miss_rate: float = 0.0
+    miss_episode_s: float = 0.0
+    static_fps: int = 0
+    static_fp_rate: float = 0.0
+    rssi_at_1m_dbm: tuple[float, float] = (-40.0, -40.0)
+    path_loss_exponent: tuple[float, float] = (2.5, 2.5)
+    shadowing_db: float = 3.0
+
+
+PRESETS: dict[str, VmRealism] = {
+    "paper": VmRealism(),
+    "realistic": VmRealism(
+        phones=PhoneRealism(),
+        calib_bias_m=0.15,
+        merge_m=0.6,
+        miss_rate=0.1,
+        miss_episode_s=1.5,
+        static_fps=1,
+        static_fp_rate=0.3,
+        rssi_at_1m_dbm=(-47.0, -33.0),
+        path_loss_exponent=(2.0, 3.5),
+        shadowing_db=5.0,
+    ),
+}
+"""``paper``: the dissertation's idealised setting, kept for its tables; ``realistic`` (the
+default): the models of :class:`VmRealism` and :mod:`trackctl.sim.phones`."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,8 +155,33 @@ class VmScenario:
     """Rendered frames: each person casts a shadow on the floor (a lamp at 50 deg elevation)."""
     standing_s: float = 0.0
     """An extra person (non-user ``s0``) walks in, stands still this long, and walks out."""
+    preset: str = "realistic"
+    """``realistic`` (default) or ``paper``: see :class:`VmRealism` and :data:`PRESETS`."""
+    carry_yaw_deg: float | None = None
+    """Realistic preset: every phone's device-to-walk yaw fixed to this (None: per carry)."""
+    clock_offset_s: float | None = None
+    """Realistic preset: phone clock offsets uniform in +- this (None: the preset's 2 s)."""
+
+    @property
+    def realism(self) -> VmRealism:
+        """The preset's models with this scenario's overrides."""
+        base = PRESETS[self.preset]
+        if base.phones is None:
+            return base
+        phones = base.phones
+        if self.carry_yaw_deg is not None:
+            phones = replace(phones, carry_yaw_deg=self.carry_yaw_deg)
+        if self.clock_offset_s is not None:
+            phones = replace(phones, clock_offset_s=self.clock_offset_s)
+        return replace(base, phones=phones)
 
     def __post_init__(self) -> None:
+        if self.preset not in PRESETS:
+            raise InputError(f"--preset {self.preset!r}: expected one of {', '.join(PRESETS)}")
+        if self.preset == "paper" and (
+            self.carry_yaw_deg is not None or self.clock_offset_s is not None
+        ):
+            raise InputError("--carry-yaw and --clock-offset model real phones: use --preset realistic")
         if self.field not in FIELDS:
             raise InputError(f"--field {self.field!r}: expected one of {', '.join(FIELDS)}")
         if self.users < 0 or self.nonusers < 0:
@@ -374,10 +457,94 @@ def _camera_detections(
     return dets
 
 
+class _RealDetections:
+    """The realistic preset's detector: calibration bias per camera, merged boxes of people
+    walking together, misses in episodes, and persistent false positives (own random stream)."""
+
+    def __init__(self, site: _Site, cfg: VmScenario) -> None:
+        self.real = cfg.realism
+        self.rng = np.random.default_rng([cfg.seed, 3])
+        self.fps = cfg.fps
+        self.bias = {
+            cam.model.camera: self.rng.normal(0, self.real.calib_bias_m, 2) for cam in site.cams
+        }
+        self.missing: dict[tuple[str, str], bool] = {}
+        self.statics: dict[str, list[np.ndarray]] = {}
+        for cam in site.cams:
+            spots = []
+            for _ in range(self.real.static_fps):
+                px = np.array(
+                    [[self.rng.uniform(0.15, 0.85) * cam.model.width_px,
+                      self.rng.uniform(0.55, 0.95) * cam.model.height_px]]
+                )
+                g = cam.ground_point(px)[0]
+                if not np.isnan(g).any():
+                    spots.append(g[:2])
+            self.statics[cam.model.camera] = spots
+
+    def _missed(self, camera: str, person: str) -> bool:
+        r = self.real
+        if r.miss_episode_s <= 0:
+            return bool(self.rng.random() < r.miss_rate)
+        leave = 1.0 / max(1.0, r.miss_episode_s * self.fps)
+        enter = leave * r.miss_rate / max(1e-9, 1 - r.miss_rate)
+        state = self.missing.get((camera, person), False)
+        state = bool(self.rng.random() >= leave) if state else bool(self.rng.random() < enter)
+        self.missing[(camera, person)] = state
+        return state
+
+    def __call__(
+        self, cam: PinholeCamera, present: dict[str, np.ndarray], sigma: float
+    ) -> list[Detection]:
+        camera = cam.model.camera
+        seen = []
+        for p, xy in present.items():
+            box = _person_box(cam, xy)
+            if box is not None:
+                seen.append((box[1], p, xy, box[0]))
+        seen.sort()
+        kept: list[tuple[str, np.ndarray, BBox]] = []
+        for k, (_, p, xy, box) in enumerate(seen):
+            if any(_overlap(box, seen[j][3]) > 0.5 for j in range(k)):
+                continue
+            if self._missed(camera, p):
+                continue
+            kept.append((p, xy, box))
+        # people walking together: one box at their middle
+        points: list[tuple[np.ndarray, BBox]] = []
+        used: set[int] = set()
+        for a in range(len(kept)):
+            if a in used:
+                continue
+            xy, box = kept[a][1], kept[a][2]
+            for b in range(a + 1, len(kept)):
+                if b not in used and np.linalg.norm(kept[b][1] - xy) < self.real.merge_m:
+                    used.add(b)
+                    xy = (xy + kept[b][1]) / 2
+            points.append((xy, box))
+        dets = []
+        bias = self.bias[camera]
+        for xy, box in points:
+            g = xy + bias + self.rng.normal(0, sigma, 2)
+            score = round(float(self.rng.uniform(0.5, 1.0)), 3)
+            dets.append(Detection(box, score, "person", Vec3(float(g[0]), float(g[1]), 0.0)))
+        for spot in self.statics[camera]:
+            if self.rng.random() < self.real.static_fp_rate:
+                g = spot + self.rng.normal(0, 0.1, 2)
+                dets.append(
+                    Detection(
+                        BBox(0.0, 0.0, 20.0, 60.0), 0.5, "person",
+                        Vec3(float(g[0]), float(g[1]), 0.0),
+                    )
+                )
+        return dets
+
+
 def _camera_events(site: _Site, cfg: VmScenario, rng: np.random.Generator) -> list[Event]:
     """Ground truth and every camera's detections (or frames to render) at each instant."""
     events: list[Event] = []
     sigma = cfg.det_noise_m / math.sqrt(math.pi / 2)
+    real = _RealDetections(site, cfg) if cfg.preset != "paper" else None
     for t in np.arange(0.0, site.duration, 1.0 / cfg.fps):
         t_ns = int(round(t * S))
         pos = {tr.person: tr.at(t)[0] for tr in site.trajs}
@@ -390,28 +557,60 @@ def _camera_events(site: _Site, cfg: VmScenario, rng: np.random.Generator) -> li
                 # keep the random stream (and so every other topic) identical to a --no-frames log
                 events.append((t_ns, 5, topics.image(cam.model.camera), _Frame(cam, t)))
                 continue
+            if real is not None:
+                dets = real(cam, present, sigma)
             detections = Detections(t_ns, cam.model.camera, tuple(dets))
             events.append((t_ns, 5, topics.detections(cam.model.camera), detections))
     return events
 
 
-def _imu_events(site: _Site, cfg: VmScenario, rng: np.random.Generator) -> list[Event]:
+def _imu_events(
+    site: _Site, cfg: VmScenario, rng: np.random.Generator
+) -> tuple[list[Event], dict[str, PhoneTruth]]:
     events: list[Event] = []
+    truths: dict[str, PhoneTruth] = {}
+    phones = cfg.realism.phones
+    real_rng = np.random.default_rng([cfg.seed, 4])
+    site_yaw = 0.0
+    if phones is not None:
+        site_yaw = (
+            math.radians(phones.site_yaw_deg)
+            if phones.site_yaw_deg is not None
+            else float(real_rng.uniform(-math.pi, math.pi))
+        )
     for tr in site.trajs:
         mac = site.phones.get(tr.person)
         if mac is None:
+            continue
+        topic = topics.imu(mac.replace(":", ""))
+        if phones is not None:
+            samples, truths[mac] = realistic_imu(tr, mac, site.duration, real_rng, phones, site_yaw)
+            events.extend((imu.t_ns, 1, topic, imu) for imu in samples)
             continue
         t0 = max(tr.t0_s, 0.0)
         t1 = min(tr.t0_s + tr.dt_s * (len(tr.xy) - 1), site.duration)
         grid_t = np.arange(math.ceil(t0 * cfg.imu_hz) / cfg.imu_hz, t1, 1.0 / cfg.imu_hz)
         for imu in _imu_samples(tr, mac, grid_t, rng, cfg):
-            events.append((imu.t_ns, 1, topics.imu(mac.replace(":", "")), imu))
-    return events
+            events.append((imu.t_ns, 1, topic, imu))
+    return events, truths
 
 
-def _rssi_events(site: _Site, rng: np.random.Generator) -> list[Event]:
-    """Each AP's scan once a second: log-distance path loss (exponent 2.5) + 3 dB shadowing."""
+def _rssi_events(site: _Site, rng: np.random.Generator, cfg: VmScenario) -> list[Event]:
+    """Each AP's scan once a second: log-distance path loss + shadowing (paper: -40 dBm at 1 m,
+    exponent 2.5, 3 dB; realistic: per-AP draws from :class:`VmRealism`'s ranges)."""
     events: list[Event] = []
+    real = cfg.realism
+    model = {ap: (-40.0, 2.5, 3.0) for ap, _ in site.aps}
+    if cfg.preset != "paper":
+        rng = np.random.default_rng([cfg.seed, 5])
+        model = {
+            ap: (
+                float(rng.uniform(*real.rssi_at_1m_dbm)),
+                float(rng.uniform(*real.path_loss_exponent)),
+                real.shadowing_db,
+            )
+            for ap, _ in site.aps
+        }
     for t in np.arange(0.0, site.duration, 1.0):
         t_ns = int(round(t * S))
         for ap, ap_xy in site.aps:
@@ -422,7 +621,8 @@ def _rssi_events(site: _Site, rng: np.random.Generator) -> list[Event]:
                 if mac is None or np.isnan(xy).any():
                     continue
                 d = max(0.3, float(np.hypot(*(xy - ap_xy))))
-                rssi = -40.0 - 25.0 * math.log10(d) + rng.normal(0, 3.0)
+                at1, exponent, shadow = model[ap]
+                rssi = at1 - 10 * exponent * math.log10(d) + rng.normal(0, shadow)
                 if rssi > -90:
                     readings.append(RssiReading(mac, round(rssi, 1)))
             observer_m = Vec3(float(ap_xy[0]), float(ap_xy[1]), 2.0)
@@ -468,14 +668,26 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
     """Write a VM-Tracking scenario log to ``out``; returns message counts per topic."""
     rng = np.random.default_rng(cfg.seed)
     site = _site(cfg, rng)
-    events = _camera_events(site, cfg, rng) + _imu_events(site, cfg, rng)
-    events += _rssi_events(site, rng)
+    events = _camera_events(site, cfg, rng)
+    imu_events, truths = _imu_events(site, cfg, rng)
+    events += imu_events
+    events += _rssi_events(site, rng, cfg)
     events.sort(key=lambda e: (e[0], e[1], e[2]))
     render = _Renderer(site, cfg)
     counts: dict[str, int] = {}
     with LogWriter(out) as w:
         w.add_metadata("scenario", _scenario_metadata(site, cfg))
         w.add_metadata("phones", {mac: person for person, mac in site.phones.items()})
+        if truths:
+            # what the simulator chose per phone: for the metrics only, never read by trackers
+            w.add_metadata(
+                "phone_truth",
+                {
+                    f"{mac}/{k}": v
+                    for mac, tr in truths.items()
+                    for k, v in asdict(tr).items()
+                },
+            )
         for m in site.models:
             w.write(topics.calibration(m.camera), to_foxglove_calibration(m), 0)
             w.write(topics.camera_model(m.camera), m)
@@ -510,4 +722,5 @@ def _scenario_metadata(site: _Site, cfg: VmScenario) -> dict[str, object]:
         "flicker": cfg.flicker,
         "shadows": cfg.shadows,
         "standing_s": cfg.standing_s,
+        "preset": cfg.preset,
     }

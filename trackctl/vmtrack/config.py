@@ -5,12 +5,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import StrEnum
 
+from trackctl.vmtrack.align import AlignConfig
 from trackctl.vmtrack.frames import FrameConfig
+from trackctl.vmtrack.identify import IdentifyConfig
 from trackctl.vmtrack.motion import MotionConfig
 from trackctl.vmtrack.stitch import StitchConfig
 from trackctl.vmtrack.tracker import TrackerConfig
 
-__all__ = ["Mode", "Source", "VmTrackConfig"]
+__all__ = ["Identity", "Mode", "Source", "VmTrackConfig"]
 
 
 class Mode(StrEnum):
@@ -18,6 +20,14 @@ class Mode(StrEnum):
 
     VM = "vm"
     V_AF = "v-af"
+
+
+class Identity(StrEnum):
+    """Who names the tracks: ``offline`` decides over the whole log (:mod:`~trackctl.vmtrack.
+    identify`); ``online`` publishes the paper's frame-by-frame bindings."""
+
+    OFFLINE = "offline"
+    ONLINE = "online"
 
 
 class Source(StrEnum):
@@ -44,6 +54,11 @@ class VmTrackConfig:
     """Two tracks closer than this are one person (the younger, unbound one is dropped)."""
     bind_frames: int = 9
     """Frames of consistent motion before a phone is bound to a visual track (Theorem 1)."""
+    bind_frames_free: int = 24
+    """...for a phone whose alignment (carry yaw, step scale, clock offset) is not known yet:
+    every candidate gets its own best fit, so only turns, stops and pace tell them apart."""
+    align: AlignConfig = field(default_factory=AlignConfig)
+    """Search ranges of each phone's unknowns (:mod:`~trackctl.vmtrack.align`)."""
     reject_mps: float = 0.45
     """A candidate whose mean velocity disagreement exceeds this is filtered away."""
     loss_gross: float = 2.0
@@ -72,5 +87,8 @@ class VmTrackConfig:
     source: Source = Source.AUTO
     """Detections from camera frames or from detections topics (auto: frames when present)."""
     frames: FrameConfig = field(default_factory=FrameConfig)
+    identity: Identity = Identity.OFFLINE
+    identify: IdentifyConfig = field(default_factory=IdentifyConfig)
+    """Offline identity parameters."""
     stitch: StitchConfig = field(default_factory=StitchConfig)
     """Offline clean-up of visual-only tracks (coasting tails, fragments, short tracks)."""

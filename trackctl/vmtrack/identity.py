@@ -18,50 +18,24 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from trackctl.logs.messages import RssiScan, TrackState
+from trackctl.vmtrack.align import Alignment, PairEvidence, lag_grid
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.tracker import GroundTrack
 
 if TYPE_CHECKING:
     from trackctl.vmtrack.config import VmTrackConfig
 
-__all__ = ["Candidate", "IdentityBinder", "BindingStats"]
+__all__ = ["IdentityBinder", "BindingStats"]
 
 _RSSI_WEIGHT = 0.05
 
 
-@dataclass
-class Candidate:
-    """Evidence that a phone (MID) is carried by the person of one visual track (VID)."""
-
-    n: int = 0
-    d2: float = 0.0
-    """Sum of squared velocity disagreements (m/s)^2 over ``n`` frames."""
-    rssi_n: int = 0
-    rssi_z2: float = 0.0
-    """Sum of squared normalised RSSI residuals (observed - path loss at the track's distance)."""
-
-    @property
-    def mean(self) -> float:
-        """Mean squared velocity disagreement plus the RSSI penalty, in (m/s)^2."""
-        return (self.d2 / self.n if self.n else 0.0) + self.rssi_penalty
-
-    @property
-    def rssi_penalty(self) -> float:
-        """Chi-square excess of the RSSI residuals (expected 1 per reading for the right person),
-        in units of the rejection threshold's scale so one incompatible AP pass rejects."""
-        if self.rssi_n < 2:
-            return 0.0
-        return _RSSI_WEIGHT * max(0.0, self.rssi_z2 / self.rssi_n - 1.0)
-
-    def add_rssi(self, z2: float) -> None:
-        """Add one squared normalised RSSI residual."""
-        self.rssi_n += 1
-        self.rssi_z2 += z2
-
-    def add_motion(self, d2: float) -> None:
-        """Add one frame's squared velocity disagreement."""
-        self.n += 1
-        self.d2 += d2
+def _rssi_penalty(ev: PairEvidence) -> float:
+    """Chi-square excess of the RSSI residuals (expected 1 per reading for the right person),
+    in units of the rejection threshold's scale so one incompatible AP pass rejects."""
+    if ev.rssi_n < 2:
+        return 0.0
+    return _RSSI_WEIGHT * max(0.0, ev.rssi_z2 / ev.rssi_n - 1.0)
 
 
 @dataclass
@@ -72,10 +46,19 @@ class BindingStats:
     bindings: int = 0
     checkpoint_bindings: int = 0
     offline_bindings: int = 0
+    ambiguous_frames: int = 0
+    """Frames in which a phone had two or more tracks it could be on and did not guess."""
 
 
 class IdentityBinder:
     """Online phone-to-track binding with loss detection, and the offline identity passes.
+
+    Phone velocities are compared with tracks through an :class:`~trackctl.vmtrack.align.
+    Alignment` (device-to-walk yaw, step scale, clock offset), never assumed: an unbound phone
+    with no known alignment scores each candidate track at that pair's best alignment, and
+    needs ``bind_frames_free`` frames (turns, stops and pace must single one track out); a
+    phone whose alignment is known (it was bound before) scores with it and needs
+    ``bind_frames``. A bound phone's alignment is re-fitted from the track's detections.
 
     Args:
         phones: motion of every phone, by MID (empty for the visual-only baseline).
@@ -85,21 +68,56 @@ class IdentityBinder:
     def __init__(self, phones: dict[str, PhoneMotion], cfg: VmTrackConfig) -> None:
         self.phones = phones
         self.cfg = cfg
+        self.acfg = cfg.align
+        self.lags = lag_grid(cfg.align)
+        self._lag_ns = np.round(self.lags * 1e9).astype(np.int64)
         self.stats = BindingStats()
         self.bound: dict[str, GroundTrack] = {}
-        self.candidates: dict[str, dict[str, Candidate]] = defaultdict(dict)
+        self.align: dict[str, Alignment] = {}
+        """Alignment of every bound phone (absent: bound, not yet fitted)."""
+        self.last_align: dict[str, Alignment] = {}
+        """The latest alignment each phone had (re-binding, back-dating, the report)."""
+        self.bound_ev: dict[str, PairEvidence] = {}
+        self._bound_t: dict[str, int] = {}
+        self.candidates: dict[str, dict[str, PairEvidence]] = defaultdict(dict)
         # whole-log evidence of (never-bound phone, track) agreement, for the offline resolution
-        self.evidence: dict[str, dict[str, Candidate]] = defaultdict(dict)
+        self.evidence: dict[str, dict[str, PairEvidence]] = defaultdict(dict)
         self.by_vid: dict[str, GroundTrack] = {}
         self.disagreement: dict[str, list[float]] = defaultdict(list)
         self.visual_disagreement: dict[str, list[float]] = defaultdict(list)
         self.pending_rssi: list[RssiScan] = []
+        self._cache_t: int | None = None
+        self._cache: dict[str, np.ndarray] = {}
 
     # -- queries --------------------------------------------------------------------------------
+    def phone_lags(self, mid: str, t_ns: int) -> np.ndarray:
+        """The phone's raw velocity (complex, device heading) at camera time ``t_ns`` under every
+        candidate clock offset; NaN where the phone has no samples."""
+        if t_ns != self._cache_t:
+            self._cache_t, self._cache = t_ns, {}
+        out = self._cache.get(mid)
+        if out is None:
+            v = self.phones[mid].velocities_at(t_ns + self._lag_ns)
+            out = self._cache[mid] = v[:, 0] + 1j * v[:, 1]
+        return out
+
+    def _aligned(self, mid: str, t_ns: int, al: Alignment) -> np.ndarray | None:
+        v = self.phones[mid].velocities_at(np.array([t_ns + self._lag_ns[al.lag_index]]))[0]
+        return None if np.isnan(v).any() else al.apply(complex(v[0], v[1]))
+
+    def streaming(self, mid: str, t_ns: int) -> bool:
+        """Whether the phone reports around ``t_ns`` (any clock offset in the search range)."""
+        p = self.phones.get(mid)
+        return p is not None and bool((~np.isnan(self.phone_lags(mid, t_ns))).any())
+
     def velocity(self, mid: str | None, t_ns: int) -> np.ndarray | None:
-        """The phone's walking velocity at ``t_ns`` (None: no such phone or outside its span)."""
-        p = self.phones.get(mid) if mid else None
-        return None if p is None else p.velocity_at(t_ns)
+        """The phone's walking velocity at ``t_ns`` in the site frame (its alignment applied);
+        None: no such phone, not bound with a fitted alignment, or outside its samples."""
+        al = self.align.get(mid) if mid else None
+        if mid is None or al is None or mid not in self.bound:
+            return None
+        z = self.phone_lags(mid, t_ns)[al.lag_index]
+        return None if np.isnan(z) else al.apply(complex(z))
 
     def owner(self, trk: GroundTrack) -> str | None:
         """The MID bound to ``trk`` now, if any."""
@@ -112,11 +130,25 @@ class IdentityBinder:
     # -- online ---------------------------------------------------------------------------------
     def release(self, mid: str) -> None:
         """The bound track of ``mid`` was retired (lost for too long)."""
-        del self.bound[mid]
+        self._unbind(mid)
         self.stats.losses += 1
 
-    def _bind_track(self, mid: str, trk: GroundTrack, t_ns: int) -> None:
+    def _unbind(self, mid: str) -> None:
+        del self.bound[mid]
+        self.align.pop(mid, None)
+        self.bound_ev.pop(mid, None)
+        self.disagreement[mid].clear()
+        self.visual_disagreement[mid].clear()
+
+    def _bind_track(
+        self, mid: str, trk: GroundTrack, t_ns: int, ev: PairEvidence | None = None,
+        al: Alignment | None = None,
+    ) -> None:
         self.bound[mid] = trk
+        self.bound_ev[mid] = ev.copy() if ev is not None else PairEvidence(len(self.lags))
+        self._bound_t[mid] = t_ns
+        if al is not None:
+            self.align[mid] = self.last_align[mid] = al
         if trk.first_mid is None:
             trk.first_mid, trk.first_bound_ns = mid, t_ns
 
@@ -135,11 +167,14 @@ class IdentityBinder:
         self.pending_rssi.clear()
         self._detect_losses(t_ns, free)
         wants = {}
+        ambiguous = False
         for mid in self.phones:
             if mid not in self.bound:
-                choice = self._filter_candidates(mid, t_ns, free)
+                choice, unsure = self._filter_candidates(mid, t_ns, free)
+                ambiguous |= unsure
                 if choice is not None:
                     wants[mid] = choice
+        self.stats.ambiguous_frames += ambiguous
         self._assign(t_ns, free, wants)
 
     def _checkpoints(self, t_ns: int, free: list[GroundTrack]) -> None:
@@ -161,7 +196,7 @@ class IdentityBinder:
                     trk for trk in free if np.linalg.norm(trk.xy - ap) < cfg.checkpoint_radius_m
                 ]
                 if len(near) == 1:
-                    self._bind_track(mid, near[0], t_ns)
+                    self._bind_track(mid, near[0], t_ns, al=self.last_align.get(mid))
                     free.remove(near[0])
                     self.candidates.pop(mid, None)
                     self.stats.bindings += 1
@@ -184,10 +219,36 @@ class IdentityBinder:
                     d = max(0.3, float(np.linalg.norm(trk.xy - ap)))
                     expect = cfg.rssi_at_1m_dbm - 10 * cfg.path_loss_exponent * math.log10(d)
                     z2 = ((reading.rssi_dbm - expect) / cfg.shadowing_db) ** 2
-                    self.candidates[mid].setdefault(trk.vid, Candidate()).add_rssi(z2)
+                    self._pair(self.candidates, mid, trk.vid).add_rssi(z2)
                     if trk.first_mid is None:
-                        self.evidence[mid].setdefault(trk.vid, Candidate()).add_rssi(z2)
+                        self._pair(self.evidence, mid, trk.vid).add_rssi(z2)
                         self.by_vid[trk.vid] = trk
+
+    def _pair(
+        self, table: dict[str, dict[str, PairEvidence]], mid: str, vid: str
+    ) -> PairEvidence:
+        ev = table[mid].get(vid)
+        if ev is None:
+            ev = table[mid][vid] = PairEvidence(len(self.lags))
+        return ev
+
+    def _refit(self, mid: str, trk: GroundTrack, t_ns: int) -> None:
+        """A bound phone's alignment, re-fitted from the track's detections alone (its filter
+        state already holds the phone), forgetting over ``align.forget_s``."""
+        vis = trk.visual_velocity()
+        ev = self.bound_ev[mid]
+        dt = (t_ns - self._bound_t.get(mid, t_ns)) / 1e9
+        self._bound_t[mid] = t_ns
+        ev.decay(math.exp(-max(dt, 0.0) / self.acfg.forget_s))
+        if vis is None:
+            return
+        t_c = int(np.mean(vis[1]))
+        zl = self.phones[mid].velocities_at(t_c + self._lag_ns)
+        ev.add(complex(vis[0][0], vis[0][1]), zl[:, 0] + 1j * zl[:, 1])
+        if ev.frames >= self.cfg.bind_frames:
+            al = ev.fit(self.acfg, self.lags)
+            if al is not None:
+                self.align[mid] = self.last_align[mid] = al
 
     def _detect_losses(self, t_ns: int, free: Sequence[GroundTrack] = ()) -> None:
         """A bound track whose motion keeps disagreeing with its phone, or whose phone stopped
@@ -204,12 +265,16 @@ class IdentityBinder:
         cfg = self.cfg
         limit = (1.6 * cfg.reject_mps) ** 2
         for mid, trk in list(self.bound.items()):
-            v = self.velocity(mid, t_ns)
-            if v is None:
-                del self.bound[mid]
+            if not self.streaming(mid, t_ns):
+                self._unbind(mid)
                 continue
             if trk.last_hit_ns != t_ns:
                 continue
+            self._refit(mid, trk, t_ns)
+            v = self.velocity(mid, t_ns)
+            al = self.align.get(mid)
+            if v is None or al is None:
+                continue  # not fitted yet (a check-point binding), or a gap in the samples
             blended = self.disagreement[mid]
             blended.append(float(np.sum((trk.v - v) ** 2)))
             del blended[: -cfg.bind_frames]
@@ -217,50 +282,56 @@ class IdentityBinder:
             vis = trk.visual_velocity()
             if not lost and vis is not None:
                 # the phone's velocity over the same detections' times (turns smooth alike)
-                phone = self.phones[mid]
-                at = [phone.velocity_at(int(t)) for t in vis[1]]
-                v_phone = np.mean([a for a in at if a is not None], axis=0)
-                visual = self.visual_disagreement[mid]
-                visual.append(float(np.sum((vis[0] - v_phone) ** 2)))
-                del visual[: -cfg.bind_frames]
-                mean = float(np.mean(visual))
-                lost = (
-                    len(visual) == cfg.bind_frames
-                    and mean > limit
-                    and (
-                        mean > cfg.loss_gross * limit
-                        or self._better_track(phone, free, cfg.loss_better * mean)
+                v_phone = self._mean_aligned(mid, vis[1], al)
+                if v_phone is not None:
+                    visual = self.visual_disagreement[mid]
+                    visual.append(float(np.sum((vis[0] - v_phone) ** 2)))
+                    del visual[: -cfg.bind_frames]
+                    mean = float(np.mean(visual))
+                    lost = (
+                        len(visual) == cfg.bind_frames
+                        and mean > limit
+                        and (
+                            mean > cfg.loss_gross * limit
+                            or self._better_track(mid, al, free, cfg.loss_better * mean)
+                        )
                     )
-                )
             if lost:
-                del self.bound[mid]
-                blended.clear()
-                self.visual_disagreement[mid].clear()
+                self._unbind(mid)
                 self.stats.losses += 1
 
-    @staticmethod
-    def _better_track(phone: PhoneMotion, free: Sequence[GroundTrack], below: float) -> bool:
-        """Whether an unbound track's detections move with ``phone`` (squared velocity
+    def _mean_aligned(self, mid: str, times: np.ndarray, al: Alignment) -> np.ndarray | None:
+        v = self.phones[mid].velocities_at(np.asarray(times, np.int64) + self._lag_ns[al.lag_index])
+        v = v[~np.isnan(v).any(axis=1)]
+        if not len(v):
+            return None
+        return al.apply(complex(*v.mean(axis=0)))
+
+    def _better_track(
+        self, mid: str, al: Alignment, free: Sequence[GroundTrack], below: float
+    ) -> bool:
+        """Whether an unbound track's detections move with the phone (squared velocity
         disagreement under ``below``) over their last seconds."""
         for trk in free:
             vis = trk.visual_velocity()
             if vis is None:
                 continue
-            at = [v for v in (phone.velocity_at(int(t)) for t in vis[1]) if v is not None]
-            if at and float(np.sum((vis[0] - np.mean(at, axis=0)) ** 2)) < below:
+            v = self._mean_aligned(mid, vis[1], al)
+            if v is not None and float(np.sum((vis[0] - v) ** 2)) < below:
                 return True
         return False
 
     def _filter_candidates(
         self, mid: str, t_ns: int, free: list[GroundTrack]
-    ) -> tuple[GroundTrack, float] | None:
+    ) -> tuple[tuple[GroundTrack, float, PairEvidence, Alignment | None] | None, bool]:
         """Candidate filtering of one unbound phone (initialization and loss recovery): the track
-        it wants, with its score, once one candidate clearly beats the others."""
+        it wants (with its score, evidence and alignment) once one candidate clearly beats the
+        others; and whether it is ambiguous (enough evidence, two or more tracks fit)."""
         cfg = self.cfg
-        v = self.velocity(mid, t_ns)
-        if v is None:
+        zl = self.phone_lags(mid, t_ns)
+        if np.isnan(zl).all():
             self.candidates.pop(mid, None)
-            return None
+            return None, False
         cands = self.candidates[mid]
         live = {trk.vid for trk in free}
         for vid in list(cands):
@@ -269,38 +340,60 @@ class IdentityBinder:
         for trk in free:
             if trk.hits < cfg.converge_hits:
                 continue  # its velocity estimate has not converged yet
-            d2 = float(np.sum((trk.v - v) ** 2))
-            cands.setdefault(trk.vid, Candidate()).add_motion(d2)
+            z = complex(trk.v[0], trk.v[1])
+            self._pair(self.candidates, mid, trk.vid).add(z, zl)
             if trk.first_mid is None:
-                self.evidence[mid].setdefault(trk.vid, Candidate()).add_motion(d2)
+                self._pair(self.evidence, mid, trk.vid).add(z, zl)
                 self.by_vid[trk.vid] = trk
-        alive = sorted(
-            (
-                (c.mean, vid, c)
-                for vid, c in cands.items()
-                if not (c.n >= 3 and c.mean > cfg.reject_mps**2)
-            ),
-            key=lambda a: a[0],
-        )
-        if not alive or alive[0][2].n < cfg.bind_frames:
-            return None
-        rivals = [a for a in alive[1:] if a[2].n >= 3]
-        if not rivals or rivals[0][0] > cfg.ratio * alive[0][0] + 0.02:
-            trk = next(t for t in free if t.vid == alive[0][1])
-            return trk, alive[0][0]
-        return None
+        known = self.last_align.get(mid)
+        if known is not None:
+            # a phone seen before: its alignment is known (unless its carry changed since)
+            pick, unsure = self._pick(cands, free, known, cfg.bind_frames, 3)
+            if pick is not None:
+                return pick, False
+        pick, unsure = self._pick(cands, free, None, cfg.bind_frames_free, cfg.bind_frames)
+        return pick, unsure
+
+    def _pick(
+        self,
+        cands: dict[str, PairEvidence],
+        free: list[GroundTrack],
+        known: Alignment | None,
+        need: int,
+        judge_after: int,
+    ) -> tuple[tuple[GroundTrack, float, PairEvidence, Alignment | None] | None, bool]:
+        cfg = self.cfg
+        scored = []
+        for vid, ev in cands.items():
+            m = ev.score(cfg.align, known) + _rssi_penalty(ev)
+            if ev.frames >= judge_after and m > cfg.reject_mps**2:
+                continue  # filtered away
+            scored.append((m, vid, ev))
+        scored.sort(key=lambda a: a[0])
+        if not scored or scored[0][2].frames < need:
+            return None, False
+        rivals = [a for a in scored[1:] if a[2].frames >= judge_after]
+        if rivals and rivals[0][0] <= cfg.ratio * scored[0][0] + 0.02:
+            return None, True
+        best, vid, ev = scored[0]
+        trk = next(t for t in free if t.vid == vid)
+        al = known if known is not None else ev.fit(cfg.align, self.lags)
+        return (trk, best, ev, al), False
 
     def _assign(
-        self, t_ns: int, free: list[GroundTrack], wants: dict[str, tuple[GroundTrack, float]]
+        self,
+        t_ns: int,
+        free: list[GroundTrack],
+        wants: dict[str, tuple[GroundTrack, float, PairEvidence, Alignment | None]],
     ) -> None:
         """Bind each wanted track to the phone that wants it most."""
         taken: dict[str, tuple[str, float]] = {}
-        for mid, (trk, score) in wants.items():
+        for mid, (trk, score, _, _) in wants.items():
             if trk.vid not in taken or score < taken[trk.vid][1]:
                 taken[trk.vid] = (mid, score)
         for vid, (mid, _) in taken.items():
-            trk = next(t for t in free if t.vid == vid)
-            self._bind_track(mid, trk, t_ns)
+            trk, _, ev, al = wants[mid]
+            self._bind_track(mid, trk, t_ns, ev, al)
             self.candidates.pop(mid, None)
             self.disagreement[mid].clear()
             self.visual_disagreement[mid].clear()
@@ -332,9 +425,9 @@ class IdentityBinder:
             if mid not in self.phones or mid in ever_bound:
                 continue
             scored = sorted(
-                (c.mean, vid)
-                for vid, c in cands.items()
-                if by_vid[vid].first_mid is None and c.n >= cfg.bind_frames
+                (ev.score(cfg.align) + _rssi_penalty(ev), vid)
+                for vid, ev in cands.items()
+                if by_vid[vid].first_mid is None and ev.frames >= cfg.bind_frames_free
             )
             if not scored or scored[0][0] > cfg.offline_reject_mps**2:
                 continue
@@ -348,22 +441,25 @@ class IdentityBinder:
                 continue
             trk.first_mid = mid
             trk.first_bound_ns = trk.t_ns + 1  # the identity covers the whole track (back-dated)
+            al = self.evidence[mid][vid].fit(cfg.align, self.lags)
+            if al is not None:
+                self.last_align[mid] = al
             made += 1
         return made
 
     def _backdate_identity(self, trk: GroundTrack) -> None:
         """Set how far back before its binding a track carries its phone's identity.
 
-        Walking back from the binding, the track's velocity is compared with the phone's over a
-        sliding window of ``bind_frames`` frames; where the mean disagreement exceeds the loss
-        threshold the track was following somebody else (visual tracks can swap people before a
-        phone anchors them), and the identity stops there.
+        Walking back from the binding, the track's velocity is compared with the phone's
+        (aligned) over a sliding window of ``bind_frames`` frames; where the mean disagreement
+        exceeds the loss threshold the track was following somebody else (visual tracks can
+        swap people before a phone anchors them), and the identity stops there.
         """
         cfg = self.cfg
         if trk.first_mid is None or trk.first_bound_ns is None or not trk.history:
             return
-        phone = self.phones.get(trk.first_mid)
-        if phone is None:
+        al = self.last_align.get(trk.first_mid)
+        if trk.first_mid not in self.phones or al is None:
             return
         limit = (1.6 * cfg.offline_reject_mps) ** 2  # whole-life evidence: the offline gate
         window: list[float] = []
@@ -371,7 +467,7 @@ class IdentityBinder:
         for t_ns, x, _, _ in reversed(trk.history):
             if t_ns >= trk.first_bound_ns:
                 continue
-            v = phone.velocity_at(t_ns)
+            v = self._aligned(trk.first_mid, t_ns, al)
             if v is None:
                 break
             window.append(float(np.sum((x[2:, 0] - v) ** 2)))

@@ -1,9 +1,14 @@
 """Walking velocity of a phone carrier from its IMU (pedestrian dead reckoning).
 
-Heading comes from the phone's orientation (rotation vector yaw; integrated gyro when absent);
-speed from the step cadence found in the vertical specific force (least-squares periodogram over
-a centred window, since we run offline) times a step length. At the paper's 5 Hz IMU rate the
-cadence (1.4-2.2 Hz) stays below Nyquist.
+Heading comes from the phone's orientation (the rotation vector; integrated gyro when absent):
+the horizontal direction of the device axis that lies most level over the last seconds, so a
+phone upright in a pocket has a heading as well as one held flat. That heading is the
+*device's*, not the walk's: how far the two differ (the carry, the site frame's rotation from
+magnetic north) and the phone's clock offset are estimated by the identity stage
+(:mod:`~trackctl.vmtrack.align`), never assumed. Speed comes from the step cadence found in the
+vertical specific force (least-squares periodogram over a centred window, since we run offline,
+evaluated every ``hop_s``) times a nominal step length (the per-person scale is estimated with
+the heading offset). At the paper's 5 Hz IMU rate the cadence (1.4-2.2 Hz) stays below Nyquist.
 """
 
 from __future__ import annotations
@@ -33,6 +38,10 @@ class MotionConfig:
     still_window_s: float = 1.2
     """Short centred window in which a phone whose vertical force barely varies is standing."""
     still_std_mps2: float = 0.3
+    hop_s: float = 0.2
+    """The cadence is evaluated every ``hop_s`` and interpolated (fast at 50-200 Hz)."""
+    axis_window_s: float = 4.0
+    """The heading's device axis is the one most level over this centred window."""
 
 
 class PhoneMotion:
@@ -43,11 +52,14 @@ class PhoneMotion:
         self.config = config or MotionConfig()
         self._t: list[int] = []
         self._vert: list[float] = []
-        self._yaw: list[float] = []
+        self._quat: list[tuple[float, float, float, float]] = []
+        self._acc: list[tuple[float, float, float]] = []
         self._gyro_z: list[float] = []
         self.bad_samples = 0
         self.t_ns = np.empty(0, np.int64)
         self.v = np.empty((0, 2))
+        self.heading = np.empty(0)
+        self.speed = np.empty(0)
 
     def add(self, imu: Imu) -> None:
         """Add one sample (non-finite samples are skipped and counted)."""
@@ -58,18 +70,10 @@ class PhoneMotion:
         if self._t and imu.t_ns <= self._t[-1]:
             self.bad_samples += 1
             return
-        f = np.array(imu.accel_mps2)
-        if imu.orientation is not None:
-            q = imu.orientation
-            rot = Rotation.from_quat([q.x, q.y, q.z, q.w])
-            yaw = float(rot.as_euler("ZYX")[0])
-            vert = float(rot.apply(f)[2]) - G
-        else:
-            yaw = math.nan
-            vert = float(np.linalg.norm(f)) - G
         self._t.append(imu.t_ns)
-        self._vert.append(vert)
-        self._yaw.append(yaw)
+        self._acc.append(tuple(imu.accel_mps2))
+        q = imu.orientation
+        self._quat.append((math.nan,) * 4 if q is None else (q.x, q.y, q.z, q.w))
         # no gyro and no orientation: the heading cannot be integrated (held constant)
         self._gyro_z.append(0.0 if imu.gyro_rps is None else imu.gyro_rps.z)
 
@@ -79,38 +83,67 @@ class PhoneMotion:
             return
         t = np.asarray(self._t, np.int64)
         ts = (t - t[0]) / 1e9
-        vert = np.asarray(self._vert)
-        yaw = np.asarray(self._yaw)
-        if np.isnan(yaw).any():
+        acc = np.asarray(self._acc, float)
+        quat = np.asarray(self._quat, float)
+        known = np.isfinite(quat).all(axis=1)
+        vert = np.linalg.norm(acc, axis=1) - G
+        heading = np.full(len(t), math.nan)
+        if known.any():
+            rot = Rotation.from_quat(quat[known]).as_matrix()  # device -> world, (n, 3, 3)
+            vert[known] = np.einsum("nj,nj->n", rot[:, 2, :], acc[known]) - G
+            heading[known] = self._axis_heading(ts[known], rot)
+        if np.isnan(heading).any():
             gz = np.asarray(self._gyro_z)
             integrated = np.concatenate(([0.0], np.cumsum(np.diff(ts) * gz[1:])))
-            yaw = np.where(np.isnan(yaw), integrated, yaw)
+            heading = np.where(np.isnan(heading), integrated, heading)
         speed = self._speeds(ts, vert)
         self.t_ns = t
-        self.v = np.column_stack([speed * np.cos(yaw), speed * np.sin(yaw)])
-        self._t, self._vert, self._yaw, self._gyro_z = [], [], [], []
+        self.heading = heading
+        self.speed = speed
+        self.v = np.column_stack([speed * np.cos(heading), speed * np.sin(heading)])
+        self._t, self._acc, self._quat, self._gyro_z = [], [], [], []
+
+    def _axis_heading(self, ts: np.ndarray, rot: np.ndarray) -> np.ndarray:
+        """Heading (rad) of the device axis that lies most level over a centred window: the
+        x or y axis of a phone held flat, the z axis (out of the screen) of one upright in a
+        pocket. A change of axis (the phone was moved) is a jump the identity stage re-fits."""
+        rate = (len(ts) - 1) / max(ts[-1] - ts[0], 1e-9) if len(ts) > 1 else 1.0
+        n = max(1, int(round(self.config.axis_window_s * rate)))
+        tilt = (
+            pd.DataFrame(np.abs(rot[:, 2, :])).rolling(n, center=True, min_periods=1).mean()
+        ).to_numpy()
+        # hysteresis: keep the axis until another is clearly more level (a flat phone's x and y
+        # are both level; flipping between them would turn the heading by 90 deg)
+        axis = np.empty(len(ts), int)
+        cur = int(np.argmin(tilt[0]))
+        for k in range(len(ts)):
+            if tilt[k, cur] > tilt[k].min() + 0.25:
+                cur = int(np.argmin(tilt[k]))
+            axis[k] = cur
+        k = np.arange(len(ts))
+        return np.arctan2(rot[k, 1, axis], rot[k, 0, axis])
 
     def _speeds(self, ts: np.ndarray, vert: np.ndarray) -> np.ndarray:
         cfg = self.config
         freqs = np.arange(cfg.cadence_hz[0], cfg.cadence_hz[1], 0.05)
         half = cfg.window_s / 2
-        out = np.zeros(len(ts))
-        lo = hi = 0
-        for k, tk in enumerate(ts):
-            while ts[lo] < tk - half:
-                lo += 1
-            while hi < len(ts) and ts[hi] <= tk + half:
-                hi += 1
-            w_t, w_v = ts[lo:hi], vert[lo:hi] - vert[lo:hi].mean()
-            if len(w_t) < 6:
+        grid = np.arange(ts[0], ts[-1] + cfg.hop_s, cfg.hop_s)
+        lo_idx = np.searchsorted(ts, grid - half, side="left")
+        hi_idx = np.searchsorted(ts, grid + half, side="right")
+        on_grid = np.zeros(len(grid))
+        for k in range(len(grid)):
+            lo, hi = lo_idx[k], hi_idx[k]
+            if hi - lo < 6:
                 continue
+            w_t, w_v = ts[lo:hi], vert[lo:hi] - vert[lo:hi].mean()
             # least-squares sinusoid amplitude per candidate frequency (Lomb-Scargle-like)
             ph = 2 * np.pi * freqs[:, None] * w_t[None, :]
             c, s = np.cos(ph), np.sin(ph)
             amp = 2 * np.sqrt((c @ w_v) ** 2 + (s @ w_v) ** 2) / len(w_t)
             best = int(np.argmax(amp))
             if amp[best] >= cfg.min_bounce_mps2:
-                out[k] = freqs[best] * cfg.step_length_m
+                on_grid[k] = freqs[best] * cfg.step_length_m
+        out = np.interp(ts, grid, on_grid)
         # the cadence window (3 s) smears short stops; a quiet short window means standing still
         if len(ts) > 2:
             rate = (len(ts) - 1) / max(ts[-1] - ts[0], 1e-9)
@@ -130,3 +163,16 @@ class PhoneMotion:
         vx = np.interp(t_ns, self.t_ns, self.v[:, 0])
         vy = np.interp(t_ns, self.t_ns, self.v[:, 1])
         return np.array([vx, vy])
+
+    def velocities_at(self, t_ns: np.ndarray) -> np.ndarray:
+        """Velocities (n, 2) at many times; NaN rows outside the phone's samples (+-0.5 s)."""
+        t_ns = np.asarray(t_ns, np.int64)
+        out = np.full((len(t_ns), 2), np.nan)
+        if len(self.t_ns) == 0:
+            return out
+        ok = (t_ns >= self.t_ns[0] - 500_000_000) & (t_ns <= self.t_ns[-1] + 500_000_000)
+        x = (t_ns[ok] - self.t_ns[0]).astype(float)
+        xp = (self.t_ns - self.t_ns[0]).astype(float)
+        out[ok, 0] = np.interp(x, xp, self.v[:, 0])
+        out[ok, 1] = np.interp(x, xp, self.v[:, 1])
+        return out

@@ -41,9 +41,10 @@ from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.metrics.tracking import InitialIdentity, MotAccumulator
 from trackctl.processing.base import Progress
-from trackctl.vmtrack.config import Mode, Source, VmTrackConfig
+from trackctl.vmtrack.config import Identity, Mode, Source, VmTrackConfig
 from trackctl.vmtrack.frames import FrameDetector, detections_topic, image_cameras
-from trackctl.vmtrack.identity import IdentityBinder
+from trackctl.vmtrack.identify import Identities, identify
+from trackctl.vmtrack.identity import BindingStats, IdentityBinder
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.online import FrameOut, OnlineTracker
 from trackctl.vmtrack.scene import scene_update
@@ -371,28 +372,42 @@ def _frame_tracks(
     fr: FrameOut,
     plan: Publication,
     positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+    ids: Identities | None = None,
 ) -> list[Track]:
     """The tracks published at one frame: the online rows the clean-up keeps, under their
-    published ids, plus interpolated positions across stitched gaps."""
+    published ids (the offline identity's MID, else the online binding's, else the visual
+    id), plus interpolated positions across stitched gaps."""
     tracks: list[Track] = []
     names: set[str] = set()
-    for trk, mid_now, state, k in fr.rows:
+    # tracks bound now name first: one phone (MID) is never on two tracks in one frame, so a
+    # back-dated identity gives way to the binding of the moment
+    rows = sorted(fr.rows, key=lambda r: r[1] is None)
+    for trk, mid_now, state, k in rows:
         if (id(trk), fr.t_ns) in plan.hidden:
             continue
-        out_id = mid_now or plan.name.get(id(trk), trk.vid)
-        if (
-            mid_now is None
-            and trk.first_mid is not None
-            and trk.identity_from_ns <= fr.t_ns < (trk.first_bound_ns or 0)
+        out_id = plan.name.get(id(trk), trk.vid)
+        if ids is not None:
+            out_id = ids.mid_at.get((plan.head.get(id(trk), id(trk)), fr.t_ns), out_id)
+        elif mid_now is not None:
+            out_id = mid_now
+        elif trk.first_mid is not None and trk.identity_from_ns <= fr.t_ns < (
+            trk.first_bound_ns or 0
         ):
-            # offline: the identity found later holds back to where the track's motion
-            # stops agreeing with the phone (the track's birth, unless it switched people)
+            # online identity, offline back-dated: the identity found later holds back to
+            # where the track's motion stops agreeing with the phone
             out_id = trk.first_mid
+        if out_id in names:
+            out_id = plan.name.get(id(trk), trk.vid)
+            if out_id in names:
+                out_id = trk.vid
         # entry k of a track's history is its state at this frame (snapshotted before the
         # next frame's prediction, or when the log ends)
         tracks.append(_track_message(out_id, trk, state, positions.get((id(trk), k))))
         names.add(out_id)
-    for out_id, xy, v in plan.fills.get(fr.t_ns, ()):
+    for name, xy, v in plan.fills.get(fr.t_ns, ()):
+        out_id = name
+        if ids is not None:
+            out_id = ids.mid_at.get((plan.head_of_name.get(name, -1), fr.t_ns), name)
         if out_id not in names:
             names.add(out_id)
             tracks.append(
@@ -432,11 +447,15 @@ def _write_and_score(
     lost_at: dict[str, int] = {}
     first_loss: dict[str, float] = {}
     t_start = frames[0].t_ns if frames else 0
-    plan = plan_publication(frames, positions, cfg.stitch)
+    offline = mode is Mode.VM and cfg.identity is Identity.OFFLINE
+    plan = plan_publication(frames, positions, cfg.stitch, all_tracks=offline)
+    ids = identify(frames, plan, phones, cfg.align, cfg.identify) if offline else None
     published: dict[str, int] = {}
     coasting = shown = 0
+    wrong_s = 0.0
+    frame_s = (frames[-1].t_ns - frames[0].t_ns) / 1e9 / max(len(frames) - 1, 1) if frames else 0.0
     for fr in frames:
-        tracks = _frame_tracks(fr, plan, positions)
+        tracks = _frame_tracks(fr, plan, positions, ids)
         hyp = {m.track_id: (m.position_m.x, m.position_m.y) for m in tracks}
         for msg in tracks:
             published[msg.track_id] = published.get(msg.track_id, 0) + 1
@@ -474,6 +493,13 @@ def _write_and_score(
                 good = xy is not None and math.dist(xy, gtf[person]) < cfg.eval_threshold_m
                 if xy is not None:
                     errors.append(math.dist(xy, gtf[person]))
+                    # bound to somebody else: another person is nearer the MID's track
+                    if not good and any(
+                        math.dist(xy, pos) < cfg.eval_threshold_m
+                        for other, pos in gtf.items()
+                        if other != person
+                    ):
+                        wrong_s += frame_s
                 if ok_since.get(person) and not good:
                     loss_events += 1
                     lost_at[person] = fr.t_ns
@@ -514,8 +540,29 @@ def _write_and_score(
         "offline_bindings": stats.offline_bindings,
         "det_error_m_mean": round(float(np.mean(det_err)), 4) if det_err else None,
         "det_recall": round(det_hits / det_people, 4) if det_people else None,
+        "wrong_binding_s": round(wrong_s, 3) if mode is Mode.VM and people else None,
         **_no_truth_metrics(online, published, coasting, shown, plan),
+        **_identity_metrics(ids, stats, phones),
     }
+
+
+def _identity_metrics(
+    ids: Identities | None, stats: BindingStats, phones: dict[str, PhoneMotion]
+) -> dict[str, float | int | None]:
+    """Identity figures a log without ground truth can give: ambiguity and each phone's
+    estimated alignment (clock offset, device-to-walk yaw, step scale)."""
+    if not phones:
+        return {}
+    out: dict[str, float | int | None] = {
+        "ambiguous_frames": ids.ambiguous_frames if ids else stats.ambiguous_frames,
+        "unanchored_frames": ids.unanchored_frames if ids else None,
+    }
+    for mid in sorted(phones):
+        al = ids.alignments.get(mid) if ids else None
+        out[f"clock_offset_s/{mid}"] = round(al.lag_s, 3) if al else None
+        out[f"yaw_offset_deg/{mid}"] = round(al.yaw_deg, 1) if al else None
+        out[f"step_scale/{mid}"] = round(al.scale, 3) if al else None
+    return out
 
 
 def _no_truth_metrics(

@@ -21,7 +21,7 @@ motion-sensor prediction and is published).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -139,19 +139,25 @@ class Publication:
     """Identities dropped as too short."""
     links: int = 0
     """Fragments joined to an earlier one."""
+    head: dict[int, int] = field(default_factory=dict)
+    """Chain head (``id`` of its first track) of every track in the plan."""
+    head_of_name: dict[str, int] = field(default_factory=dict)
+    """Chain head of every published name."""
 
 
 def plan_publication(
     frames: Sequence[FrameOut],
     positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
     cfg: StitchConfig,
+    all_tracks: bool = False,
 ) -> Publication:
-    """Coasting tails, stitched identities and short identities of visual-only tracks."""
+    """Coasting tails, stitched identities and short identities of visual-only tracks (of every
+    track with ``all_tracks``: the offline identity stage names them afterwards)."""
     rows: dict[int, list[tuple[int, int]]] = {}
     tracks: dict[int, GroundTrack] = {}
     for fr in frames:
         for trk, mid_now, _, k in fr.rows:
-            if mid_now is None and trk.first_mid is None:
+            if all_tracks or (mid_now is None and trk.first_mid is None):
                 rows.setdefault(id(trk), []).append((fr.t_ns, k))
                 tracks[id(trk)] = trk
     hidden: set[tuple[int, int]] = set()
@@ -213,4 +219,5 @@ def plan_publication(
                 w = (t_ns - a.last_ns) / (b.first_ns - a.last_ns)
                 xy = (1 - w) * a.last_xy + w * b.first_xy
                 fills.setdefault(t_ns, []).append((name[by_key[head].key], xy, v))
-    return Publication(name, hidden, fills, len(dropped), links)
+    head_of_name = {name[h]: h for h in set(heads.values()) if h in name}
+    return Publication(name, hidden, fills, len(dropped), links, dict(heads), head_of_name)

@@ -80,6 +80,8 @@ class GroundTrack:
     """Times of the frames in which a detection corrected this track."""
     recent: deque[tuple[int, float, float]] = field(default_factory=lambda: deque(maxlen=16))
     """The last detections this track took (time, x, y): its visual-only evidence."""
+    hits_log: list[tuple[int, float, float]] = field(default_factory=list)
+    """Every detection this track took (time, x, y): the offline identity stage's evidence."""
     born_xy: np.ndarray | None = None
     moved_m: float = 0.0
     """Farthest the track's corrected position has been from where it was born: a track that
@@ -101,7 +103,15 @@ class GroundTrack:
             kf.P[:2, :2] = cov
         kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
         kf.R = np.eye(2) * cfg.det_sigma_m**2
-        return cls(vid, kf, t_ns, last_hit_ns=t_ns, hit_ns=[t_ns], born_xy=np.array(xy[:2], float))
+        return cls(
+            vid,
+            kf,
+            t_ns,
+            last_hit_ns=t_ns,
+            hit_ns=[t_ns],
+            born_xy=np.array(xy[:2], float),
+            hits_log=[(t_ns, float(xy[0]), float(xy[1]))],
+        )
 
     @property
     def xy(self) -> np.ndarray:
@@ -168,7 +178,9 @@ class GroundTrack:
 
     def correct(self, xy: np.ndarray, cov: np.ndarray | None = None) -> None:
         """Update with a ground point; ``cov`` is its 2x2 covariance (None: ``det_sigma_m``)."""
-        self.recent.append((self.t_ns, float(xy[0]), float(xy[1])))
+        hit = (self.t_ns, float(xy[0]), float(xy[1]))
+        self.recent.append(hit)
+        self.hits_log.append(hit)
         self.kf.update(np.asarray(xy, float).reshape(2, 1), R=cov)
         if self.born_xy is not None:
             self.moved_m = max(self.moved_m, float(np.linalg.norm(self.xy - self.born_xy)))

@@ -1,0 +1,272 @@
+"""Phones carried by walking people: the IMU a real phone reports (the ``realistic`` preset).
+
+Every model, its parameter and its source (docs/vmtrack.md, "Simulator"):
+
+* **Carry** per person, drawn from ``carries`` (hand 30 %, front pocket 30 %, back pocket 15 %,
+  bag 25 %), and changed when the phone is taken out and put back (a Poisson process of
+  ``carry_changes_per_min``, 0.2: once in five minutes, more often than the 47-76 pickups a
+  day of phone-use studies (Deloitte 2017, dscout 2016) spread over waking hours). Each carry has an attitude (measured: the gravity direction in the
+  device frame of the Oxford step-counter traces in ``shared/data/phones``: hand tilted ~35 deg
+  towards the face, pockets upright with the device y axis up, bag on its side with x up), a
+  yaw between the device and the walking direction (hand: N(0, 10 deg); pockets and bag:
+  uniform, a new draw at each change), a yaw sway at the stride frequency (hand 3 deg,
+  pockets 20, bag 8) and a vertical bounce amplitude at normal speed (measured on the same
+  traces: magnitude std 2.2 m/s^2 in the hand, 4.7 in the pockets, 3.8 in the bag; a sinusoid
+  of amplitude std * sqrt(2)); pockets add the stride (one leg) at half the step rate.
+* **Heading** is the Android rotation vector's: the device attitude in a frame whose north is
+  ``site_yaw_deg`` away from the site's x axis (uniform per log: the site frame is not magnetic
+  north), disturbed indoors by a smooth magnetic field (``magnetic_deg`` amplitude over
+  ``magnetic_wavelength_m``; steel and wiring deflect indoor compasses by 10-20 deg, Li et al.,
+  IPIN 2012) and a slow random walk (``heading_drift_deg_per_sqrt_s``).
+* **Gait** per person: step length uniform in ``step_length_m`` (0.55-0.85 m; adult step
+  lengths, Grieve & Gear 1966), growing with speed (0.75 + 0.25 v / 1.3 of it: cadence and
+  length both rise with speed).
+* **Always on**: phones report for the whole log. Outside the cameras' view their carriers
+  stand or walk elsewhere (alternating 5-30 s bouts, random headings).
+* **Clock**: each phone's clock is off by uniform +-``clock_offset_s`` and drifts by
+  +-``clock_drift_ppm`` (phones without NTP sync; quartz clocks drift 10-50 ppm).
+* **Sampling**: each phone reports at one of ``imu_rates_hz`` (Android's SENSOR_DELAY_NORMAL,
+  UI and GAME: 5, 16, 50 Hz), with ``jitter_ms`` timestamp jitter and ``drop`` of the samples
+  lost. Accelerometer noise 0.15 m/s^2, gyro noise 0.02 rad/s and bias 0.01 rad/s (MEMS
+  datasheets, e.g. Bosch BMI160).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from trackctl.logs.messages import Imu, Quat, Vec3
+from trackctl.sim.walkers import Trajectory
+
+__all__ = ["PhoneRealism", "PhoneTruth", "CARRIES", "realistic_imu"]
+
+G = 9.80665
+S = 1_000_000_000
+
+
+@dataclass(frozen=True, slots=True)
+class _Carry:
+    attitude: tuple[str, float]
+    """Device tilt from level: (axis, degrees) of a rotation applied before the yaw."""
+    yaw_sigma_deg: float | None
+    """Device-to-walk yaw: N(0, sigma), or uniform on the circle when None."""
+    sway_deg: float
+    bounce_mps2: float
+    stride: float
+    """Amplitude of the one-leg stride component, as a share of the bounce."""
+
+
+CARRIES: dict[str, _Carry] = {
+    "hand": _Carry(("x", 35.0), 10.0, 3.0, 3.2, 0.0),
+    "front_pocket": _Carry(("x", 90.0), None, 20.0, 6.6, 0.3),
+    "back_pocket": _Carry(("x", 90.0), None, 20.0, 6.8, 0.4),
+    "bag": _Carry(("y", -90.0), None, 8.0, 5.3, 0.1),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class PhoneRealism:
+    """Knobs of the phone models above (see the module docstring for sources)."""
+
+    carries: tuple[tuple[str, float], ...] = (
+        ("hand", 0.3),
+        ("front_pocket", 0.3),
+        ("back_pocket", 0.15),
+        ("bag", 0.25),
+    )
+    carry_changes_per_min: float = 0.2
+    site_yaw_deg: float | None = None
+    """Rotation of magnetic north from the site's x axis; None: uniform per log."""
+    magnetic_deg: float = 10.0
+    magnetic_wavelength_m: float = 6.0
+    heading_drift_deg_per_sqrt_s: float = 1.0
+    step_length_m: tuple[float, float] = (0.55, 0.85)
+    always_on: bool = True
+    clock_offset_s: float = 2.0
+    clock_drift_ppm: float = 50.0
+    imu_rates_hz: tuple[float, ...] = (5.0, 16.0, 50.0)
+    jitter_ms: float = 3.0
+    drop: float = 0.02
+    carry_yaw_deg: float | None = None
+    """Every phone's device-to-walk yaw fixed to this (tests: 0, 45, 90, 180); None: per carry."""
+
+
+@dataclass(frozen=True, slots=True)
+class PhoneTruth:
+    """What the simulator chose for one phone (scenario metadata; read by metrics only)."""
+
+    carry: str
+    yaw_offset_deg: float
+    """First carry's device-to-walk yaw plus the site rotation (what a tracker must estimate)."""
+    clock_offset_s: float
+    clock_drift_ppm: float
+    step_length_m: float
+    imu_hz: float
+
+
+def _walk_velocity(
+    traj: Trajectory, duration: float, dt: float, rng: np.random.Generator, always_on: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The carrier's true time grid, velocity and position (NaN out of view) over the log.
+
+    Inside the trajectory, its velocity; outside (always-on phones), bouts of standing and of
+    walking elsewhere (5-30 s each, 0.8-1.4 m/s, a random heading turning slowly)."""
+    t = np.arange(0.0, duration + dt, dt)
+    xy = traj.at(t)
+    inside = ~np.isnan(xy).any(axis=1)
+    vel = np.zeros((len(t), 2))
+    if inside.any():
+        filled = xy.copy()
+        idx = np.flatnonzero(inside)
+        for j in range(2):
+            filled[:, j] = np.interp(np.arange(len(t)), idx, xy[idx, j])
+        vel = np.gradient(filled, dt, axis=0)
+    if always_on:
+        k = 0
+        heading = rng.uniform(-math.pi, math.pi)
+        while k < len(t):
+            n = int(rng.uniform(5.0, 30.0) / dt)
+            walking = rng.random() < 0.5
+            speed = rng.uniform(0.8, 1.4)
+            turn = np.cumsum(rng.normal(0, math.radians(4.0) * math.sqrt(dt), n)) + heading
+            seg = slice(k, min(k + n, len(t)))
+            m = seg.stop - seg.start
+            out = ~inside[seg]
+            v = np.column_stack([np.cos(turn[:m]), np.sin(turn[:m])]) * (speed if walking else 0)
+            vel[seg][out] = v[out]
+            heading = float(turn[m - 1])
+            k += n
+    else:
+        vel[~inside] = np.nan
+    return t, vel, xy
+
+
+def _magnetic(xy: np.ndarray, rng: np.random.Generator, cfg: PhoneRealism) -> np.ndarray:
+    """Heading disturbance (rad) of the indoor magnetic field at positions ``xy`` (NaN: out of
+    view, where a slow random walk of the same size stands in)."""
+    lam = cfg.magnetic_wavelength_m
+    p = rng.uniform(0, 2 * math.pi, 4)
+    amp = math.radians(cfg.magnetic_deg)
+    x, y = np.nan_to_num(xy[:, 0]), np.nan_to_num(xy[:, 1])
+    field = amp * 0.5 * (
+        np.sin(2 * math.pi * x / lam + p[0]) * np.cos(2 * math.pi * y / lam + p[1])
+        + np.sin(2 * math.pi * (x + y) / (1.7 * lam) + p[2])
+    )
+    out = np.isnan(xy).any(axis=1)
+    if out.any():
+        walk = np.cumsum(rng.normal(0, amp * 0.05, len(xy)))
+        field[out] = np.clip(walk[out], -amp, amp)
+    return field
+
+
+def _carry_yaw(carry: _Carry, rng: np.random.Generator, cfg: PhoneRealism) -> float:
+    if cfg.carry_yaw_deg is not None:
+        return math.radians(cfg.carry_yaw_deg)
+    if carry.yaw_sigma_deg is None:
+        return float(rng.uniform(-math.pi, math.pi))
+    return float(rng.normal(0, math.radians(carry.yaw_sigma_deg)))
+
+
+def realistic_imu(
+    traj: Trajectory,
+    mac: str,
+    duration: float,
+    rng: np.random.Generator,
+    cfg: PhoneRealism,
+    site_yaw: float,
+) -> tuple[list[Imu], PhoneTruth]:
+    """The IMU samples (phone clock stamps) of the phone carried along ``traj``, and its truth."""
+    dt = 0.02
+    names = [c for c, _ in cfg.carries]
+    probs = np.array([p for _, p in cfg.carries], float)
+    probs /= probs.sum()
+    t, vel, xy = _walk_velocity(traj, duration, dt, rng, cfg.always_on)
+    speed = np.linalg.norm(np.nan_to_num(vel), axis=1)
+    heading = np.arctan2(np.nan_to_num(vel[:, 1]), np.nan_to_num(vel[:, 0]))
+    for k in range(1, len(heading)):  # keep the last heading while standing
+        if speed[k] < 0.1:
+            heading[k] = heading[k - 1]
+    heading = np.unwrap(heading)
+    step_len = float(rng.uniform(*cfg.step_length_m))
+    cadence = speed / (step_len * (0.75 + 0.25 * np.minimum(speed, 2.0) / 1.3))
+    phase = 2 * math.pi * np.cumsum(cadence) * dt
+    acc = np.gradient(np.nan_to_num(vel), dt, axis=0)
+    # carries: a segment per Poisson change
+    n = len(t)
+    carry_idx = np.zeros(n, int)
+    yaw_off = np.zeros(n)
+    first = str(rng.choice(names, p=probs))
+    cur, cur_yaw = first, _carry_yaw(CARRIES[first], rng, cfg)
+    first_yaw = cur_yaw
+    rate = cfg.carry_changes_per_min / 60.0
+    next_change = rng.exponential(1 / rate) if rate > 0 else math.inf
+    for k in range(n):
+        if t[k] >= next_change:
+            cur = str(rng.choice(names, p=probs))
+            cur_yaw = _carry_yaw(CARRIES[cur], rng, cfg)
+            next_change += rng.exponential(1 / rate)
+        carry_idx[k] = names.index(cur)
+        yaw_off[k] = cur_yaw
+    carries = [CARRIES[names[i]] for i in range(len(names))]
+    sway = np.radians([c.sway_deg for c in carries])[carry_idx] * np.sin(phase / 2)
+    bounce = np.array([c.bounce_mps2 for c in carries])[carry_idx]
+    bounce_amp = bounce * np.minimum(speed / 1.3, 1.5) ** 1.5
+    stride = np.array([c.stride for c in carries])[carry_idx]
+    drift_sigma = math.radians(cfg.heading_drift_deg_per_sqrt_s) * math.sqrt(dt)
+    drift = np.cumsum(rng.normal(0, drift_sigma, n))
+    yaw_dev = heading + yaw_off + sway + site_yaw + _magnetic(xy, rng, cfg) + drift
+    yaw_rate = np.gradient(np.unwrap(yaw_dev), dt)
+    vert = G + bounce_amp * (np.sin(phase) + stride * np.sin(phase / 2))
+    tilt_of = {
+        i: Rotation.from_euler(CARRIES[c].attitude[0], CARRIES[c].attitude[1], degrees=True)
+        for i, c in enumerate(names)
+    }
+    # true sample times of this phone's clock, jittered, some dropped
+    hz = float(rng.choice(cfg.imu_rates_hz))
+    offset = float(rng.uniform(-cfg.clock_offset_s, cfg.clock_offset_s))
+    drift_ppm = float(rng.uniform(-cfg.clock_drift_ppm, cfg.clock_drift_ppm))
+    stamps = np.arange(0.0, duration, 1.0 / hz)
+    true_t = (stamps - offset) / (1 + drift_ppm * 1e-6)
+    true_t = true_t + rng.normal(0, cfg.jitter_ms / 1000.0, len(true_t))
+    keep = (true_t >= 0) & (true_t <= t[-1]) & (rng.random(len(true_t)) >= cfg.drop)
+    frame = f"phone/{mac}"
+    out: list[Imu] = []
+    gyro_bias = rng.normal(0, 0.01, 3)
+    noise_a = rng.normal(0, 0.15, (len(stamps), 3))
+    noise_g = rng.normal(0, 0.02, (len(stamps), 3))
+    sel = np.flatnonzero(keep)
+    ks = np.minimum(np.round(true_t[sel] / dt).astype(int), n - 1)
+    # device -> world: the carry's tilt, then the yaw about world z (vectorised by carry)
+    rot_m = np.empty((len(sel), 3, 3))
+    for i, tilt in tilt_of.items():
+        m = carry_idx[ks] == i
+        if m.any():
+            rot_m[m] = (Rotation.from_euler("z", yaw_dev[ks[m]][:, None]) * tilt).as_matrix()
+    f_world = np.column_stack([acc[ks, 0], acc[ks, 1], vert[ks]])
+    w_world = np.column_stack([np.zeros(len(ks)), np.zeros(len(ks)), yaw_rate[ks]])
+    f_dev = np.einsum("kji,kj->ki", rot_m, f_world) + noise_a[sel]
+    gyro = np.einsum("kji,kj->ki", rot_m, w_world) + gyro_bias + noise_g[sel]
+    quats = Rotation.from_matrix(rot_m).as_quat() if len(sel) else np.zeros((0, 4))
+    for r, j in enumerate(sel):
+        out.append(
+            Imu(
+                int(round(stamps[j] * S)),
+                frame,
+                Vec3(*map(float, f_dev[r])),
+                Vec3(*map(float, gyro[r])),
+                Quat(*map(float, quats[r])),
+            )
+        )
+    truth = PhoneTruth(
+        carry=first,
+        yaw_offset_deg=round(math.degrees(math.remainder(first_yaw + site_yaw, 2 * math.pi)), 2),
+        clock_offset_s=round(offset, 4),
+        clock_drift_ppm=round(drift_ppm, 2),
+        step_length_m=round(step_len, 3),
+        imu_hz=hz,
+    )
+    return out, truth

@@ -1,0 +1,149 @@
+"""How a phone's dead-reckoned velocity maps onto the walk a camera sees: carry-agnostic fusion.
+
+A phone's PDR velocity is in the *device's* heading (a phone in a pocket or a bag points
+anywhere; the rotation vector's north is not the site's x axis), scaled by a nominal step
+length, and stamped by the phone's own clock. With velocities as complex numbers
+``z = vx + i vy``, a track's ground velocity at camera time ``t`` is modelled as
+
+    z_track(t) = a * z_phone(t + lag),    a = scale * exp(i * yaw)
+
+with one unknown ``a`` (device-to-walk yaw and step-length scale) and one ``lag`` (the phone's
+clock offset) per phone. For a candidate (phone, track) pair, :class:`PairEvidence` keeps, per
+lag on a grid, the sums ``S = sum z_track conj(z_phone)``, ``P = sum |z_phone|^2`` and
+``T = sum |z_track|^2``; the best ``a`` is then ``S / P`` in closed form (a 2-D Procrustes fit,
+scale clipped to plausible step lengths) and the residual ``T - 2|a||S| + |a|^2 P``, so scoring
+every lag costs a few multiplications per frame. What identifies a carrier without a known
+alignment is therefore what does not depend on it: the speed profile (stops, starts, pace),
+turns (a change of heading), and their timing. Once a phone is bound, its alignment is
+re-estimated continuously from the track's detections and then used as known.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Alignment", "AlignConfig", "PairEvidence", "lag_grid"]
+
+
+@dataclass(frozen=True, slots=True)
+class AlignConfig:
+    """Unknowns of a phone and how far to search them."""
+
+    max_clock_offset_s: float = 2.5
+    """Phone clocks may be off the cameras' by up to this (unsynchronised phones: +-2 s)."""
+    lag_step_s: float = 0.25
+    scale: tuple[float, float] = (0.7, 1.3)
+    """Step-length scale a fit may use: 0.5-0.9 m steps against the nominal 0.7 m."""
+    forget_s: float = 60.0
+    """A bound phone's alignment follows changes (magnetic disturbance, heading drift) over this
+    time constant; a changed carry breaks the binding and is re-fitted from scratch."""
+
+
+def lag_grid(cfg: AlignConfig) -> np.ndarray:
+    """Candidate clock offsets, seconds (phone time = camera time + lag)."""
+    n = int(round(cfg.max_clock_offset_s / cfg.lag_step_s))
+    return np.arange(-n, n + 1) * cfg.lag_step_s
+
+
+@dataclass(frozen=True, slots=True)
+class Alignment:
+    """A phone's estimated mapping onto the walk: ``z_track(t) = a z_phone(t + lag_s)``."""
+
+    a: complex
+    lag_s: float
+    lag_index: int
+
+    @property
+    def yaw_deg(self) -> float:
+        return math.degrees(math.atan2(self.a.imag, self.a.real))
+
+    @property
+    def scale(self) -> float:
+        return abs(self.a)
+
+    def apply(self, z_phone: complex) -> np.ndarray:
+        z = self.a * z_phone
+        return np.array([z.real, z.imag])
+
+
+class PairEvidence:
+    """Sums over frames of one (phone, track) pair, per candidate lag; see the module doc."""
+
+    __slots__ = ("S", "P", "T", "n", "rssi_n", "rssi_z2")
+
+    def __init__(self, n_lags: int) -> None:
+        self.S = np.zeros(n_lags, complex)
+        self.P = np.zeros(n_lags)
+        self.T = np.zeros(n_lags)
+        self.n = np.zeros(n_lags)
+        self.rssi_n = 0
+        self.rssi_z2 = 0.0
+
+    def copy(self) -> PairEvidence:
+        out = PairEvidence(len(self.S))
+        out.S, out.P, out.T, out.n = self.S.copy(), self.P.copy(), self.T.copy(), self.n.copy()
+        out.rssi_n, out.rssi_z2 = self.rssi_n, self.rssi_z2
+        return out
+
+    @property
+    def frames(self) -> int:
+        """Frames of evidence (at the best-covered lag)."""
+        return int(self.n.max()) if len(self.n) else 0
+
+    def add(self, z_track: complex, z_phone: np.ndarray, weight: float = 1.0) -> None:
+        """One frame: the track's velocity and the phone's at every lag (NaN: no sample)."""
+        ok = ~np.isnan(z_phone)
+        zp = z_phone[ok]
+        self.S[ok] += weight * z_track * np.conj(zp)
+        self.P[ok] += weight * np.abs(zp) ** 2
+        self.T[ok] += weight * abs(z_track) ** 2
+        self.n[ok] += weight
+
+    def decay(self, factor: float) -> None:
+        """Forget old evidence (a bound phone's alignment follows slow changes)."""
+        self.S *= factor
+        self.P *= factor
+        self.T *= factor
+        self.n *= factor
+
+    def add_rssi(self, z2: float) -> None:
+        self.rssi_n += 1
+        self.rssi_z2 += z2
+
+    def _residuals(self, cfg: AlignConfig, known: Alignment | None) -> np.ndarray:
+        """Mean squared disagreement (m/s)^2 per lag: with ``known``'s ``a`` at its lag, or with
+        the best ``a`` of each lag."""
+        n = np.maximum(self.n, 1e-9)
+        out = np.full(len(self.S), np.inf)
+        enough = self.n >= 0.8 * self.n.max() if self.n.max() > 0 else self.n > 0
+        if known is not None:
+            k = known.lag_index
+            a = known.a
+            r = self.T[k] - 2 * (np.conj(a) * self.S[k]).real + abs(a) ** 2 * self.P[k]
+            out[k] = max(r, 0.0) / n[k]
+            return out
+        mag = np.abs(self.S)
+        s = np.clip(mag / np.maximum(self.P, 1e-9), *cfg.scale)
+        r = self.T - 2 * s * mag + s * s * self.P
+        out[enough] = np.maximum(r[enough], 0.0) / n[enough]
+        return out
+
+    def score(self, cfg: AlignConfig, known: Alignment | None = None) -> float:
+        """Mean squared velocity disagreement at the best alignment, (m/s)^2 (inf: none)."""
+        return float(self._residuals(cfg, known).min()) if self.n.max() > 0 else math.inf
+
+    def fit(self, cfg: AlignConfig, lags: np.ndarray) -> Alignment | None:
+        """The alignment that best explains this pair (None without evidence)."""
+        if self.n.max() <= 0:
+            return None
+        res = self._residuals(cfg, None)
+        k = int(np.argmin(res))
+        if not math.isfinite(res[k]) or self.P[k] <= 0:
+            return None
+        mag = abs(self.S[k])
+        s = float(np.clip(mag / self.P[k], *cfg.scale))
+        a = complex(s * self.S[k] / mag) if mag > 0 else complex(s, 0.0)
+        return Alignment(a, float(lags[k]), k)

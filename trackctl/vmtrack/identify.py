@@ -1,0 +1,452 @@
+"""Offline identity: which phone each published track carries, decided over the whole log.
+
+The online stage (:mod:`~trackctl.vmtrack.identity`) binds phones as the paper's real-time system
+did, frame by frame. Offline we have every track's whole life and every phone's whole motion, so
+identity becomes a global problem, solved here in three steps:
+
+1. **Evidence per (phone, track, frame)**: the track's velocity from its *detections alone*
+   (a centred least-squares slope over ``velocity_window_s``: never the filter state, which
+   holds the phone's velocity once bound) against the phone's PDR velocity, under the best
+   alignment (device yaw, step scale, clock offset; :mod:`~trackctl.vmtrack.align`) of a
+   centred ``window_s`` window. Without a known alignment, what tells two walkers apart is
+   what does not depend on it: pace, stops and starts, turns and their timing.
+2. **A path per phone** (Viterbi): at each frame the phone is on one track or on none; staying
+   costs the evidence, switching tracks costs ``switch_cost``, being on no track costs
+   ``none_cost`` (a track that fits worse than that is not the carrier). People walking
+   together fit alike for a while; the path keeps the phone where the evidence before and after
+   puts it, and frames where two tracks fit within ``ratio`` are counted as ambiguous. A stretch
+   on one track with no unambiguous frame at all is not published (the report says so).
+3. **One phone per track**: where two phones' paths meet on one track, the better fit keeps it.
+
+Per phone, the report gives the alignment fitted over all frames it was assigned.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from trackctl.vmtrack.align import AlignConfig, Alignment, PairEvidence, lag_grid
+from trackctl.vmtrack.motion import PhoneMotion
+from trackctl.vmtrack.tracker import GroundTrack
+
+if TYPE_CHECKING:
+    from trackctl.vmtrack.online import FrameOut
+    from trackctl.vmtrack.stitch import Publication
+
+__all__ = ["IdentifyConfig", "Identities", "identify"]
+
+
+@dataclass(frozen=True, slots=True)
+class IdentifyConfig:
+    """Offline identity parameters (seconds, (m/s)^2 per frame)."""
+
+    window_s: float = 16.0
+    """Centred window over which one alignment is fitted per (phone, track) pair."""
+    min_window_frames: int = 8
+    """Frames of evidence a window needs to score a pair."""
+    velocity_window_s: float = 3.0
+    """Centred window of detections whose least-squares slope is a track's velocity."""
+    min_speed_mps: float = 0.3
+    """A window in which track and phone together move slower than this holds no evidence."""
+    none_cost: float = 0.2
+    """Cost per frame of the phone being on no track: a worse fit is not its carrier (the
+    online stage's rejection threshold, 0.45 m/s, squared)."""
+    switch_cost: float = 2.0
+    """Cost of moving the phone from one live track to another (10 frames at the none cost)."""
+    ratio: float = 2.0
+    """A frame is ambiguous when another track fits within this factor of the chosen one."""
+    refine_passes: int = 2
+    """Passes that re-score every chain under the phone's alignment found by the last path."""
+    align_window_frames: int = 180
+    """A phone's alignment is fitted over this many frames around each frame (a minute at
+    3 fps: it follows magnetic disturbance and drift, not the noise)."""
+    known_window_s: float = 6.0
+    """Centred window of the disagreement under a known alignment."""
+
+
+@dataclass
+class Identities:
+    """The offline identity decisions."""
+
+    mid_at: dict[tuple[int, int], str] = field(default_factory=dict)
+    """(chain head key, frame ns) -> MID."""
+    ambiguous_frames: int = 0
+    """Frames in which some phone could be on two or more tracks alike."""
+    unanchored_frames: int = 0
+    """Phone-frames left unpublished: a stretch with no unambiguous frame."""
+    alignments: dict[str, Alignment] = field(default_factory=dict)
+
+
+@dataclass
+class _Chain:
+    key: int
+    times: np.ndarray
+    """Frame times (ns) at which the chain is published."""
+    z: np.ndarray
+    """Detection-only velocity (complex) per frame, NaN without enough detections."""
+
+
+def _visual_velocity(hits: np.ndarray, times: np.ndarray, half_s: float) -> np.ndarray:
+    """Centred least-squares velocity (complex) of detections ``hits`` (t_ns, x, y) at
+    ``times``; NaN where fewer than 3 detections span the window (cumulative sums: O(n))."""
+    out = np.full(len(times), np.nan, complex)
+    if len(hits) < 3:
+        return out
+    t0 = hits[0, 0]
+    t = (hits[:, 0] - t0) / 1e9
+    x, y = hits[:, 1], hits[:, 2]
+    cols = np.column_stack([np.ones_like(t), t, t * t, x, y, t * x, t * y])
+    cum = np.vstack([np.zeros(7), np.cumsum(cols, axis=0)])
+    tq = (times - t0) / 1e9
+    lo = np.searchsorted(t, tq - half_s, side="left")
+    hi = np.searchsorted(t, tq + half_s, side="right")
+    s = cum[hi] - cum[lo]
+    n, st, stt, sx, sy, stx, sty = s.T
+    den = n * stt - st * st
+    ok = (n >= 3) & (den > 1e-9 * np.maximum(n, 1) ** 2)
+    vx = (n * stx - st * sx)[ok] / den[ok]
+    vy = (n * sty - st * sy)[ok] / den[ok]
+    out[ok] = vx + 1j * vy
+    return out
+
+
+def _dead_reckoned(phone: PhoneMotion, rate_hz: float = 10.0) -> np.ndarray:
+    """The phone's dead-reckoned path (t_ns, x, y) on a uniform grid: its velocity integrated
+    (device heading; the alignment rotates it). Gaps longer than 2 s break the path."""
+    if len(phone.t_ns) < 2:
+        return np.empty((0, 3))
+    step = int(1e9 / rate_hz)
+    grid = np.arange(phone.t_ns[0], phone.t_ns[-1], step, dtype=np.int64)
+    v = phone.velocities_at(grid)
+    gap = np.diff(phone.t_ns) > 2_000_000_000
+    if gap.any():
+        for a, b in zip(phone.t_ns[:-1][gap], phone.t_ns[1:][gap], strict=True):
+            v[(grid > a) & (grid < b)] = np.nan
+    ok = ~np.isnan(v).any(axis=1)
+    xy = np.cumsum(np.where(ok[:, None], v, 0.0), axis=0) / rate_hz
+    return np.column_stack([grid[ok].astype(float), xy[ok]])
+
+
+def _chains(frames: Sequence[FrameOut], plan: Publication, velocity_half_s: float) -> list[_Chain]:
+    """Every published chain (stitched track) with its frame times and visual velocity."""
+    times: dict[int, list[int]] = {}
+    hits: dict[int, list[tuple[int, float, float]]] = {}
+    members: dict[int, dict[int, GroundTrack]] = {}
+    for fr in frames:
+        for trk, _, _, _ in fr.rows:
+            key = id(trk)
+            if (key, fr.t_ns) in plan.hidden:
+                continue
+            head = plan.head.get(key, key)
+            times.setdefault(head, []).append(fr.t_ns)
+            members.setdefault(head, {})[key] = trk
+    for head, tracks in members.items():
+        hits[head] = sorted(h for trk in tracks.values() for h in trk.hits_log)
+    for t_ns, fills in plan.fills.items():
+        for name, _, _ in fills:
+            head = plan.head_of_name.get(name)
+            if head is not None and head in times:
+                times[head].append(t_ns)
+    out = []
+    for head, ts in times.items():
+        t = np.array(sorted(set(ts)), np.int64)
+        h = np.array(hits[head], float).reshape(-1, 3)
+        out.append(_Chain(head, t, _visual_velocity(h, t, velocity_half_s)))
+    return out
+
+
+def _window_scores(
+    chain: _Chain,
+    zl: np.ndarray,
+    acfg: AlignConfig,
+    cfg: IdentifyConfig,
+) -> np.ndarray:
+    """Mean squared disagreement (m/s)^2 per chain frame at the best alignment of the centred
+    window (inf where the window holds too little evidence). ``zl``: (frames, lags) phone
+    velocities."""
+    zt = chain.z[:, None]
+    ok = ~(np.isnan(zl) | np.isnan(zt))
+    zp = np.where(ok, zl, 0)
+    zt0 = np.where(ok, zt, 0)
+    parts = [zt0 * np.conj(zp), np.abs(zp) ** 2, np.abs(zt0) ** 2, ok.astype(float)]
+    cums = [np.concatenate([np.zeros((1, zl.shape[1]), p.dtype), np.cumsum(p, axis=0)]) for p in parts]
+    half = int(cfg.window_s / 2 * 1e9)
+    lo = np.searchsorted(chain.times, chain.times - half, side="left")
+    hi = np.searchsorted(chain.times, chain.times + half, side="right")
+    s, p, t, n = (c[hi] - c[lo] for c in cums)
+    mag = np.abs(s)
+    scale = np.clip(mag / np.maximum(p.real, 1e-9), *acfg.scale)
+    r = (t.real - 2 * scale * mag + scale * scale * p.real) / np.maximum(n.real, 1e-9)
+    enough = (n.real >= cfg.min_window_frames) & (n.real >= 0.8 * n.real.max(axis=1, keepdims=True))
+    # two people standing still agree whatever the alignment: no evidence, not a match
+    moving = (t.real + p.real) / np.maximum(n.real, 1e-9) >= cfg.min_speed_mps**2
+    r = np.where(enough & moving, np.maximum(r, 0.0), np.inf)
+    return r.min(axis=1)
+
+
+def identify(
+    frames: Sequence[FrameOut],
+    plan: Publication,
+    phones: dict[str, PhoneMotion],
+    acfg: AlignConfig,
+    cfg: IdentifyConfig,
+) -> Identities:
+    """Decide which phone each published chain carries at each frame (see the module doc)."""
+    out = Identities()
+    if not phones or not frames:
+        return out
+    lags = lag_grid(acfg)
+    lag_ns = np.round(lags * 1e9).astype(np.int64)
+    chains = _chains(frames, plan, cfg.velocity_window_s / 2)
+    frame_t = np.array([fr.t_ns for fr in frames], np.int64)
+    index = {int(t): i for i, t in enumerate(frame_t)}
+    n_f = len(frame_t)
+    rows = [np.array([index[int(t)] for t in c.times], int) for c in chains]
+    paths: dict[str, np.ndarray] = {}
+    costs: dict[str, np.ndarray] = {}
+    half_v = cfg.velocity_window_s / 2
+    for mid, phone in sorted(phones.items()):
+        path_pts = _dead_reckoned(phone)
+        zls = []
+        free = np.full((n_f, len(chains)), np.inf)
+        for c, chain in enumerate(chains):
+            # the phone's velocity through the same centred least-squares slope as the track's
+            # detections: both sides see the walk through one filter
+            at = (chain.times[:, None] + lag_ns[None, :]).ravel()
+            zl = _visual_velocity(path_pts, at, half_v).reshape(len(chain.times), len(lags))
+            zls.append(zl)
+            if np.isnan(zl).all():
+                continue
+            r = _window_scores(chain, zl, acfg, cfg)
+            # a published frame without evidence costs what "no track" costs
+            free[rows[c], c] = np.where(np.isfinite(r), r, cfg.none_cost)
+        cost = free
+        path = _viterbi(cost, cfg)
+        for _ in range(cfg.refine_passes):
+            # the phone's alignment over time, from where the path put it; then every chain is
+            # scored under that alignment (direction counts again), the free fit elsewhere
+            known = _alignment_track(path, chains, rows, zls, n_f, lags, acfg, cfg)
+            if known is None:
+                break
+            cost = _known_costs(free, known, chains, rows, zls, cfg)
+            path = _viterbi(cost, cfg)
+        paths[mid], costs[mid] = path, cost
+    ambiguous = np.zeros(n_f, bool)
+    for mid, path in paths.items():
+        cost = costs[mid]
+        for f in np.flatnonzero(path >= 0):
+            row = cost[f]
+            mine = row[path[f]]
+            rivals = np.delete(row, path[f])
+            if len(rivals) and np.min(rivals) <= cfg.ratio * mine + 0.02 and mine < cfg.none_cost:
+                ambiguous[f] = True
+        _drop_unanchored(path, cost, cfg, out)
+    # one phone per chain and frame: the better fit keeps it
+    keys = [c.key for c in chains]
+    for f in range(n_f):
+        owner: dict[int, tuple[float, str]] = {}
+        for mid, path in paths.items():
+            c = int(path[f])
+            if c < 0:
+                continue
+            score = float(costs[mid][f, c])
+            if c not in owner or score < owner[c][0]:
+                owner[c] = (score, mid)
+        for c, (_, mid) in owner.items():
+            out.mid_at[(keys[c], int(frame_t[f]))] = mid
+    out.ambiguous_frames = int(ambiguous.sum())
+    out.alignments = _alignments(out, chains, phones, lags, lag_ns, acfg, half_v)
+    return out
+
+
+def _alignment_track(
+    path: np.ndarray,
+    chains: list[_Chain],
+    rows: list[np.ndarray],
+    zls: list[np.ndarray],
+    n_f: int,
+    lags: np.ndarray,
+    acfg: AlignConfig,
+    cfg: IdentifyConfig,
+) -> tuple[int, np.ndarray] | None:
+    """The phone's lag (one, over all assigned frames) and its ``a`` per frame (a centred
+    ``align_window_s`` fit over the assigned frames; NaN where too few): None when the path
+    holds too little evidence."""
+    n_l = len(lags)
+    s = np.zeros((n_f, n_l), complex)
+    p = np.zeros((n_f, n_l))
+    t = np.zeros((n_f, n_l))
+    n = np.zeros((n_f, n_l))
+    for c, chain in enumerate(chains):
+        on = path[rows[c]] == c
+        if not on.any():
+            continue
+        f = rows[c][on]
+        zt = chain.z[on][:, None]
+        zl = zls[c][on]
+        ok = ~(np.isnan(zl) | np.isnan(zt))
+        zp, z0 = np.where(ok, zl, 0), np.where(ok, zt, 0)
+        s[f] += z0 * np.conj(zp)
+        p[f] += np.abs(zp) ** 2
+        t[f] += np.abs(z0) ** 2
+        n[f] += ok
+    total = PairEvidence(n_l)
+    total.S, total.P, total.T, total.n = s.sum(0), p.sum(0), t.sum(0), n.sum(0)
+    if total.frames < cfg.min_window_frames * 2:
+        return None
+    al = total.fit(acfg, lags)
+    if al is None:
+        return None
+    k = al.lag_index
+    # frames are uniform enough: the window in frames from the median frame interval
+    half = max(1, int(round(cfg.align_window_frames / 2)))
+    cs = np.concatenate([[0], np.cumsum(s[:, k])])
+    cp = np.concatenate([[0], np.cumsum(p[:, k])])
+    cn = np.concatenate([[0], np.cumsum(n[:, k])])
+    idx = np.arange(n_f)
+    lo, hi = np.clip(idx - half, 0, n_f), np.clip(idx + half + 1, 0, n_f)
+    sw, pw, nw = cs[hi] - cs[lo], cp[hi] - cp[lo], cn[hi] - cn[lo]
+    mag = np.abs(sw)
+    scale = np.clip(mag / np.maximum(pw, 1e-9), *acfg.scale)
+    a = np.where(mag > 0, scale * sw / np.maximum(mag, 1e-12), np.nan)
+    a = np.where(nw >= cfg.min_window_frames * 2, a, np.nan)
+    return k, a
+
+
+def _known_costs(
+    free: np.ndarray,
+    known: tuple[int, np.ndarray],
+    chains: list[_Chain],
+    rows: list[np.ndarray],
+    zls: list[np.ndarray],
+    cfg: IdentifyConfig,
+) -> np.ndarray:
+    """Costs under the phone's known alignment (a centred ``known_window_s`` mean of squared
+    disagreements); the free fit's cost where the alignment is not known."""
+    k, a = known
+    cost = free.copy()
+    for c, chain in enumerate(chains):
+        f = rows[c]
+        af = a[f]
+        err = np.abs(chain.z - af * zls[c][:, k]) ** 2
+        ok = ~np.isnan(err)
+        ce = np.concatenate([[0.0], np.cumsum(np.where(ok, err, 0.0))])
+        cn = np.concatenate([[0.0], np.cumsum(ok)])
+        half = int(cfg.known_window_s / 2 * 1e9)
+        lo = np.searchsorted(chain.times, chain.times - half, side="left")
+        hi = np.searchsorted(chain.times, chain.times + half, side="right")
+        nw = cn[hi] - cn[lo]
+        r = (ce[hi] - ce[lo]) / np.maximum(nw, 1e-9)
+        energy = np.abs(chain.z) ** 2 + np.abs(af * zls[c][:, k]) ** 2
+        ce2 = np.concatenate([[0.0], np.cumsum(np.where(ok, energy, 0.0))])
+        moving = (ce2[hi] - ce2[lo]) / np.maximum(nw, 1e-9) >= cfg.min_speed_mps**2
+        use = (nw >= cfg.min_window_frames / 2) & ~np.isnan(af)
+        r = np.where(moving, r, cfg.none_cost)
+        cost[f[use], c] = r[use]
+    return cost
+
+
+def _viterbi(cost: np.ndarray, cfg: IdentifyConfig) -> np.ndarray:
+    """The phone's cheapest path over frames: chain index per frame, -1 for none.
+
+    States are the chains and "none". Staying is free; moving between two chains costs
+    ``switch_cost``, between a chain and none half of it; a chain that stops being published
+    releases the phone to none for free (the person left, or the fragment ended)."""
+    n_f, n_c = cost.shape
+    none = n_c
+    acc = np.full(n_c + 1, math.inf)
+    acc[none] = 0.0
+    back = np.zeros((n_f, n_c + 1), np.int32)
+    half = cfg.switch_cost / 2
+    states = np.arange(n_c + 1)
+    for f in range(n_f):
+        e = np.append(cost[f], cfg.none_cost)
+        if n_c:
+            bt = int(np.argmin(acc[:n_c]))
+            best_trk = acc[bt]
+        else:
+            bt, best_trk = none, math.inf
+        # best way into each state: stay, come from the best chain, or come from none
+        into = acc.copy()
+        src = states.copy()
+        for cand, origin in ((best_trk + cfg.switch_cost, bt), (acc[none] + half, none)):
+            better = cand < into
+            better[none] = False
+            into[better] = cand
+            src[better] = origin
+        # into none: from the best chain (half the switch), or free from a chain that ended
+        if n_c:
+            if best_trk + half < into[none]:
+                into[none], src[none] = best_trk + half, bt
+            ended = np.isfinite(acc[:n_c]) & ~np.isfinite(cost[f])
+            if ended.any():
+                k = int(np.flatnonzero(ended)[np.argmin(acc[:n_c][ended])])
+                if acc[k] < into[none]:
+                    into[none], src[none] = acc[k], k
+        acc = into + e
+        back[f] = src
+    state = int(np.argmin(acc))
+    path = np.empty(n_f, int)
+    for f in range(n_f - 1, -1, -1):
+        path[f] = -1 if state == none else state
+        state = int(back[f, state])
+    return path
+
+
+def _drop_unanchored(path: np.ndarray, cost: np.ndarray, cfg: IdentifyConfig, out: Identities) -> None:
+    """A stretch on one chain whose every frame has a rival as good (ratio) is a guess: the
+    phone is left off it."""
+    f = 0
+    n = len(path)
+    while f < n:
+        c = path[f]
+        g = f
+        while g < n and path[g] == c:
+            g += 1
+        if c >= 0:
+            block = cost[f:g]
+            mine = block[:, c]
+            rivals = np.delete(block, c, axis=1)
+            best_rival = rivals.min(axis=1) if rivals.shape[1] else np.full(g - f, np.inf)
+            clear = (mine < cfg.none_cost) & (best_rival > cfg.ratio * mine + 0.02)
+            if not clear.any():
+                path[f:g] = -1
+                out.unanchored_frames += g - f
+        f = g
+
+
+def _alignments(
+    out: Identities,
+    chains: list[_Chain],
+    phones: dict[str, PhoneMotion],
+    lags: np.ndarray,
+    lag_ns: np.ndarray,
+    acfg: AlignConfig,
+    half_s: float,
+) -> dict[str, Alignment]:
+    """Each phone's alignment fitted over every frame it was assigned (for the report)."""
+    by_key = {c.key: c for c in chains}
+    samples: dict[str, list[tuple[int, complex]]] = {}
+    for (key, t_ns), mid in out.mid_at.items():
+        chain = by_key[key]
+        z = chain.z[int(np.searchsorted(chain.times, t_ns))]
+        if not np.isnan(z):
+            samples.setdefault(mid, []).append((t_ns, complex(z)))
+    fits = {}
+    for mid, pairs in samples.items():
+        t = np.array([p[0] for p in pairs], np.int64)
+        z = np.array([p[1] for p in pairs])
+        at = (t[:, None] + lag_ns[None, :]).ravel()
+        zl = _visual_velocity(_dead_reckoned(phones[mid]), at, half_s).reshape(len(t), len(lags))
+        ev = PairEvidence(len(lags))
+        for k in range(len(t)):
+            ev.add(z[k], zl[k])
+        al = ev.fit(acfg, lags)
+        if al is not None:
+            fits[mid] = al
+    return fits
