@@ -50,6 +50,12 @@ class VmTrackConfig:
     """Detections of one instant from different cameras closer than this are one person."""
     spawn_m: float = 1.0
     """An unmatched detection closer than this to a track does not start a new track."""
+    clutter_radius_m: float = 0.5
+    clutter_min: int = 5
+    clutter_memory_s: float = 120.0
+    """Clutter map: where ``clutter_min`` tracks were born and died without moving more than
+    ``clutter_radius_m`` in the last ``clutter_memory_s``, no new track starts (a poster or a
+    plant the detector keeps firing on; a door sees people walk away from it)."""
     duplicate_m: float = 0.45
     """Two tracks closer than this are one person (the younger, unbound one is dropped)."""
     bind_frames: int = 9

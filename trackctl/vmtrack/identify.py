@@ -49,7 +49,7 @@ class IdentifyConfig:
     """Centred window over which one alignment is fitted per (phone, track) pair."""
     min_window_frames: int = 8
     """Frames of evidence a window needs to score a pair."""
-    velocity_window_s: float = 3.0
+    velocity_window_s: float = 7.0
     """Centred window of detections whose least-squares slope is a track's velocity."""
     min_speed_mps: float = 0.3
     """A window in which track and phone together move slower than this holds no evidence."""
@@ -63,10 +63,13 @@ class IdentifyConfig:
     refine_passes: int = 2
     """Passes that re-score every chain under the phone's alignment found by the last path."""
     align_window_frames: int = 180
-    """A phone's alignment is fitted over this many frames around each frame (a minute at
-    3 fps: it follows magnetic disturbance and drift, not the noise)."""
+    """A phone's alignment is fitted over this many frames around each frame (30 s at 3 fps:
+    it follows a changed carry within seconds of the window, not the noise)."""
     known_window_s: float = 6.0
     """Centred window of the disagreement under a known alignment."""
+    yaw_slack_deg: float = 10.0
+    """Under a known alignment, a window's yaw may still differ this much from the local fit
+    (indoor magnetic disturbance is 10-20 deg)."""
 
 
 @dataclass
@@ -230,7 +233,9 @@ def identify(
         for _ in range(cfg.refine_passes):
             # the phone's alignment over time, from where the path put it; then every chain is
             # scored under that alignment (direction counts again), the free fit elsewhere
-            known = _alignment_track(path, chains, rows, zls, n_f, lags, acfg, cfg)
+            known = _alignment_track(
+                _clear_path(path, cost, cfg), chains, rows, zls, n_f, lags, acfg, cfg
+            )
             if known is None:
                 break
             cost = _known_costs(free, known, chains, rows, zls, cfg)
@@ -261,6 +266,19 @@ def identify(
             out.mid_at[(keys[c], int(frame_t[f]))] = mid
     out.ambiguous_frames = int(ambiguous.sum())
     out.alignments = _alignments(out, chains, phones, lags, lag_ns, acfg, half_v)
+    return out
+
+
+def _clear_path(path: np.ndarray, cost: np.ndarray, cfg: IdentifyConfig) -> np.ndarray:
+    """The path where it is unambiguous (its chain fits, and clearly better than any other);
+    -1 elsewhere: a phone's alignment is learnt only from frames that name its carrier."""
+    out = np.full(len(path), -1)
+    for f in np.flatnonzero(path >= 0):
+        row = cost[f]
+        mine = row[path[f]]
+        rival = np.min(np.delete(row, path[f])) if len(row) > 1 else np.inf
+        if mine < cfg.none_cost and rival > cfg.ratio * mine + 0.02:
+            out[f] = path[f]
     return out
 
 
@@ -326,27 +344,33 @@ def _known_costs(
     zls: list[np.ndarray],
     cfg: IdentifyConfig,
 ) -> np.ndarray:
-    """Costs under the phone's known alignment (a centred ``known_window_s`` mean of squared
-    disagreements); the free fit's cost where the alignment is not known."""
+    """Costs under the phone's known alignment: its clock offset and step scale as fitted, its
+    yaw free only within ``yaw_slack_deg`` of the local fit (magnetic disturbance, drift), over
+    a centred ``known_window_s``; the free fit's cost where the alignment is not known."""
     k, a = known
     cost = free.copy()
+    slack = math.radians(cfg.yaw_slack_deg)
+    half = int(cfg.known_window_s / 2 * 1e9)
     for c, chain in enumerate(chains):
         f = rows[c]
         af = a[f]
-        err = np.abs(chain.z - af * zls[c][:, k]) ** 2
-        ok = ~np.isnan(err)
-        ce = np.concatenate([[0.0], np.cumsum(np.where(ok, err, 0.0))])
-        cn = np.concatenate([[0.0], np.cumsum(ok)])
-        half = int(cfg.known_window_s / 2 * 1e9)
+        zp = zls[c][:, k]
+        ok = ~(np.isnan(zp) | np.isnan(chain.z))
+        zp0, zt0 = np.where(ok, zp, 0), np.where(ok, chain.z, 0)
+        parts = [zt0 * np.conj(zp0), np.abs(zp0) ** 2, np.abs(zt0) ** 2, ok.astype(float)]
+        cums = [np.concatenate([np.zeros(1, q.dtype), np.cumsum(q)]) for q in parts]
         lo = np.searchsorted(chain.times, chain.times - half, side="left")
         hi = np.searchsorted(chain.times, chain.times + half, side="right")
-        nw = cn[hi] - cn[lo]
-        r = (ce[hi] - ce[lo]) / np.maximum(nw, 1e-9)
-        energy = np.abs(chain.z) ** 2 + np.abs(af * zls[c][:, k]) ** 2
-        ce2 = np.concatenate([[0.0], np.cumsum(np.where(ok, energy, 0.0))])
-        moving = (ce2[hi] - ce2[lo]) / np.maximum(nw, 1e-9) >= cfg.min_speed_mps**2
+        sw, pw, tw, nw = (q[hi] - q[lo] for q in cums)
+        pw, tw, nw = pw.real, tw.real, nw.real
+        phi = np.angle(af)
+        dev = np.clip(np.angle(sw * np.exp(-1j * phi)), -slack, slack)
+        rot = np.exp(1j * (phi + dev))
+        scale = np.abs(af)
+        r = (tw - 2 * scale * (np.conj(rot) * sw).real + scale**2 * pw) / np.maximum(nw, 1e-9)
+        moving = (tw + pw) / np.maximum(nw, 1e-9) >= cfg.min_speed_mps**2
         use = (nw >= cfg.min_window_frames / 2) & ~np.isnan(af)
-        r = np.where(moving, r, cfg.none_cost)
+        r = np.where(moving, np.maximum(r, 0.0), cfg.none_cost)
         cost[f[use], c] = r[use]
     return cost
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -59,6 +60,11 @@ class OnlineTracker:
         self._next_vid = 0
         # unmatched detections of the current frame, with their covariances
         self._pending_new: list[tuple[np.ndarray, np.ndarray | None]] = []
+        # where tracks that never moved died, and when (the clutter map)
+        self._static_deaths: deque[tuple[int, float, float]] = deque()
+        self.static_death_log: list[tuple[float, float]] = []
+        """Every never-moving track's birth place, for the offline clutter rule."""
+        self.clutter_suppressed = 0
 
     @property
     def tracks_started(self) -> int:
@@ -120,20 +126,31 @@ class OnlineTracker:
             age = (t_ns - trk.last_hit_ns) / 1e9
             mid = self.identity.owner(trk)
             limit = tcfg.lose_bound_after_s if mid else tcfg.drop_unbound_after_s
-            if trk.state is TrackState.TENTATIVE and trk.last_hit_ns != t_ns:
-                continue
-            if age > limit:
+            if (trk.state is TrackState.TENTATIVE and trk.last_hit_ns != t_ns) or age > limit:
                 if mid:
                     self.identity.release(mid)
+                if trk.moved_m < self.cfg.clutter_radius_m and trk.born_xy is not None:
+                    self._static_deaths.append((t_ns, *map(float, trk.born_xy)))
+                    self.static_death_log.append((float(trk.born_xy[0]), float(trk.born_xy[1])))
                 continue
             keep.append(trk)
         self.tracks[:] = keep
+        memory = int(self.cfg.clutter_memory_s * 1e9)
+        while self._static_deaths and self._static_deaths[0][0] < t_ns - memory:
+            self._static_deaths.popleft()
         if not self._pending_new:
             return
         tree = cKDTree(np.array([trk.xy for trk in keep])) if keep else None
+        deaths = np.array([d[1:] for d in self._static_deaths]).reshape(-1, 2)
         for det, cov in self._pending_new:
             # a detection near a track (or near one started just now) is a duplicate view
             if tree is not None and tree.query_ball_point(det, self.cfg.spawn_m):
+                continue
+            # a spot where tracks keep being born and dying without moving is clutter (a
+            # poster, a plant): no new track there; people walking past keep their own tracks
+            near = np.sum(np.sum((deaths - det) ** 2, axis=1) < self.cfg.clutter_radius_m**2)
+            if near >= self.cfg.clutter_min:
+                self.clutter_suppressed += 1
                 continue
             if any(
                 np.linalg.norm(trk.xy - det) <= self.cfg.spawn_m for trk in self.tracks[len(keep) :]

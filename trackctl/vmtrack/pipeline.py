@@ -448,7 +448,8 @@ def _write_and_score(
     first_loss: dict[str, float] = {}
     t_start = frames[0].t_ns if frames else 0
     offline = mode is Mode.VM and cfg.identity is Identity.OFFLINE
-    plan = plan_publication(frames, positions, cfg.stitch, all_tracks=offline)
+    deaths = np.array(online.static_death_log, float).reshape(-1, 2)
+    plan = plan_publication(frames, positions, cfg.stitch, all_tracks=offline, static_deaths=deaths)
     ids = identify(frames, plan, phones, cfg.align, cfg.identify) if offline else None
     published: dict[str, int] = {}
     coasting = shown = 0

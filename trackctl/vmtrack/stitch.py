@@ -12,7 +12,9 @@ a phone (non-users, and everyone in ``v-af`` mode):
   assignment (scipy's ``linear_sum_assignment``) over a motion-gated cost, and the gap between
   them is filled by linear interpolation (published as ``predicted``);
 * **short tracks are dropped**: an identity with fewer than ``min_hits`` detections in all is
-  clutter (a car boot, a shadow), not a person.
+  clutter (a car boot, a shadow), not a person;
+* **recurring static clutter is dropped**: never-moving tracks that keep being born at one spot
+  (``clutter_min``) are a poster or a plant the detector fires on.
 
 Tracks bound to a phone keep the identity stage's decisions (their coasting is the paper's
 motion-sensor prediction and is published).
@@ -26,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
 
 from trackctl.vmtrack.tracker import GroundTrack
 
@@ -53,6 +56,13 @@ class StitchConfig:
     poster, a plant, or floor revealed where the starting background held a person."""
     publish_coasting_tails: bool = False
     """Publish positions after a track's last detection (the online prediction)."""
+    clutter_radius_m: float = 0.5
+    clutter_hold_s: float = 2.0
+    """A track whose detections stay at a clutter spot this long either side is parked there."""
+    clutter_min: int = 3
+    """Clutter spots (see :func:`_clutter_spots`): a track parked at one is not published
+    there. A person standing still makes one or two never-moving tracks, not a recurring spot
+    (but one standing at a poster for a while is hidden with it)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,11 +155,55 @@ class Publication:
     """Chain head of every published name."""
 
 
+def _clutter_spots(
+    tracks: dict[int, GroundTrack], cfg: StitchConfig, deaths: np.ndarray | None = None
+) -> np.ndarray:
+    """Places where never-moving tracks keep appearing: a poster or a plant the detector fires
+    on, whose tracks break and restart all day (and capture passers-by's tracks when their
+    detections miss). Evidence: tracks whose first two or more detections stayed at their
+    birth place, and ``deaths`` (where tracks that never moved died during tracking); a spot
+    is an evidence point with ``clutter_min`` others within ``clutter_radius_m``."""
+    r2 = cfg.clutter_radius_m**2
+    stayed = []
+    for trk in tracks.values():
+        if trk.born_xy is None or len(trk.hits_log) < 2:
+            continue
+        first = np.array(trk.hits_log[:2], float)[:, 1:]
+        if np.all(np.sum((first - trk.born_xy) ** 2, axis=1) <= r2):
+            stayed.append(trk.born_xy)
+    pts = [np.array(stayed, float).reshape(-1, 2)]
+    if deaths is not None:
+        pts.append(np.asarray(deaths, float).reshape(-1, 2))
+    evidence = np.vstack(pts)
+    if len(evidence) <= cfg.clutter_min:
+        return np.empty((0, 2))
+    near = cKDTree(evidence).query_ball_point(evidence, cfg.clutter_radius_m)
+    counts = np.array([len(n) - 1 for n in near])
+    return evidence[counts >= cfg.clutter_min]
+
+
+def _parked_at_clutter(
+    trk: GroundTrack, times: np.ndarray, spots: cKDTree | None, cfg: StitchConfig
+) -> np.ndarray:
+    """Per time in ``times``: the track sits at a clutter spot (every detection within
+    ``clutter_hold_s`` around it is at a spot)."""
+    if spots is None or not trk.hits_log:
+        return np.zeros(len(times), bool)
+    hits = np.array(trk.hits_log, float)
+    d, _ = spots.query(hits[:, 1:])
+    away = np.concatenate([[0], np.cumsum(d > cfg.clutter_radius_m)])
+    half = cfg.clutter_hold_s * 1e9
+    lo = np.searchsorted(hits[:, 0], times - half, side="left")
+    hi = np.searchsorted(hits[:, 0], times + half, side="right")
+    return (hi > lo) & (away[hi] - away[lo] == 0)
+
+
 def plan_publication(
     frames: Sequence[FrameOut],
     positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
     cfg: StitchConfig,
     all_tracks: bool = False,
+    static_deaths: np.ndarray | None = None,
 ) -> Publication:
     """Coasting tails, stitched identities and short identities of visual-only tracks (of every
     track with ``all_tracks``: the offline identity stage names them afterwards)."""
@@ -161,12 +215,20 @@ def plan_publication(
                 rows.setdefault(id(trk), []).append((fr.t_ns, k))
                 tracks[id(trk)] = trk
     hidden: set[tuple[int, int]] = set()
+    spots = _clutter_spots(tracks, cfg, static_deaths)
+    spot_tree = cKDTree(spots) if len(spots) else None
     tracklets = []
     for key, seq in rows.items():
         trk = tracks[key]
         last_hit = trk.hit_ns[-1]
         if not cfg.publish_coasting_tails:
             hidden.update((key, t) for t, _ in seq if t > last_hit)
+        parked = _parked_at_clutter(trk, np.array([t for t, _ in seq], float), spot_tree, cfg)
+        if parked.any():
+            hidden.update((key, t) for (t, _), p in zip(seq, parked, strict=True) if p)
+            seq = [row for row, p in zip(seq, parked, strict=True) if not p]
+            if not seq:
+                continue
         shown = [(t, k) for t, k in seq if t <= last_hit] or seq[:1]
 
         def state(t_k: tuple[int, int], trk: GroundTrack = trk) -> np.ndarray:
@@ -180,7 +242,9 @@ def plan_publication(
                 key, hits, shown[0][0], shown[-1][0], s0[:2], s1[:2], s0[2:4], s1[2:4], trk.moved_m
             )
         )
+    clutter = {key for key in rows if key not in {t.key for t in tracklets}}
     heads = stitch(tracklets, cfg) if cfg.enabled else {t.key: t.key for t in tracklets}
+    heads.update({key: key for key in clutter})
     by_key = {t.key: t for t in tracklets}
     chain_hits: dict[int, int] = {}
     chain_moved: dict[int, float] = {}
@@ -194,7 +258,7 @@ def plan_publication(
     name = {key: tracks[heads[key]].vid for key in rows}
     dropped = {
         h for h, n in chain_hits.items() if n < cfg.min_hits or chain_moved[h] < cfg.min_motion_m
-    }
+    } | clutter
     for key, seq in rows.items():
         if heads[key] in dropped:
             hidden.update((key, t) for t, _ in seq)
