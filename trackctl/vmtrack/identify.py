@@ -333,7 +333,15 @@ def _alignment_track(
     scale = np.clip(mag / np.maximum(pw, 1e-9), *acfg.scale)
     a = np.where(mag > 0, scale * sw / np.maximum(mag, 1e-12), np.nan)
     a = np.where(nw >= cfg.min_window_frames * 2, a, np.nan)
-    return k, a
+    # before the first and after the last well-fitted stretch (and between stretches) the
+    # nearest fit holds: a carry stays until the phone is taken out
+    good = np.flatnonzero(~np.isnan(a))
+    if not len(good):
+        return None
+    nearest = good[np.clip(np.searchsorted(good, idx), 0, len(good) - 1)]
+    prev = good[np.clip(np.searchsorted(good, idx) - 1, 0, len(good) - 1)]
+    pick = np.where(np.abs(prev - idx) < np.abs(nearest - idx), prev, nearest)
+    return k, a[pick]
 
 
 def _known_costs(
