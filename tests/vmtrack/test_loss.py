@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from trackctl.vmtrack.align import Alignment, lag_grid
 from trackctl.vmtrack.config import VmTrackConfig
 from trackctl.vmtrack.identity import IdentityBinder
 from trackctl.vmtrack.motion import PhoneMotion
@@ -16,6 +17,8 @@ def _phone(speed: float) -> PhoneMotion:
     p = PhoneMotion("m1")
     p.t_ns = np.arange(0, 30 * S, S // 5, dtype=np.int64)
     p.v = np.tile([speed, 0.0], (len(p.t_ns), 1))
+    p.speed = np.full(len(p.t_ns), speed)
+    p.heading = np.zeros(len(p.t_ns))
     return p
 
 
@@ -23,7 +26,9 @@ def _run(track_speed: float) -> IdentityBinder:
     cfg = VmTrackConfig()
     binder = IdentityBinder({"m1": _phone(1.0)}, cfg)
     trk = GroundTrack.start("v1", np.zeros(2), 0, TrackerConfig())
-    binder.bound["m1"] = trk
+    # bound with a known alignment: the phone's heading is the walk's, its clock the cameras'
+    zero = int(np.argmin(np.abs(lag_grid(cfg.align))))
+    binder._bind_track("m1", trk, 0, al=Alignment(1 + 0j, 0.0, zero))
     rng = np.random.default_rng(0)
     for k in range(1, 40):  # 3 fps for 13 s
         t = k * S // 3

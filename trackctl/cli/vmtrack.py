@@ -40,6 +40,15 @@ def vm_track(
         Path | None,
         typer.Option(help="Draw error over time and the CDF of tracking time into this folder."),
     ] = None,
+    phones_aligned: Annotated[
+        bool,
+        typer.Option(
+            "--phones-aligned",
+            help="The paper's assumption: phone heading = walking direction in the site frame "
+            "and phone clocks = camera clocks (only if your phone app guarantees it; by "
+            "default both are estimated per phone).",
+        ),
+    ] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     fail_if: Annotated[
         str | None,
@@ -61,6 +70,7 @@ def vm_track(
             smooth=smooth,
             source=source_value,
             frames=FrameConfig(predicted=search == "predicted"),
+            phones_aligned=phones_aligned,
         )
     )
     draw = figures_from_output(out, plot, "vmtrack")

@@ -93,6 +93,11 @@ class VmTrackConfig:
     source: Source = Source.AUTO
     """Detections from camera frames or from detections topics (auto: frames when present)."""
     frames: FrameConfig = field(default_factory=FrameConfig)
+    phones_aligned: bool = False
+    """The paper's assumption, only for sites whose phone app guarantees it: each phone's
+    rotation-vector heading is its carrier's walking direction in the site frame, and its clock
+    is the cameras'. Off (the default), both are estimated per phone (:mod:`~trackctl.vmtrack.
+    align`)."""
     identity: Identity = Identity.OFFLINE
     identify: IdentifyConfig = field(default_factory=IdentifyConfig)
     """Offline identity parameters."""

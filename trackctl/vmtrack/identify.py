@@ -198,8 +198,11 @@ def identify(
     phones: dict[str, PhoneMotion],
     acfg: AlignConfig,
     cfg: IdentifyConfig,
+    aligned: bool = False,
 ) -> Identities:
-    """Decide which phone each published chain carries at each frame (see the module doc)."""
+    """Decide which phone each published chain carries at each frame (see the module doc).
+    ``aligned``: every phone's heading is the walking direction in the site frame and its
+    clock is the cameras' (the paper's assumption; only when the phones' app guarantees it)."""
     out = Identities()
     if not phones or not frames:
         return out
@@ -228,6 +231,12 @@ def identify(
             r = _window_scores(chain, zl, acfg, cfg)
             # a published frame without evidence costs what "no track" costs
             free[rows[c], c] = np.where(np.isfinite(r), r, cfg.none_cost)
+        if aligned:
+            # the paper's setting, declared by the user: heading = walk, one clock, 0.7 m steps
+            known = (len(lags) // 2, np.ones(n_f, complex))
+            cost = _known_costs(free, known, chains, rows, zls, cfg)
+            paths[mid], costs[mid] = _viterbi(cost, cfg), cost
+            continue
         cost = free
         path = _viterbi(cost, cfg)
         for _ in range(cfg.refine_passes):

@@ -88,6 +88,9 @@ class IdentityBinder:
         self.pending_rssi: list[RssiScan] = []
         self._cache_t: int | None = None
         self._cache: dict[str, np.ndarray] = {}
+        if cfg.phones_aligned:
+            zero = Alignment(1 + 0j, 0.0, len(self.lags) // 2)
+            self.last_align.update({mid: zero for mid in phones})
 
     # -- queries --------------------------------------------------------------------------------
     def phone_lags(self, mid: str, t_ns: int) -> np.ndarray:

@@ -450,7 +450,11 @@ def _write_and_score(
     offline = mode is Mode.VM and cfg.identity is Identity.OFFLINE
     deaths = np.array(online.static_death_log, float).reshape(-1, 2)
     plan = plan_publication(frames, positions, cfg.stitch, all_tracks=offline, static_deaths=deaths)
-    ids = identify(frames, plan, phones, cfg.align, cfg.identify) if offline else None
+    ids = (
+        identify(frames, plan, phones, cfg.align, cfg.identify, cfg.phones_aligned)
+        if offline
+        else None
+    )
     published: dict[str, int] = {}
     coasting = shown = 0
     wrong_s = 0.0
