@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from trackctl.vmtrack.align import AlignConfig, Alignment, PairEvidence, lag_grid
-from trackctl.vmtrack.identify import IdentifyConfig, _viterbi, _visual_velocity
+from trackctl.vmtrack.identify import IdentifyConfig, _visual_velocity, _viterbi
 
 CFG = AlignConfig()
 LAGS = lag_grid(CFG)
@@ -30,7 +30,9 @@ def _walk(n: int, seed: int) -> np.ndarray:
     lag_steps=st.integers(-8, 8),
     seed=st.integers(0, 1000),
 )
-def test_fit_recovers_yaw_scale_and_lag(yaw: float, scale: float, lag_steps: int, seed: int) -> None:
+def test_fit_recovers_yaw_scale_and_lag(
+    yaw: float, scale: float, lag_steps: int, seed: int
+) -> None:
     step = int(round(CFG.lag_step_s * 10))  # samples per lag step at 10 Hz
     z_phone = _walk(600, seed)
     a = scale * np.exp(1j * yaw)
@@ -72,8 +74,6 @@ def test_viterbi_stays_through_ambiguity_and_releases_when_a_track_ends() -> Non
     cfg = IdentifyConfig()
     # chain 0 fits, then a stretch where chain 1 fits marginally better, then chain 0 again;
     # chain 0 ends at frame 9, chain 1 fits badly throughout its last frames
-    cost = np.array(
-        [[0.02, 0.5]] * 3 + [[0.05, 0.04]] * 3 + [[0.02, 0.5]] * 3 + [[inf, 0.9]] * 3
-    )
+    cost = np.array([[0.02, 0.5]] * 3 + [[0.05, 0.04]] * 3 + [[0.02, 0.5]] * 3 + [[inf, 0.9]] * 3)
     path = _viterbi(cost, cfg)
     assert list(path) == [0] * 9 + [-1] * 3

@@ -1,4 +1,4 @@
-"""VM-Tracking with realistic phones: carry-agnostic identity, one phone per track, honest report."""
+"""VM-Tracking with realistic phones: carry-agnostic identity, one phone per track, report."""
 
 from __future__ import annotations
 
@@ -88,15 +88,18 @@ def test_realistic_phones_are_always_on_with_their_own_clocks(tmp_path: Path) ->
     reader = LogReader(log)
     truth = reader.metadata()["phone_truth"]
     assert {k.rpartition("/")[2] for k in truth} >= {"carry", "clock_offset_s", "imu_hz"}
-    for topic, info in reader.topics().items():
+    for topic in reader.topics():
         if topic.endswith("/imu"):
             stamps = [m.log_time_ns for m in reader.messages([topic])]
             # reporting from (about) the start to the end of the log, not only while in view
             assert stamps[0] < 3e9 and stamps[-1] > 37e9
             rate = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) / 1e9)
             mac = topic.split("/")[2]
-            hz = next(float(v) for k, v in truth.items() if k.endswith("imu_hz") and
-                      k.replace(":", "").startswith(mac))
+            hz = next(
+                float(v)
+                for k, v in truth.items()
+                if k.endswith("imu_hz") and k.replace(":", "").startswith(mac)
+            )
             assert math.isclose(rate, hz, rel_tol=0.1)
 
 

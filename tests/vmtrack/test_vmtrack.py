@@ -97,9 +97,7 @@ def test_two_users_on_close_lines_keep_their_identities(tmp_path: Path) -> None:
     log = tmp_path / "lines.mcap"
     simulate_vm(
         str(log),
-        VmScenario(
-            trajectories=str(csv), phones=("1", "2"), duration_s=60, seed=3, preset="paper"
-        ),
+        VmScenario(trajectories=str(csv), phones=("1", "2"), duration_s=60, seed=3, preset="paper"),
     )
     # walking in opposite directions on parallel lines, the two are each other rotated by
     # 180 deg: only phones known to point along the walk (the paper's setting) tell them apart

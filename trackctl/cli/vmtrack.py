@@ -149,7 +149,9 @@ def simulate_vm(
     ] = "realistic",
     carry_yaw: Annotated[
         float | None,
-        typer.Option(help="Realistic: every phone's device-to-walk yaw, degrees (default: per carry)."),
+        typer.Option(
+            help="Realistic: every phone's device-to-walk yaw, degrees (default: per carry)."
+        ),
     ] = None,
     clock_offset: Annotated[
         float | None,

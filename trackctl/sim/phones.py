@@ -5,7 +5,8 @@ Every model, its parameter and its source (docs/vmtrack.md, "Simulator"):
 * **Carry** per person, drawn from ``carries`` (hand 30 %, front pocket 30 %, back pocket 15 %,
   bag 25 %), and changed when the phone is taken out and put back (a Poisson process of
   ``carry_changes_per_min``, 0.2: once in five minutes, more often than the 47-76 pickups a
-  day of phone-use studies (Deloitte 2017, dscout 2016) spread over waking hours). Each carry has an attitude (measured: the gravity direction in the
+  day of phone-use studies (Deloitte 2017, dscout 2016) spread over waking hours). Each
+  carry has an attitude (measured: the gravity direction in the
   device frame of the Oxford step-counter traces in ``shared/data/phones``: hand tilted ~35 deg
   towards the face, pockets upright with the device y axis up, bag on its side with x up), a
   yaw between the device and the walking direction (hand: N(0, 10 deg); pockets and bag:
@@ -152,9 +153,13 @@ def _magnetic(xy: np.ndarray, rng: np.random.Generator, cfg: PhoneRealism) -> np
     p = rng.uniform(0, 2 * math.pi, 4)
     amp = math.radians(cfg.magnetic_deg)
     x, y = np.nan_to_num(xy[:, 0]), np.nan_to_num(xy[:, 1])
-    field = amp * 0.5 * (
-        np.sin(2 * math.pi * x / lam + p[0]) * np.cos(2 * math.pi * y / lam + p[1])
-        + np.sin(2 * math.pi * (x + y) / (1.7 * lam) + p[2])
+    field = (
+        amp
+        * 0.5
+        * (
+            np.sin(2 * math.pi * x / lam + p[0]) * np.cos(2 * math.pi * y / lam + p[1])
+            + np.sin(2 * math.pi * (x + y) / (1.7 * lam) + p[2])
+        )
     )
     out = np.isnan(xy).any(axis=1)
     if out.any():

@@ -181,7 +181,9 @@ class VmScenario:
         if self.preset == "paper" and (
             self.carry_yaw_deg is not None or self.clock_offset_s is not None
         ):
-            raise InputError("--carry-yaw and --clock-offset model real phones: use --preset realistic")
+            raise InputError(
+                "--carry-yaw and --clock-offset model real phones: use --preset realistic"
+            )
         if self.field not in FIELDS:
             raise InputError(f"--field {self.field!r}: expected one of {', '.join(FIELDS)}")
         if self.users < 0 or self.nonusers < 0:
@@ -474,8 +476,12 @@ class _RealDetections:
             spots = []
             for _ in range(self.real.static_fps):
                 px = np.array(
-                    [[self.rng.uniform(0.15, 0.85) * cam.model.width_px,
-                      self.rng.uniform(0.55, 0.95) * cam.model.height_px]]
+                    [
+                        [
+                            self.rng.uniform(0.15, 0.85) * cam.model.width_px,
+                            self.rng.uniform(0.55, 0.95) * cam.model.height_px,
+                        ]
+                    ]
                 )
                 g = cam.ground_point(px)[0]
                 if not np.isnan(g).any():
@@ -499,9 +505,9 @@ class _RealDetections:
         camera = cam.model.camera
         seen = []
         for p, xy in present.items():
-            box = _person_box(cam, xy)
-            if box is not None:
-                seen.append((box[1], p, xy, box[0]))
+            placed = _person_box(cam, xy)
+            if placed is not None:
+                seen.append((placed[1], p, xy, placed[0]))
         seen.sort()
         kept: list[tuple[str, np.ndarray, BBox]] = []
         for k, (_, p, xy, box) in enumerate(seen):
@@ -533,7 +539,9 @@ class _RealDetections:
                 g = spot + self.rng.normal(0, 0.1, 2)
                 dets.append(
                     Detection(
-                        BBox(0.0, 0.0, 20.0, 60.0), 0.5, "person",
+                        BBox(0.0, 0.0, 20.0, 60.0),
+                        0.5,
+                        "person",
                         Vec3(float(g[0]), float(g[1]), 0.0),
                     )
                 )
@@ -682,11 +690,7 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
             # what the simulator chose per phone: for the metrics only, never read by trackers
             w.add_metadata(
                 "phone_truth",
-                {
-                    f"{mac}/{k}": v
-                    for mac, tr in truths.items()
-                    for k, v in asdict(tr).items()
-                },
+                {f"{mac}/{k}": v for mac, tr in truths.items() for k, v in asdict(tr).items()},
             )
         for m in site.models:
             w.write(topics.calibration(m.camera), to_foxglove_calibration(m), 0)

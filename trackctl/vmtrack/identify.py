@@ -152,9 +152,9 @@ def _chains(frames: Sequence[FrameOut], plan: Publication, velocity_half_s: floa
         hits[head] = sorted(h for trk in tracks.values() for h in trk.hits_log)
     for t_ns, fills in plan.fills.items():
         for name, _, _ in fills:
-            head = plan.head_of_name.get(name)
-            if head is not None and head in times:
-                times[head].append(t_ns)
+            filled = plan.head_of_name.get(name)
+            if filled is not None and filled in times:
+                times[filled].append(t_ns)
     out = []
     for head, ts in times.items():
         t = np.array(sorted(set(ts)), np.int64)
@@ -177,7 +177,9 @@ def _window_scores(
     zp = np.where(ok, zl, 0)
     zt0 = np.where(ok, zt, 0)
     parts = [zt0 * np.conj(zp), np.abs(zp) ** 2, np.abs(zt0) ** 2, ok.astype(float)]
-    cums = [np.concatenate([np.zeros((1, zl.shape[1]), p.dtype), np.cumsum(p, axis=0)]) for p in parts]
+    cums = [
+        np.concatenate([np.zeros((1, zl.shape[1]), q.dtype), np.cumsum(q, axis=0)]) for q in parts
+    ]
     half = int(cfg.window_s / 2 * 1e9)
     lo = np.searchsorted(chain.times, chain.times - half, side="left")
     hi = np.searchsorted(chain.times, chain.times + half, side="right")
@@ -217,39 +219,9 @@ def identify(
     costs: dict[str, np.ndarray] = {}
     half_v = cfg.velocity_window_s / 2
     for mid, phone in sorted(phones.items()):
-        path_pts = _dead_reckoned(phone)
-        zls = []
-        free = np.full((n_f, len(chains)), np.inf)
-        for c, chain in enumerate(chains):
-            # the phone's velocity through the same centred least-squares slope as the track's
-            # detections: both sides see the walk through one filter
-            at = (chain.times[:, None] + lag_ns[None, :]).ravel()
-            zl = _visual_velocity(path_pts, at, half_v).reshape(len(chain.times), len(lags))
-            zls.append(zl)
-            if np.isnan(zl).all():
-                continue
-            r = _window_scores(chain, zl, acfg, cfg)
-            # a published frame without evidence costs what "no track" costs
-            free[rows[c], c] = np.where(np.isfinite(r), r, cfg.none_cost)
-        if aligned:
-            # the paper's setting, declared by the user: heading = walk, one clock, 0.7 m steps
-            known = (len(lags) // 2, np.ones(n_f, complex))
-            cost = _known_costs(free, known, chains, rows, zls, cfg)
-            paths[mid], costs[mid] = _viterbi(cost, cfg), cost
-            continue
-        cost = free
-        path = _viterbi(cost, cfg)
-        for _ in range(cfg.refine_passes):
-            # the phone's alignment over time, from where the path put it; then every chain is
-            # scored under that alignment (direction counts again), the free fit elsewhere
-            known = _alignment_track(
-                _clear_path(path, cost, cfg), chains, rows, zls, n_f, lags, acfg, cfg
-            )
-            if known is None:
-                break
-            cost = _known_costs(free, known, chains, rows, zls, cfg)
-            path = _viterbi(cost, cfg)
-        paths[mid], costs[mid] = path, cost
+        paths[mid], costs[mid] = _phone_path(
+            phone, chains, rows, n_f, lags, lag_ns, acfg, cfg, aligned
+        )
     ambiguous = np.zeros(n_f, bool)
     for mid, path in paths.items():
         cost = costs[mid]
@@ -262,17 +234,17 @@ def identify(
         _drop_unanchored(path, cost, cfg, out)
     # one phone per chain and frame: the better fit keeps it
     keys = [c.key for c in chains]
-    for f in range(n_f):
+    for fi in range(n_f):
         owner: dict[int, tuple[float, str]] = {}
         for mid, path in paths.items():
-            c = int(path[f])
+            c = int(path[fi])
             if c < 0:
                 continue
-            score = float(costs[mid][f, c])
+            score = float(costs[mid][fi, c])
             if c not in owner or score < owner[c][0]:
                 owner[c] = (score, mid)
         for c, (_, mid) in owner.items():
-            out.mid_at[(keys[c], int(frame_t[f]))] = mid
+            out.mid_at[(keys[c], int(frame_t[fi]))] = mid
     out.ambiguous_frames = int(ambiguous.sum())
     out.alignments = _alignments(out, chains, phones, lags, lag_ns, acfg, half_v)
     return out
@@ -289,6 +261,52 @@ def _clear_path(path: np.ndarray, cost: np.ndarray, cfg: IdentifyConfig) -> np.n
         if mine < cfg.none_cost and rival > cfg.ratio * mine + 0.02:
             out[f] = path[f]
     return out
+
+
+def _phone_path(
+    phone: PhoneMotion,
+    chains: list[_Chain],
+    rows: list[np.ndarray],
+    n_f: int,
+    lags: np.ndarray,
+    lag_ns: np.ndarray,
+    acfg: AlignConfig,
+    cfg: IdentifyConfig,
+    aligned: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One phone's path over the chains (chain index per frame, -1: none) and its cost matrix:
+    the free fit first, then ``refine_passes`` under the alignment the last path implies."""
+    path_pts = _dead_reckoned(phone)
+    zls = []
+    free = np.full((n_f, len(chains)), np.inf)
+    for c, chain in enumerate(chains):
+        # the phone's velocity through the same centred least-squares slope as the track's
+        # detections: both sides see the walk through one filter
+        at = (chain.times[:, None] + lag_ns[None, :]).ravel()
+        zl = _visual_velocity(path_pts, at, cfg.velocity_window_s / 2)
+        zls.append(zl.reshape(len(chain.times), len(lags)))
+        if np.isnan(zls[-1]).all():
+            continue
+        r = _window_scores(chain, zls[-1], acfg, cfg)
+        # a published frame without evidence costs what "no track" costs
+        free[rows[c], c] = np.where(np.isfinite(r), r, cfg.none_cost)
+    if aligned:
+        # the paper's setting, declared by the user: heading = walk, one clock, 0.7 m steps
+        cost = _known_costs(free, (len(lags) // 2, np.ones(n_f, complex)), chains, rows, zls, cfg)
+        return _viterbi(cost, cfg), cost
+    cost = free
+    path = _viterbi(cost, cfg)
+    for _ in range(cfg.refine_passes):
+        # the phone's alignment over time, from where the path names its carrier clearly; then
+        # every chain is scored under it (direction counts again), the free fit elsewhere
+        known = _alignment_track(
+            _clear_path(path, cost, cfg), chains, rows, zls, n_f, lags, acfg, cfg
+        )
+        if known is None:
+            break
+        cost = _known_costs(free, known, chains, rows, zls, cfg)
+        path = _viterbi(cost, cfg)
+    return path, cost
 
 
 def _alignment_track(
@@ -439,7 +457,9 @@ def _viterbi(cost: np.ndarray, cfg: IdentifyConfig) -> np.ndarray:
     return path
 
 
-def _drop_unanchored(path: np.ndarray, cost: np.ndarray, cfg: IdentifyConfig, out: Identities) -> None:
+def _drop_unanchored(
+    path: np.ndarray, cost: np.ndarray, cfg: IdentifyConfig, out: Identities
+) -> None:
     """A stretch on one chain whose every frame has a rival as good (ratio) is a guess: the
     phone is left off it."""
     f = 0

@@ -144,7 +144,11 @@ class IdentityBinder:
         self.visual_disagreement[mid].clear()
 
     def _bind_track(
-        self, mid: str, trk: GroundTrack, t_ns: int, ev: PairEvidence | None = None,
+        self,
+        mid: str,
+        trk: GroundTrack,
+        t_ns: int,
+        ev: PairEvidence | None = None,
         al: Alignment | None = None,
     ) -> None:
         self.bound[mid] = trk
@@ -227,9 +231,7 @@ class IdentityBinder:
                         self._pair(self.evidence, mid, trk.vid).add_rssi(z2)
                         self.by_vid[trk.vid] = trk
 
-    def _pair(
-        self, table: dict[str, dict[str, PairEvidence]], mid: str, vid: str
-    ) -> PairEvidence:
+    def _pair(self, table: dict[str, dict[str, PairEvidence]], mid: str, vid: str) -> PairEvidence:
         ev = table[mid].get(vid)
         if ev is None:
             ev = table[mid][vid] = PairEvidence(len(self.lags))
@@ -394,7 +396,7 @@ class IdentityBinder:
         for mid, (trk, score, _, _) in wants.items():
             if trk.vid not in taken or score < taken[trk.vid][1]:
                 taken[trk.vid] = (mid, score)
-        for vid, (mid, _) in taken.items():
+        for mid, _ in taken.values():
             trk, _, ev, al = wants[mid]
             self._bind_track(mid, trk, t_ns, ev, al)
             self.candidates.pop(mid, None)

@@ -71,7 +71,8 @@ class PhoneMotion:
             self.bad_samples += 1
             return
         self._t.append(imu.t_ns)
-        self._acc.append(tuple(imu.accel_mps2))
+        a = imu.accel_mps2
+        self._acc.append((a.x, a.y, a.z))
         q = imu.orientation
         self._quat.append((math.nan,) * 4 if q is None else (q.x, q.y, q.z, q.w))
         # no gyro and no orientation: the heading cannot be integrated (held constant)
@@ -120,8 +121,8 @@ class PhoneMotion:
             if tilt[k, cur] > tilt[k].min() + 0.25:
                 cur = int(np.argmin(tilt[k]))
             axis[k] = cur
-        k = np.arange(len(ts))
-        return np.arctan2(rot[k, 1, axis], rot[k, 0, axis])
+        rows = np.arange(len(ts))
+        return np.arctan2(rot[rows, 1, axis], rot[rows, 0, axis])
 
     def _speeds(self, ts: np.ndarray, vert: np.ndarray) -> np.ndarray:
         cfg = self.config

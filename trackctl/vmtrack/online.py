@@ -130,7 +130,8 @@ class OnlineTracker:
                 if mid:
                     self.identity.release(mid)
                 if trk.moved_m < self.cfg.clutter_radius_m and trk.born_xy is not None:
-                    self._static_deaths.append((t_ns, *map(float, trk.born_xy)))
+                    bx, by = float(trk.born_xy[0]), float(trk.born_xy[1])
+                    self._static_deaths.append((t_ns, bx, by))
                     self.static_death_log.append((float(trk.born_xy[0]), float(trk.born_xy[1])))
                 continue
             keep.append(trk)

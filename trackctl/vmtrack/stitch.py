@@ -198,6 +198,38 @@ def _parked_at_clutter(
     return (hi > lo) & (away[hi] - away[lo] == 0)
 
 
+def _gap_fills(
+    frames: Sequence[FrameOut],
+    tracklets: Sequence[Tracklet],
+    heads: dict[int, int],
+    dropped: set[int],
+    name: dict[int, str],
+) -> tuple[dict[int, list[tuple[str, np.ndarray, np.ndarray]]], int]:
+    """Positions interpolated across the gaps of every stitched chain, by frame; and the
+    number of links."""
+    times = [fr.t_ns for fr in frames]
+    fills: dict[int, list[tuple[str, np.ndarray, np.ndarray]]] = {}
+    members: dict[int, list[Tracklet]] = {}
+    for tl in tracklets:
+        members.setdefault(heads[tl.key], []).append(tl)
+    links = 0
+    for head, chain in members.items():
+        if head in dropped:
+            continue
+        chain.sort(key=lambda t: t.first_ns)
+        for a, b in zip(chain, chain[1:], strict=False):
+            links += 1
+            span = (b.first_ns - a.last_ns) / 1e9
+            v = (b.first_xy - a.last_xy) / span
+            lo = int(np.searchsorted(times, a.last_ns, side="right"))
+            hi = int(np.searchsorted(times, b.first_ns, side="left"))
+            for t_ns in times[lo:hi]:
+                w = (t_ns - a.last_ns) / (b.first_ns - a.last_ns)
+                xy = (1 - w) * a.last_xy + w * b.first_xy
+                fills.setdefault(t_ns, []).append((name[head], xy, v))
+    return fills, links
+
+
 def plan_publication(
     frames: Sequence[FrameOut],
     positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
@@ -245,7 +277,6 @@ def plan_publication(
     clutter = {key for key in rows if key not in {t.key for t in tracklets}}
     heads = stitch(tracklets, cfg) if cfg.enabled else {t.key: t.key for t in tracklets}
     heads.update({key: key for key in clutter})
-    by_key = {t.key: t for t in tracklets}
     chain_hits: dict[int, int] = {}
     chain_moved: dict[int, float] = {}
     chain_start: dict[int, np.ndarray] = {}
@@ -262,26 +293,6 @@ def plan_publication(
     for key, seq in rows.items():
         if heads[key] in dropped:
             hidden.update((key, t) for t, _ in seq)
-    # fill stitched gaps by interpolation between the end and the start
-    times = [fr.t_ns for fr in frames]
-    fills: dict[int, list[tuple[str, np.ndarray, np.ndarray]]] = {}
-    members: dict[int, list[Tracklet]] = {}
-    for tl in tracklets:
-        members.setdefault(heads[tl.key], []).append(tl)
-    links = 0
-    for head, chain in members.items():
-        if head in dropped:
-            continue
-        chain.sort(key=lambda t: t.first_ns)
-        for a, b in zip(chain, chain[1:], strict=False):
-            links += 1
-            span = (b.first_ns - a.last_ns) / 1e9
-            v = (b.first_xy - a.last_xy) / span
-            lo = int(np.searchsorted(times, a.last_ns, side="right"))
-            hi = int(np.searchsorted(times, b.first_ns, side="left"))
-            for t_ns in times[lo:hi]:
-                w = (t_ns - a.last_ns) / (b.first_ns - a.last_ns)
-                xy = (1 - w) * a.last_xy + w * b.first_xy
-                fills.setdefault(t_ns, []).append((name[by_key[head].key], xy, v))
+    fills, links = _gap_fills(frames, tracklets, heads, dropped, name)
     head_of_name = {name[h]: h for h in set(heads.values()) if h in name}
     return Publication(name, hidden, fills, len(dropped), links, dict(heads), head_of_name)
