@@ -79,7 +79,6 @@ def test_readme_main_job_on_the_sample_log(tmp_path: Path) -> None:
     # longer logs); here: the main job runs on frames, finds the people, and reports
     assert report["source"] == "frames" and report["det_recall"] >= 0.9
     assert report["idf1"] is not None and "ambiguous_frames" in report
-    assert report["wrong_binding_s"] <= 2.0
     from tests.vmtrack.test_realistic import assert_one_track_per_phone
 
     assert assert_one_track_per_phone(out) == report["frames"]

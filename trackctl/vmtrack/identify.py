@@ -60,6 +60,8 @@ class IdentifyConfig:
     """Cost of moving the phone from one live track to another (10 frames at the none cost)."""
     ratio: float = 2.0
     """A frame is ambiguous when another track fits within this factor of the chosen one."""
+    min_clear_frames: int = 1
+    """Frames of clear evidence a stretch on one chain needs to be published."""
     refine_passes: int = 2
     """Passes that re-score every chain under the phone's alignment found by the last path."""
     align_window_frames: int = 180
@@ -460,8 +462,9 @@ def _viterbi(cost: np.ndarray, cfg: IdentifyConfig) -> np.ndarray:
 def _drop_unanchored(
     path: np.ndarray, cost: np.ndarray, cfg: IdentifyConfig, out: Identities
 ) -> None:
-    """A stretch on one chain whose every frame has a rival as good (ratio) is a guess: the
-    phone is left off it."""
+    """A stretch on one chain with fewer than ``min_clear_frames`` frames in which the chain
+    fits and clearly better than any other (by ``ratio``) is a guess: the phone is left off it."""
+    clear = _clear_path(path, cost, cfg) >= 0
     f = 0
     n = len(path)
     while f < n:
@@ -469,15 +472,9 @@ def _drop_unanchored(
         g = f
         while g < n and path[g] == c:
             g += 1
-        if c >= 0:
-            block = cost[f:g]
-            mine = block[:, c]
-            rivals = np.delete(block, c, axis=1)
-            best_rival = rivals.min(axis=1) if rivals.shape[1] else np.full(g - f, np.inf)
-            clear = (mine < cfg.none_cost) & (best_rival > cfg.ratio * mine + 0.02)
-            if not clear.any():
-                path[f:g] = -1
-                out.unanchored_frames += g - f
+        if c >= 0 and int(clear[f:g].sum()) < cfg.min_clear_frames:
+            path[f:g] = -1
+            out.unanchored_frames += g - f
         f = g
 
 

@@ -1,0 +1,108 @@
+"""VM-Tracking on realistic phones: the figures issue 13 asks for, in one table.
+
+    python benchmarks/vm_realistic.py [--duration 300] [--seeds 1,2,3] [--quick]
+
+Scenarios (all ``trackctl simulate vm``, realistic preset unless said): lobby 5 carriers + 3
+people without phones; the same with 35 without (~40 in view); the paper preset; every phone
+carried at 0 / 45 / 90 / 180 deg from the walk, or per carry; phone clocks off by up to 2 s;
+``students001`` (real trajectories, the 5 longest walkers carry phones). Prints IDF1, mean error,
+time bound to somebody else and the estimated clock offset error per row.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from trackctl.logs import LogReader
+from trackctl.processing import run_processors
+from trackctl.sim.vm import VmScenario, simulate_vm
+from trackctl.sim.walkers import load_trajectories_csv
+from trackctl.vmtrack import VmTrackConfig, VmTrackProcessor
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "pedestrians"
+
+
+def _longest_walkers(path: Path, k: int = 5) -> tuple[str, ...]:
+    trajs = load_trajectories_csv(path)
+    length = {
+        t.person: float(np.nansum(np.linalg.norm(np.diff(t.xy, axis=0), axis=1))) for t in trajs
+    }
+    return tuple(sorted(length, key=lambda p: -length[p])[:k])
+
+
+def _clock_error(m: dict[str, object], out: Path) -> float | None:
+    truth = LogReader(out).metadata().get("phone_truth", {})
+    errs = []
+    for key, value in truth.items():
+        mid, _, field = key.rpartition("/")
+        est = m.get(f"clock_offset_s/{mid}")
+        if field == "clock_offset_s" and est is not None:
+            errs.append(abs(float(est) - float(value)))  # type: ignore[arg-type]
+    return float(np.median(errs)) if errs else None
+
+
+def _run(tmp: Path, name: str, sc: VmScenario, cfg: VmTrackConfig | None = None) -> list[str]:
+    log, out = tmp / f"{name}.mcap", tmp / f"{name}.out.mcap"
+    simulate_vm(str(log), sc)
+    t0 = time.perf_counter()
+    (rep,) = run_processors(log, out, [VmTrackProcessor(cfg or VmTrackConfig())])
+    secs = time.perf_counter() - t0
+    m = rep.metrics
+    clock = _clock_error(m, out)
+    return [
+        name,
+        f"{m['idf1']:.3f}" if m["idf1"] is not None else "-",
+        f"{m['error_m_mean']:.2f}" if m["error_m_mean"] is not None else "-",
+        f"{m['wrong_binding_s']:.0f}" if m.get("wrong_binding_s") is not None else "-",
+        f"{m.get('ambiguous_frames', '-')}",
+        f"{clock:.2f}" if clock is not None else "-",
+        f"{secs:.0f}",
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--duration", type=float, default=300.0)
+    ap.add_argument("--seeds", default="1,2,3")
+    ap.add_argument("--quick", action="store_true", help="one seed, no crowd, no students")
+    args = ap.parse_args(argv)
+    seeds = [int(s) for s in args.seeds.split(",")][: 1 if args.quick else None]
+    base = VmScenario(field="lobby", users=5, nonusers=3, duration_s=args.duration)
+    rows = [["scenario", "IDF1", "err m", "wrong s", "ambig.", "clock err s", "run s"]]
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        for s in seeds:
+            rows.append(_run(tmp, f"realistic seed {s}", replace(base, seed=s)))
+        for s in seeds:
+            rows.append(_run(tmp, f"paper seed {s}", replace(base, seed=s, preset="paper")))
+        for yaw in (0.0, 45.0, 90.0, 180.0):
+            sc = replace(base, seed=seeds[0], carry_yaw_deg=yaw)
+            rows.append(_run(tmp, f"carry {yaw:.0f} deg", sc))
+        rows.append(_run(tmp, "clocks +-2 s", replace(base, seed=seeds[0], clock_offset_s=2.0)))
+        if not args.quick:
+            for s in seeds:
+                rows.append(_run(tmp, f"crowd 40 seed {s}", replace(base, seed=s, nonusers=35)))
+            students = SHARED / "students001.txt"
+            if students.is_file():
+                sc = VmScenario(
+                    trajectories=str(students),
+                    phones=_longest_walkers(students),
+                    duration_s=178.0,
+                    seed=seeds[0],
+                )
+                rows.append(_run(tmp, "students001", sc))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    for r in rows:
+        print("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
