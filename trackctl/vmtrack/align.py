@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Alignment", "AlignConfig", "PairEvidence", "lag_grid"]
+__all__ = ["Alignment", "AlignConfig", "CandidateTable", "PairEvidence", "lag_grid"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,3 +147,100 @@ class PairEvidence:
         s = float(np.clip(mag / self.P[k], *cfg.scale))
         a = complex(s * self.S[k] / mag) if mag > 0 else complex(s, 0.0)
         return Alignment(a, float(lags[k]), k)
+
+
+class CandidateTable:
+    """:class:`PairEvidence` of one phone with many tracks, one row per track (vectorised: a
+    frame updates every candidate in a few array operations, whatever the crowd)."""
+
+    def __init__(self, n_lags: int) -> None:
+        self.n_lags = n_lags
+        self.vids: list[str] = []
+        self.index: dict[str, int] = {}
+        self.S = np.zeros((0, n_lags), complex)
+        self.P = np.zeros((0, n_lags))
+        self.T = np.zeros((0, n_lags))
+        self.n = np.zeros((0, n_lags))
+        self.rssi_n = np.zeros(0)
+        self.rssi_z2 = np.zeros(0)
+
+    def __len__(self) -> int:
+        return len(self.vids)
+
+    def _rows(self, vids: list[str]) -> np.ndarray:
+        new = [v for v in dict.fromkeys(vids) if v not in self.index]
+        if new:
+            for v in new:
+                self.index[v] = len(self.vids)
+                self.vids.append(v)
+            k, L = len(new), self.n_lags
+            self.S = np.vstack([self.S, np.zeros((k, L), complex)])
+            self.P = np.vstack([self.P, np.zeros((k, L))])
+            self.T = np.vstack([self.T, np.zeros((k, L))])
+            self.n = np.vstack([self.n, np.zeros((k, L))])
+            self.rssi_n = np.concatenate([self.rssi_n, np.zeros(k)])
+            self.rssi_z2 = np.concatenate([self.rssi_z2, np.zeros(k)])
+        return np.array([self.index[v] for v in vids], int)
+
+    def add(self, vids: list[str], z_tracks: np.ndarray, z_phone: np.ndarray) -> None:
+        """One frame: each track's velocity (complex) against the phone's at every lag."""
+        if not vids:
+            return
+        rows = self._rows(vids)
+        ok = ~np.isnan(z_phone)
+        zp = np.where(ok, z_phone, 0)
+        z = np.asarray(z_tracks, complex)[:, None]
+        self.S[rows] += z * np.conj(zp)[None, :]
+        self.P[rows] += (np.abs(zp) ** 2)[None, :]
+        self.T[rows] += np.abs(z) ** 2 * ok[None, :]
+        self.n[rows] += ok[None, :]
+
+    def add_rssi(self, vid: str, z2: float) -> None:
+        row = self._rows([vid])[0]
+        self.rssi_n[row] += 1
+        self.rssi_z2[row] += z2
+
+    def keep(self, live: set[str]) -> None:
+        """Drop the rows of tracks that are gone."""
+        rows = [i for i, v in enumerate(self.vids) if v in live]
+        if len(rows) == len(self.vids):
+            return
+        self.vids = [self.vids[i] for i in rows]
+        self.index = {v: i for i, v in enumerate(self.vids)}
+        self.S, self.P, self.T, self.n = self.S[rows], self.P[rows], self.T[rows], self.n[rows]
+        self.rssi_n, self.rssi_z2 = self.rssi_n[rows], self.rssi_z2[rows]
+
+    def frames(self) -> np.ndarray:
+        return self.n.max(axis=1) if len(self.vids) else np.zeros(0)
+
+    def scores(self, cfg: AlignConfig, known: Alignment | None = None) -> np.ndarray:
+        """Mean squared disagreement of every row at its best alignment (or at ``known``), as
+        :meth:`PairEvidence.score`, plus nothing for RSSI (see :meth:`rssi_penalty`)."""
+        if not len(self.vids):
+            return np.zeros(0)
+        n = np.maximum(self.n, 1e-9)
+        if known is not None:
+            k, a = known.lag_index, known.a
+            r = self.T[:, k] - 2 * (np.conj(a) * self.S[:, k]).real + abs(a) ** 2 * self.P[:, k]
+            out = np.maximum(r, 0.0) / n[:, k]
+            return np.where(self.n.max(axis=1) > 0, out, np.inf)
+        mag = np.abs(self.S)
+        s = np.clip(mag / np.maximum(self.P, 1e-9), *cfg.scale)
+        r = np.maximum(self.T - 2 * s * mag + s * s * self.P, 0.0) / n
+        top = self.n.max(axis=1, keepdims=True)
+        enough = (self.n >= 0.8 * top) & (self.n > 0)
+        return np.where(enough, r, np.inf).min(axis=1)
+
+    def rssi_penalty(self, weight: float) -> np.ndarray:
+        """Chi-square excess of each row's RSSI residuals (0 with fewer than 2 readings)."""
+        excess = np.maximum(0.0, self.rssi_z2 / np.maximum(self.rssi_n, 1) - 1.0)
+        return np.where(self.rssi_n >= 2, weight * excess, 0.0)
+
+    def evidence(self, vid: str) -> PairEvidence:
+        """One row as a :class:`PairEvidence` (to fit or to keep)."""
+        i = self.index[vid]
+        ev = PairEvidence(self.n_lags)
+        ev.S, ev.P = self.S[i].copy(), self.P[i].copy()
+        ev.T, ev.n = self.T[i].copy(), self.n[i].copy()
+        ev.rssi_n, ev.rssi_z2 = int(self.rssi_n[i]), float(self.rssi_z2[i])
+        return ev

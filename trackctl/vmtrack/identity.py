@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from trackctl.logs.messages import RssiScan, TrackState
-from trackctl.vmtrack.align import Alignment, PairEvidence, lag_grid
+from trackctl.vmtrack.align import Alignment, CandidateTable, PairEvidence, lag_grid
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.tracker import GroundTrack
 
@@ -28,14 +28,8 @@ if TYPE_CHECKING:
 __all__ = ["IdentityBinder", "BindingStats"]
 
 _RSSI_WEIGHT = 0.05
-
-
-def _rssi_penalty(ev: PairEvidence) -> float:
-    """Chi-square excess of the RSSI residuals (expected 1 per reading for the right person),
-    in units of the rejection threshold's scale so one incompatible AP pass rejects."""
-    if ev.rssi_n < 2:
-        return 0.0
-    return _RSSI_WEIGHT * max(0.0, ev.rssi_z2 / ev.rssi_n - 1.0)
+"""Weight of the chi-square excess of RSSI residuals (expected 1 per reading for the right
+person), in units of the rejection threshold's scale so one incompatible AP pass rejects."""
 
 
 @dataclass
@@ -79,9 +73,10 @@ class IdentityBinder:
         """The latest alignment each phone had (re-binding, back-dating, the report)."""
         self.bound_ev: dict[str, PairEvidence] = {}
         self._bound_t: dict[str, int] = {}
-        self.candidates: dict[str, dict[str, PairEvidence]] = defaultdict(dict)
-        # whole-log evidence of (never-bound phone, track) agreement, for the offline resolution
-        self.evidence: dict[str, dict[str, PairEvidence]] = defaultdict(dict)
+        self.candidates: dict[str, CandidateTable] = {}
+        # whole-log evidence of (never-bound phone, track) agreement, for the online identity's
+        # offline resolution (the offline identity stage, the default, decides on its own)
+        self.evidence: dict[str, CandidateTable] | None = {} if cfg.identity == "online" else None
         self.by_vid: dict[str, GroundTrack] = {}
         self.disagreement: dict[str, list[float]] = defaultdict(list)
         self.visual_disagreement: dict[str, list[float]] = defaultdict(list)
@@ -226,16 +221,16 @@ class IdentityBinder:
                     d = max(0.3, float(np.linalg.norm(trk.xy - ap)))
                     expect = cfg.rssi_at_1m_dbm - 10 * cfg.path_loss_exponent * math.log10(d)
                     z2 = ((reading.rssi_dbm - expect) / cfg.shadowing_db) ** 2
-                    self._pair(self.candidates, mid, trk.vid).add_rssi(z2)
-                    if trk.first_mid is None:
-                        self._pair(self.evidence, mid, trk.vid).add_rssi(z2)
+                    self._table(self.candidates, mid).add_rssi(trk.vid, z2)
+                    if trk.first_mid is None and self.evidence is not None:
+                        self._table(self.evidence, mid).add_rssi(trk.vid, z2)
                         self.by_vid[trk.vid] = trk
 
-    def _pair(self, table: dict[str, dict[str, PairEvidence]], mid: str, vid: str) -> PairEvidence:
-        ev = table[mid].get(vid)
-        if ev is None:
-            ev = table[mid][vid] = PairEvidence(len(self.lags))
-        return ev
+    def _table(self, tables: dict[str, CandidateTable], mid: str) -> CandidateTable:
+        table = tables.get(mid)
+        if table is None:
+            table = tables[mid] = CandidateTable(len(self.lags))
+        return table
 
     def _refit(self, mid: str, trk: GroundTrack, t_ns: int) -> None:
         """A bound phone's alignment, re-fitted from the track's detections alone (its filter
@@ -337,19 +332,15 @@ class IdentityBinder:
         if np.isnan(zl).all():
             self.candidates.pop(mid, None)
             return None, False
-        cands = self.candidates[mid]
-        live = {trk.vid for trk in free}
-        for vid in list(cands):
-            if vid not in live:
-                del cands[vid]
-        for trk in free:
-            if trk.hits < cfg.converge_hits:
-                continue  # its velocity estimate has not converged yet
-            z = complex(trk.v[0], trk.v[1])
-            self._pair(self.candidates, mid, trk.vid).add(z, zl)
-            if trk.first_mid is None:
-                self._pair(self.evidence, mid, trk.vid).add(z, zl)
-                self.by_vid[trk.vid] = trk
+        cands = self._table(self.candidates, mid)
+        cands.keep({trk.vid for trk in free})
+        conv = [trk for trk in free if trk.hits >= cfg.converge_hits]  # velocity has converged
+        z = np.array([complex(trk.v[0], trk.v[1]) for trk in conv])
+        cands.add([trk.vid for trk in conv], z, zl)
+        if self.evidence is not None:
+            anon = [k for k, trk in enumerate(conv) if trk.first_mid is None]
+            self._table(self.evidence, mid).add([conv[k].vid for k in anon], z[anon], zl)
+            self.by_vid.update({conv[k].vid: conv[k] for k in anon})
         known = self.last_align.get(mid)
         if known is not None:
             # a phone seen before: its alignment is known (unless its carry changed since)
@@ -361,27 +352,28 @@ class IdentityBinder:
 
     def _pick(
         self,
-        cands: dict[str, PairEvidence],
+        cands: CandidateTable,
         free: list[GroundTrack],
         known: Alignment | None,
         need: int,
         judge_after: int,
     ) -> tuple[tuple[GroundTrack, float, PairEvidence, Alignment | None] | None, bool]:
         cfg = self.cfg
-        scored = []
-        for vid, ev in cands.items():
-            m = ev.score(cfg.align, known) + _rssi_penalty(ev)
-            if ev.frames >= judge_after and m > cfg.reject_mps**2:
-                continue  # filtered away
-            scored.append((m, vid, ev))
-        scored.sort(key=lambda a: a[0])
-        if not scored or scored[0][2].frames < need:
+        if not len(cands):
             return None, False
-        rivals = [a for a in scored[1:] if a[2].frames >= judge_after]
-        if rivals and rivals[0][0] <= cfg.ratio * scored[0][0] + 0.02:
+        score = cands.scores(cfg.align, known) + cands.rssi_penalty(_RSSI_WEIGHT)
+        frames = cands.frames()
+        alive = np.flatnonzero(~((frames >= judge_after) & (score > cfg.reject_mps**2)))
+        order = alive[np.argsort(score[alive], kind="stable")]
+        if not len(order) or frames[order[0]] < need:
+            return None, False
+        rivals = [i for i in order[1:] if frames[i] >= judge_after]
+        best = float(score[order[0]])
+        if rivals and score[rivals[0]] <= cfg.ratio * best + 0.02:
             return None, True
-        best, vid, ev = scored[0]
+        vid = cands.vids[order[0]]
         trk = next(t for t in free if t.vid == vid)
+        ev = cands.evidence(vid)
         al = known if known is not None else ev.fit(cfg.align, self.lags)
         return (trk, best, ev, al), False
 
@@ -426,13 +418,15 @@ class IdentityBinder:
         cfg, by_vid = self.cfg, self.by_vid
         ever_bound = {trk.first_mid for trk in by_vid.values() if trk.first_mid is not None}
         pairs = []
-        for mid, cands in self.evidence.items():
-            if mid not in self.phones or mid in ever_bound:
+        for mid, cands in (self.evidence or {}).items():
+            if mid not in self.phones or mid in ever_bound or not len(cands):
                 continue
+            score = cands.scores(cfg.align) + cands.rssi_penalty(_RSSI_WEIGHT)
+            frames = cands.frames()
             scored = sorted(
-                (ev.score(cfg.align) + _rssi_penalty(ev), vid)
-                for vid, ev in cands.items()
-                if by_vid[vid].first_mid is None and ev.frames >= cfg.bind_frames_free
+                (float(score[i]), vid)
+                for i, vid in enumerate(cands.vids)
+                if by_vid[vid].first_mid is None and frames[i] >= cfg.bind_frames_free
             )
             if not scored or scored[0][0] > cfg.offline_reject_mps**2:
                 continue
@@ -446,7 +440,7 @@ class IdentityBinder:
                 continue
             trk.first_mid = mid
             trk.first_bound_ns = trk.t_ns + 1  # the identity covers the whole track (back-dated)
-            al = self.evidence[mid][vid].fit(cfg.align, self.lags)
+            al = (self.evidence or {})[mid].evidence(vid).fit(cfg.align, self.lags)
             if al is not None:
                 self.last_align[mid] = al
             made += 1
