@@ -205,3 +205,17 @@ def test_a_log_without_ground_truth_still_reports_what_was_seen(
     assert obj["tracks_started"] >= obj["tracks_published"] >= 1
     assert obj["track_frames_median"] > 10
     assert 0 <= obj["coasting_share"] < 0.5
+
+
+def test_online_identity_publishes_the_papers_bindings(office_log: Path, tmp_path: Path) -> None:
+    """``identity="online"``: the paper's frame-by-frame bindings (plus back-dating and the
+    resolution of never-bound phones), one phone per track in every frame."""
+    from tests.vmtrack.test_realistic import assert_one_track_per_phone
+    from trackctl.vmtrack.config import Identity
+
+    out = tmp_path / "online.mcap"
+    proc = VmTrackProcessor(VmTrackConfig(identity=Identity.ONLINE))
+    (rep,) = run_processors(office_log, out, [proc])
+    assert rep.metrics["idf1"] > 0.85
+    assert rep.metrics["bindings"] >= 3
+    assert assert_one_track_per_phone(out) == rep.metrics["frames"]
