@@ -71,3 +71,40 @@ def test_option_checks() -> None:
         VmScenario(duration_s=10, standing_s=20)
     result = runner.invoke(app, ["simulate", "vm", "--out", "x.mcap", "--shadows"])
     assert result.exit_code == 2 and "--frames" in result.output
+
+
+def test_preset_checks_through_the_cli(tmp_path: Path) -> None:
+    out = str(tmp_path / "x.mcap")
+    bad = runner.invoke(app, ["simulate", "vm", "--out", out, "--preset", "lab"])
+    assert bad.exit_code == 2 and "--preset 'lab'" in bad.output and "realistic" in bad.output
+    mixed = runner.invoke(
+        app, ["simulate", "vm", "--out", out, "--preset", "paper", "--carry-yaw", "45"]
+    )
+    assert mixed.exit_code == 2 and "--preset realistic" in mixed.output
+    assert not Path(out).exists()
+    ok = runner.invoke(
+        app,
+        [
+            "simulate",
+            "vm",
+            "--out",
+            out,
+            "--field",
+            "office",
+            "--users",
+            "1",
+            "--nonusers",
+            "0",
+            "--duration",
+            "5",
+            "--carry-yaw",
+            "90",
+            "--clock-offset",
+            "0.5",
+            "--json",
+        ],
+    )
+    assert ok.exit_code == 0, ok.output
+    truth = LogReader(out).metadata()["phone_truth"]
+    offset = float(truth["02:00:00:00:00:01/clock_offset_s"])
+    assert abs(offset) <= 0.5

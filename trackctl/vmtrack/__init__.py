@@ -5,9 +5,11 @@ from trackctl.logs.messages import MetricReport
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import ProcessorInfo, Progress
-from trackctl.vmtrack.config import Mode, Source, VmTrackConfig
+from trackctl.vmtrack.align import AlignConfig, Alignment
+from trackctl.vmtrack.config import Identity, Mode, Source, VmTrackConfig
 from trackctl.vmtrack.detect import BackgroundModel, DetectorConfig, detect_people, predict_region
 from trackctl.vmtrack.frames import FrameConfig, FrameDetector
+from trackctl.vmtrack.identify import IdentifyConfig
 from trackctl.vmtrack.motion import MotionConfig, PhoneMotion
 from trackctl.vmtrack.pipeline import TRACKS_TOPIC, run
 from trackctl.vmtrack.tracker import TrackerConfig, fused_probability
@@ -15,10 +17,14 @@ from trackctl.vmtrack.tracker import TrackerConfig, fused_probability
 __all__ = [
     "PROCESSOR",
     "TRACKS_TOPIC",
+    "AlignConfig",
+    "Alignment",
     "BackgroundModel",
     "DetectorConfig",
     "FrameConfig",
     "FrameDetector",
+    "Identity",
+    "IdentifyConfig",
     "Mode",
     "Source",
     "detect_people",
