@@ -60,6 +60,9 @@ class IdentifyConfig:
     """Cost of moving the phone from one live track to another (10 frames at the none cost)."""
     ratio: float = 2.0
     """A frame is ambiguous when another track fits within this factor of the chosen one."""
+    min_clear_share: float = 0.1
+    """...and this share of its frames (a crowd offers chance clear frames: a stretch that is
+    mostly ambiguous is a guess however long it is)."""
     min_clear_frames: int = 1
     """Frames of clear evidence a stretch on one chain needs to be published."""
     refine_passes: int = 2
@@ -462,8 +465,9 @@ def _viterbi(cost: np.ndarray, cfg: IdentifyConfig) -> np.ndarray:
 def _drop_unanchored(
     path: np.ndarray, cost: np.ndarray, cfg: IdentifyConfig, out: Identities
 ) -> None:
-    """A stretch on one chain with fewer than ``min_clear_frames`` frames in which the chain
-    fits and clearly better than any other (by ``ratio``) is a guess: the phone is left off it."""
+    """A stretch on one chain with fewer than ``min_clear_frames`` (or ``min_clear_share`` of
+    its) frames in which the chain fits and clearly better than any other (by ``ratio``) is a
+    guess: the phone is left off it."""
     clear = _clear_path(path, cost, cfg) >= 0
     f = 0
     n = len(path)
@@ -472,7 +476,8 @@ def _drop_unanchored(
         g = f
         while g < n and path[g] == c:
             g += 1
-        if c >= 0 and int(clear[f:g].sum()) < cfg.min_clear_frames:
+        n_clear = int(clear[f:g].sum())
+        if c >= 0 and (n_clear < cfg.min_clear_frames or n_clear < cfg.min_clear_share * (g - f)):
             path[f:g] = -1
             out.unanchored_frames += g - f
         f = g
