@@ -504,6 +504,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--nonusers", type=int, default=2)
     ap.add_argument("--field", default="lobby", choices=["lobby", "office"])
     ap.add_argument(
+        "--preset",
+        default="realistic",
+        choices=["realistic", "paper"],
+        help="simulator preset (paper: the dissertation's phones and detector)",
+    )
+    ap.add_argument(
         "--trackers", default="vm,v-af,stonesoup,motpy", help=f"subset of {','.join(TRACKERS)}"
     )
     ap.add_argument("--box-m", type=float, default=2.0, help="motpy ground box side (metres)")
@@ -537,6 +543,7 @@ def main(argv: list[str] | None = None) -> int:
                 nonusers=args.nonusers,
                 duration_s=args.duration,
                 seed=seed,
+                preset=args.preset,
             )
             path = simulate(
                 logs_dir,

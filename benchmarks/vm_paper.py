@@ -194,6 +194,12 @@ def main(argv: list[str] | None = None) -> int:
         help="also time Tables 3.5/3.6 on rendered camera frames (person detection included)",
     )
     ap.add_argument("--keep", type=Path, help="keep the simulated logs in this directory")
+    ap.add_argument(
+        "--preset",
+        default="paper",
+        choices=["paper", "realistic"],
+        help="simulator preset: the paper's tables are for its idealised setting (default)",
+    )
     args = ap.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",") if s]
     tables = [t.strip() for t in args.tables.split(",") if t.strip()]
@@ -225,6 +231,7 @@ def main(argv: list[str] | None = None) -> int:
                 users=users,
                 nonusers=nonusers,
                 seed=seed,
+                preset=args.preset,
                 **kw,  # type: ignore[arg-type]
             )
 
@@ -236,6 +243,7 @@ def main(argv: list[str] | None = None) -> int:
                 duration_s=fdur if frames else dur,
                 seed=seed,
                 frames=frames,
+                preset=args.preset,
             )
 
         office_cells: dict[int, Cell] = {}
@@ -254,6 +262,7 @@ def main(argv: list[str] | None = None) -> int:
                         phones=("1", "2"),
                         duration_s=lines_dur,
                         seed=seed,
+                        preset=args.preset,
                     )
 
                 # fixed trajectories: one seed is enough
