@@ -2,7 +2,7 @@
 
 The online stage (:mod:`~trackctl.vmtrack.identity`) binds phones as the paper's real-time system
 did, frame by frame. Offline we have every track's whole life and every phone's whole motion, so
-identity becomes a global problem, solved here in three steps:
+identity becomes a global problem, solved here in four steps:
 
 1. **Evidence per (phone, track, frame)**: the track's velocity from its *detections alone*
    (a centred least-squares slope over ``velocity_window_s``: never the filter state, which
@@ -14,9 +14,13 @@ identity becomes a global problem, solved here in three steps:
    costs the evidence, switching tracks costs ``switch_cost``, being on no track costs
    ``none_cost`` (a track that fits worse than that is not the carrier). People walking
    together fit alike for a while; the path keeps the phone where the evidence before and after
-   puts it, and frames where two tracks fit within ``ratio`` are counted as ambiguous. A stretch
-   on one track with no unambiguous frame at all is not published (the report says so).
-3. **One phone per track**: where two phones' paths meet on one track, the better fit keeps it.
+   puts it, and frames where two tracks fit within ``ratio`` are counted as ambiguous.
+3. **Refinement** (``refine_passes``): from the frames where the path names a track clearly,
+   the phone's clock offset and step scale (one each) and its yaw over time are fitted; every
+   track is re-scored under that alignment (direction counts again) and the path re-run.
+4. **Publication**: a stretch on one track with too few clear frames (``min_clear_frames``,
+   ``min_clear_share``) is a guess and is not published (the report counts it); where two
+   phones' paths meet on one track, the better fit keeps it.
 
 Per phone, the report gives the alignment fitted over all frames it was assigned.
 """
