@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Alignment", "AlignConfig", "CandidateTable", "PairEvidence", "lag_grid"]
+__all__ = ["Alignment", "AlignConfig", "CandidateTable", "PairEvidence", "best_fit", "lag_grid"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,6 +40,19 @@ class AlignConfig:
     forget_s: float = 60.0
     """A bound phone's alignment follows changes (magnetic disturbance, heading drift) over this
     time constant; a changed carry breaks the binding and is re-fitted from scratch."""
+
+
+def best_fit(
+    S: np.ndarray, P: np.ndarray, T: np.ndarray, n: np.ndarray, cfg: AlignConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """The closed-form fit of evidence sums (any shape, element-wise): the best ``a`` (rotation
+    of S, scale |S|/P clipped to ``cfg.scale``) and its mean squared residual
+    (T - 2|a||S| + |a|^2 P) / n, clipped at 0. Every free fit in VM-Tracking goes through here."""
+    mag = np.abs(S)
+    scale = np.clip(mag / np.maximum(P, 1e-9), *cfg.scale)
+    r = np.maximum(T - 2 * scale * mag + scale * scale * P, 0.0) / np.maximum(n, 1e-9)
+    a = np.where(mag > 0, scale * S / np.maximum(mag, 1e-12), scale + 0j)
+    return a, r
 
 
 def lag_grid(cfg: AlignConfig) -> np.ndarray:
@@ -125,10 +138,8 @@ class PairEvidence:
             r = self.T[k] - 2 * (np.conj(a) * self.S[k]).real + abs(a) ** 2 * self.P[k]
             out[k] = max(r, 0.0) / n[k]
             return out
-        mag = np.abs(self.S)
-        s = np.clip(mag / np.maximum(self.P, 1e-9), *cfg.scale)
-        r = self.T - 2 * s * mag + s * s * self.P
-        out[enough] = np.maximum(r[enough], 0.0) / n[enough]
+        _, r = best_fit(self.S, self.P, self.T, self.n, cfg)
+        out[enough] = r[enough]
         return out
 
     def score(self, cfg: AlignConfig, known: Alignment | None = None) -> float:
@@ -143,10 +154,8 @@ class PairEvidence:
         k = int(np.argmin(res))
         if not math.isfinite(res[k]) or self.P[k] <= 0:
             return None
-        mag = abs(self.S[k])
-        s = float(np.clip(mag / self.P[k], *cfg.scale))
-        a = complex(s * self.S[k] / mag) if mag > 0 else complex(s, 0.0)
-        return Alignment(a, float(lags[k]), k)
+        a, _ = best_fit(self.S[k], self.P[k], self.T[k], self.n[k], cfg)
+        return Alignment(complex(a), float(lags[k]), k)
 
 
 class CandidateTable:
@@ -224,9 +233,7 @@ class CandidateTable:
             r = self.T[:, k] - 2 * (np.conj(a) * self.S[:, k]).real + abs(a) ** 2 * self.P[:, k]
             out = np.maximum(r, 0.0) / n[:, k]
             return np.where(self.n.max(axis=1) > 0, out, np.inf)
-        mag = np.abs(self.S)
-        s = np.clip(mag / np.maximum(self.P, 1e-9), *cfg.scale)
-        r = np.maximum(self.T - 2 * s * mag + s * s * self.P, 0.0) / n
+        _, r = best_fit(self.S, self.P, self.T, self.n, cfg)
         top = self.n.max(axis=1, keepdims=True)
         enough = (self.n >= 0.8 * top) & (self.n > 0)
         return np.where(enough, r, np.inf).min(axis=1)

@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from trackctl.vmtrack.align import AlignConfig, Alignment, PairEvidence, lag_grid
+from trackctl.vmtrack.align import AlignConfig, Alignment, PairEvidence, best_fit, lag_grid
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.tracker import GroundTrack
 
@@ -172,6 +172,25 @@ def _chains(frames: Sequence[FrameOut], plan: Publication, velocity_half_s: floa
     return out
 
 
+def _window_sums(
+    times: np.ndarray, z_track: np.ndarray, z_phone: np.ndarray, half_s: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Evidence sums S, P, T, n over a centred window of ``half_s`` around each of ``times``
+    (cumulative sums: O(frames)); ``z_phone`` is (frames,) or (frames, lags), NaN: no sample."""
+    zt = z_track if z_phone.ndim == 1 else z_track[:, None]
+    ok = ~(np.isnan(z_phone) | np.isnan(zt))
+    zp0, zt0 = np.where(ok, z_phone, 0), np.where(ok, zt, 0)
+    parts = [zt0 * np.conj(zp0), np.abs(zp0) ** 2, np.abs(zt0) ** 2, ok.astype(float)]
+    cums = [
+        np.concatenate([np.zeros((1, *q.shape[1:]), q.dtype), np.cumsum(q, axis=0)]) for q in parts
+    ]
+    half = int(half_s * 1e9)
+    lo = np.searchsorted(times, times - half, side="left")
+    hi = np.searchsorted(times, times + half, side="right")
+    sw, pw, tw, nw = (c[hi] - c[lo] for c in cums)
+    return sw, pw.real, tw.real, nw.real
+
+
 def _window_scores(
     chain: _Chain,
     zl: np.ndarray,
@@ -181,25 +200,12 @@ def _window_scores(
     """Mean squared disagreement (m/s)^2 per chain frame at the best alignment of the centred
     window (inf where the window holds too little evidence). ``zl``: (frames, lags) phone
     velocities."""
-    zt = chain.z[:, None]
-    ok = ~(np.isnan(zl) | np.isnan(zt))
-    zp = np.where(ok, zl, 0)
-    zt0 = np.where(ok, zt, 0)
-    parts = [zt0 * np.conj(zp), np.abs(zp) ** 2, np.abs(zt0) ** 2, ok.astype(float)]
-    cums = [
-        np.concatenate([np.zeros((1, zl.shape[1]), q.dtype), np.cumsum(q, axis=0)]) for q in parts
-    ]
-    half = int(cfg.window_s / 2 * 1e9)
-    lo = np.searchsorted(chain.times, chain.times - half, side="left")
-    hi = np.searchsorted(chain.times, chain.times + half, side="right")
-    s, p, t, n = (c[hi] - c[lo] for c in cums)
-    mag = np.abs(s)
-    scale = np.clip(mag / np.maximum(p.real, 1e-9), *acfg.scale)
-    r = (t.real - 2 * scale * mag + scale * scale * p.real) / np.maximum(n.real, 1e-9)
-    enough = (n.real >= cfg.min_window_frames) & (n.real >= 0.8 * n.real.max(axis=1, keepdims=True))
+    s, p, t, n = _window_sums(chain.times, chain.z, zl, cfg.window_s / 2)
+    _, r = best_fit(s, p, t, n, acfg)
+    enough = (n >= cfg.min_window_frames) & (n >= 0.8 * n.max(axis=1, keepdims=True))
     # two people standing still agree whatever the alignment: no evidence, not a match
-    moving = (t.real + p.real) / np.maximum(n.real, 1e-9) >= cfg.min_speed_mps**2
-    r = np.where(enough & moving, np.maximum(r, 0.0), np.inf)
+    moving = (t + p) / np.maximum(n, 1e-9) >= cfg.min_speed_mps**2
+    r = np.where(enough & moving, r, np.inf)
     return r.min(axis=1)
 
 
@@ -365,10 +371,8 @@ def _alignment_track(
     idx = np.arange(n_f)
     lo, hi = np.clip(idx - half, 0, n_f), np.clip(idx + half + 1, 0, n_f)
     sw, pw, nw = cs[hi] - cs[lo], cp[hi] - cp[lo], cn[hi] - cn[lo]
-    mag = np.abs(sw)
-    scale = np.clip(mag / np.maximum(pw, 1e-9), *acfg.scale)
-    a = np.where(mag > 0, scale * sw / np.maximum(mag, 1e-12), np.nan)
-    a = np.where(nw >= cfg.min_window_frames * 2, a, np.nan)
+    a, _ = best_fit(sw, pw, np.zeros(n_f), nw, acfg)
+    a = np.where((nw >= cfg.min_window_frames * 2) & (np.abs(sw) > 0), a, np.nan)
     # before the first and after the last well-fitted stretch (and between stretches) the
     # nearest fit holds: a carry stays until the phone is taken out
     good = np.flatnonzero(~np.isnan(a))
@@ -394,19 +398,10 @@ def _known_costs(
     k, a = known
     cost = free.copy()
     slack = math.radians(cfg.yaw_slack_deg)
-    half = int(cfg.known_window_s / 2 * 1e9)
     for c, chain in enumerate(chains):
         f = rows[c]
         af = a[f]
-        zp = zls[c][:, k]
-        ok = ~(np.isnan(zp) | np.isnan(chain.z))
-        zp0, zt0 = np.where(ok, zp, 0), np.where(ok, chain.z, 0)
-        parts = [zt0 * np.conj(zp0), np.abs(zp0) ** 2, np.abs(zt0) ** 2, ok.astype(float)]
-        cums = [np.concatenate([np.zeros(1, q.dtype), np.cumsum(q)]) for q in parts]
-        lo = np.searchsorted(chain.times, chain.times - half, side="left")
-        hi = np.searchsorted(chain.times, chain.times + half, side="right")
-        sw, pw, tw, nw = (q[hi] - q[lo] for q in cums)
-        pw, tw, nw = pw.real, tw.real, nw.real
+        sw, pw, tw, nw = _window_sums(chain.times, chain.z, zls[c][:, k], cfg.known_window_s / 2)
         phi = np.angle(af)
         dev = np.clip(np.angle(sw * np.exp(-1j * phi)), -slack, slack)
         rot = np.exp(1j * (phi + dev))
