@@ -233,9 +233,10 @@ def identify(
     paths: dict[str, np.ndarray] = {}
     costs: dict[str, np.ndarray] = {}
     half_v = cfg.velocity_window_s / 2
-    for mid, phone in sorted(phones.items()):
+    dead_reckoned = {mid: _dead_reckoned(phone) for mid, phone in phones.items()}
+    for mid in sorted(phones):
         paths[mid], costs[mid] = _phone_path(
-            phone, chains, rows, n_f, lags, lag_ns, acfg, cfg, aligned
+            dead_reckoned[mid], chains, rows, n_f, lags, lag_ns, acfg, cfg, aligned
         )
     ambiguous = np.zeros(n_f, bool)
     for mid, path in paths.items():
@@ -261,7 +262,7 @@ def identify(
         for c, (_, mid) in owner.items():
             out.mid_at[(keys[c], int(frame_t[fi]))] = mid
     out.ambiguous_frames = int(ambiguous.sum())
-    out.alignments = _alignments(out, chains, phones, lags, lag_ns, acfg, half_v)
+    out.alignments = _alignments(out, chains, dead_reckoned, lags, lag_ns, acfg, half_v)
     return out
 
 
@@ -279,7 +280,7 @@ def _clear_path(path: np.ndarray, cost: np.ndarray, cfg: IdentifyConfig) -> np.n
 
 
 def _phone_path(
-    phone: PhoneMotion,
+    path_pts: np.ndarray,
     chains: list[_Chain],
     rows: list[np.ndarray],
     n_f: int,
@@ -290,8 +291,8 @@ def _phone_path(
     aligned: bool,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One phone's path over the chains (chain index per frame, -1: none) and its cost matrix:
-    the free fit first, then ``refine_passes`` under the alignment the last path implies."""
-    path_pts = _dead_reckoned(phone)
+    the free fit first, then ``refine_passes`` under the alignment the last path implies.
+    ``path_pts``: the phone's dead-reckoned path (:func:`_dead_reckoned`)."""
     zls = []
     free = np.full((n_f, len(chains)), np.inf)
     for c, chain in enumerate(chains):
@@ -485,7 +486,7 @@ def _drop_unanchored(
 def _alignments(
     out: Identities,
     chains: list[_Chain],
-    phones: dict[str, PhoneMotion],
+    dead_reckoned: dict[str, np.ndarray],
     lags: np.ndarray,
     lag_ns: np.ndarray,
     acfg: AlignConfig,
@@ -504,7 +505,7 @@ def _alignments(
         t = np.array([p[0] for p in pairs], np.int64)
         z = np.array([p[1] for p in pairs])
         at = (t[:, None] + lag_ns[None, :]).ravel()
-        zl = _visual_velocity(_dead_reckoned(phones[mid]), at, half_s).reshape(len(t), len(lags))
+        zl = _visual_velocity(dead_reckoned[mid], at, half_s).reshape(len(t), len(lags))
         ev = PairEvidence(len(lags))
         for k in range(len(t)):
             ev.add(z[k], zl[k])
