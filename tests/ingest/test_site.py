@@ -45,6 +45,18 @@ def test_records_match_what_the_simulator_writes() -> None:
     assert bl == {"tag_n": "3", "robot_camera": "front"}
 
 
+def test_led_colours_reach_the_robot(tmp_path: Path) -> None:
+    from trackctl.smirror import SmirrorConfig
+    from trackctl.smirror.site import load_site
+
+    records = site_records({"robots": {"r1": {"front_hue": [20, 34], "back_hue": [100, 125]}}})
+    assert records["robot/r1"] == {"front_hue": "20-34", "back_hue": "100-125"}
+    with pytest.warns(Warning):
+        site = load_site(LogReader(SMIRROR), SmirrorConfig(site=records))
+    (robot,) = site.robots
+    assert (robot.led.front_hue, robot.led.back_hue) == ((20, 34), (100, 125))
+
+
 @pytest.mark.parametrize(
     "data, message",
     [
@@ -53,6 +65,8 @@ def test_records_match_what_the_simulator_writes() -> None:
         ({"robots": {"r1": {"ticks_per_m": "many"}}}, r"robots.r1.ticks_per_m: 'many' is not"),
         ({"robots": {"r1": {"wheel_base_m": -0.3}}}, "must be positive"),
         ({"robots": {"r1": {"led_height_m": float("nan")}}}, "is not finite"),
+        ({"robots": {"r1": {"front_hue": [30]}}}, r"robots.r1.front_hue: \[30\] is not a hue"),
+        ({"robots": {"r1": {"back_hue": [100, 200]}}}, r"back_hue.*need 0 <= LO <= HI <= 180"),
         ({"smirror": {"requesters": 0}}, "must be >= 1"),
         ({"smirror": {"floorplan": {"walls": 3}}}, "smirror.floorplan"),
         ({"bridgeloc": {"tag_n": 2.5}}, "is not an integer"),

@@ -51,3 +51,24 @@ def test_bad_configs() -> None:
         LinkConfig(unicast_kBps=0)
     with pytest.raises(ValueError, match="broadcast_loss"):
         LinkConfig(broadcast_loss=1.5)
+
+
+def test_each_of_our_robots_gets_its_own_copy() -> None:
+    link = NodeLink(LinkConfig(), np.random.default_rng(0))
+    d = link.send(0.0, 10_000, 5, False, 3)
+    # five 10 ms copies queued; ours are three different places among them
+    assert len(d.arrivals) == 3 and len(set(d.arrivals)) == 3
+    assert all(a is not None and 45.0 <= a <= 85.0 for a in d.arrivals)
+    none = link.send(1000.0, 10_000, 5, False, 0)
+    assert none.arrivals == () and none.comm_ms is None
+
+
+def test_broadcast_losses_are_per_receiver() -> None:
+    link = NodeLink(LinkConfig(broadcast_loss=0.5), np.random.default_rng(1))
+    out = [link.send(i * 500.0, 10_000, 20, True, 2) for i in range(400)]
+    # one copy on the air, every receiver of ours with its own chance to miss it
+    both = [d.arrivals for d in out]
+    assert all(len(a) == 2 for a in both)
+    one_only = sum((a[0] is None) != (a[1] is None) for a in both)
+    assert 120 < one_only < 280  # 2 x 0.5 x 0.5 of 400
+    assert sum(d.lost for d in out) == sum(a is None for x in both for a in x)

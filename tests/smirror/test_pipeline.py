@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
 
-from trackctl.errors import MissingTopicError
+from trackctl.errors import InputError, MissingTopicError
 from trackctl.logs import LogReader, LogWriter, topics
 from trackctl.logs.copy import filter_log
 from trackctl.logs.messages import MirrorTransmission
@@ -209,3 +209,36 @@ def test_led_coloured_clothes_are_not_taken_for_the_robot(tmp_path: Path) -> Non
     metrics, _ = run_detailed(LogReader(log), None, SmirrorConfig())
     assert metrics.metrics["fixes_used"] > 20
     assert metrics.metrics["error_m_mean"] < 0.2
+
+
+def test_every_robot_of_a_fleet_is_localized(tmp_path: Path) -> None:
+    """Three robots with their own LED colours patrol the same rooms; each asks the nodes for
+    images, finds its own LEDs and is localized, and the report says so per robot."""
+    from trackctl.sim.smirror import SmirrorScenario, simulate_smirror
+
+    log = tmp_path / "fleet.mcap"
+    scene = SmirrorScenario(
+        paths=1, people=3, robots=3, width_px=480, height_px=360, fps=2.5, duration_s=45.0, seed=4
+    )
+    simulate_smirror(str(log), scene)
+    out = tmp_path / "out.mcap"
+    with LogWriter(out) as writer:
+        report, res = run_detailed(LogReader(log), writer, SmirrorConfig())
+    m = report.metrics
+    assert m["robots"] == 3 and m["requesters"] == 3
+    for name in ("r1", "r2", "r3"):
+        one = res.per_robot[name]
+        assert one.robot == name and len(one.error_m) > 20, name
+        assert m[f"error_m_mean/{name}"] is not None and m[f"error_m_mean/{name}"] < 0.25, name
+        assert m[f"fixes_used/{name}"] > 10, name
+    # the run's samples are all robots' samples
+    assert len(res.error_m) == sum(len(r.error_m) for r in res.per_robot.values())
+    poses = LogReader(out).topics()
+    assert {"/smirror/r1/pose", "/smirror/r2/pose", "/smirror/r3/pose"} <= set(poses)
+    # one robot chosen: the others are not localized (nor counted as ours)
+    only, res_only = run_detailed(LogReader(log), None, SmirrorConfig(robot="r2"))
+    assert only.metrics["robots"] == 1 and list(res_only.per_robot) == ["r2"]
+    # the log's other two robots still load the links as requesters (traffic)
+    assert only.metrics["requesters"] == 3 and only.metrics["error_m_mean"] < 0.25
+    with pytest.raises(InputError, match="choose one with --robot"):
+        run_detailed(LogReader(log), None, SmirrorConfig(start=(13.5, 4.0, 0.0)))

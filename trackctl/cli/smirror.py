@@ -43,7 +43,8 @@ def smirror(
         typer.Option(help="Robots requesting images (default: the log's smirror/requesters)."),
     ] = None,
     robot: Annotated[
-        str | None, typer.Option(help="The robot to localize (default: the log's only robot).")
+        str | None,
+        typer.Option(help="Localize only this robot (default: every robot of the log)."),
     ] = None,
     link_kbps: Annotated[
         float, typer.Option("--link-kbps", help="Unicast link throughput, kB/s.")
@@ -67,7 +68,7 @@ def smirror(
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
-    """S-Mirror: localize a robot from its LEDs in node images, dead-reckoning in between."""
+    """S-Mirror: localize robots from their LEDs in node images, dead-reckoning in between."""
     from trackctl.errors import InputError
     from trackctl.smirror import Mode, SmirrorConfig, SmirrorProcessor
     from trackctl.smirror.link import LinkConfig
@@ -117,7 +118,13 @@ def simulate_smirror(
     paths: Annotated[int, typer.Option(help="Patrol loops of ~40 m the robot drives (1-4).")] = 4,
     people: Annotated[int, typer.Option(help="People walking in the rooms.")] = 6,
     requesters: Annotated[
-        int, typer.Option(help="Robots requesting node images (ours + others).")
+        int, typer.Option(help="Robots requesting node images (the fleet + others).")
+    ] = 1,
+    robots: Annotated[
+        int,
+        typer.Option(
+            help="Robots that patrol and log odometry (1-3; each with its own LED colours)."
+        ),
     ] = 1,
     seed: Annotated[int, typer.Option(help="Random seed (same seed, same bytes).")] = 0,
     fps: Annotated[float, typer.Option(help="Node frame rate, Hz.")] = 5.0,
@@ -162,6 +169,7 @@ def simulate_smirror(
             paths=paths,
             people=people,
             requesters=requesters,
+            robots=robots,
             seed=seed,
             fps=fps,
             width_px=w,

@@ -12,8 +12,11 @@ log's own records (the file wins). Every key is optional; a processor names what
         ticks_per_m: 2000    # wheel encoder ticks per metre of travel
         wheel_base_m: 0.30   # distance between the wheels
         led_height_m: 0.32   # S-Mirror LEDs above the floor
-        led_front_m: 0.15    # front (red) LED ahead of the wheel axis centre
-        led_back_m: -0.15    # back (green) LED, negative = behind
+        led_front_m: 0.15    # front LED ahead of the wheel axis centre
+        led_back_m: -0.15    # back LED, negative = behind
+        front_hue: [45, 80]  # front LED colour: OpenCV hue range 0..180 (default green)
+        back_hue: [135, 170] # back LED colour (default magenta); robots of one fleet should
+                             # carry different pairs (e.g. [20, 34] yellow / [100, 125] blue)
     smirror:
       requesters: 1          # robots requesting images (ours + others)
       floorplan:             # walls block a node's view (line of sight)
@@ -52,6 +55,7 @@ __all__ = [
 ]
 
 ROBOT_KEYS = ("ticks_per_m", "wheel_base_m", "led_height_m", "led_front_m", "led_back_m")
+HUE_KEYS = ("front_hue", "back_hue")
 BRIDGELOC_KEYS = {
     "robot": str,
     "robot_camera": str,
@@ -74,6 +78,21 @@ def _number(value: Any, where: str, kind: type = float) -> str:
     if kind is int and float(value) != int(value):
         raise InputError(f"{where}: {value!r} is not an integer")
     return str(int(value)) if kind is int else str(float(value))
+
+
+def _hue_range(value: Any, where: str) -> str:
+    """An OpenCV hue range [LO, HI] (0..180) as the record's ``LO-HI``."""
+    if (
+        not isinstance(value, Sequence)
+        or isinstance(value, str)
+        or len(value) != 2
+        or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)
+    ):
+        raise InputError(f"{where}: {value!r} is not a hue range [LO, HI] (OpenCV hue, 0..180)")
+    lo, hi = value
+    if not 0 <= lo <= hi <= 180:
+        raise InputError(f"{where}: {value!r}: need 0 <= LO <= HI <= 180")
+    return f"{lo}-{hi}"
 
 
 def _mapping(value: Any, where: str) -> Mapping[str, Any]:
@@ -104,8 +123,11 @@ def site_records(data: Any, path: str | Path = "site") -> dict[str, dict[str, st
         if not isinstance(name, str) or not name or "/" in name:
             raise InputError(f"{where}: a robot NAME must be a non-empty string without '/'")
         robot = _mapping(robot, where)
-        _known(robot, ROBOT_KEYS, where)
-        out[f"robot/{name}"] = {k: _number(v, f"{where}.{k}") for k, v in robot.items()}
+        _known(robot, ROBOT_KEYS + HUE_KEYS, where)
+        out[f"robot/{name}"] = {
+            k: _hue_range(v, f"{where}.{k}") if k in HUE_KEYS else _number(v, f"{where}.{k}")
+            for k, v in robot.items()
+        }
         for k in ("ticks_per_m", "wheel_base_m"):
             if k in robot and float(robot[k]) <= 0:
                 raise InputError(f"{where}.{k}: must be positive, got {robot[k]!r}")

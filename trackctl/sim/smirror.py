@@ -1,4 +1,4 @@
-"""S-Mirror scenarios (dissertation §4.1.3): three rooms, three node cameras, a patrolling robot.
+"""S-Mirror scenarios (dissertation §4.1.3): three rooms, three node cameras, patrolling robots.
 
 A differential-drive robot with wheel encoders (per-wheel scale error and slip) and two LEDs
 (front green, back magenta) patrols predefined ~40 m loops from a home point in the middle room,
@@ -8,8 +8,9 @@ nodes publish their *calibrated* camera model, which differs from the true pose 
 calibration error, as a real calibration would. Same seed, same bytes.
 
 Topics: ``/<node>/image`` (foxglove.CompressedImage), ``/<node>/camera_model``,
-``/<node>/calibration``, ``/robot/r1/odom`` (trackctl.WheelOdometry, 25 Hz),
-``/ground_truth`` (12.5 Hz). Metadata: ``scenario``, ``robot/r1`` (wheels and LEDs),
+``/<node>/calibration``, ``/robot/rK/odom`` (trackctl.WheelOdometry, 25 Hz, one per robot of
+the fleet: r1, r2, r3), ``/ground_truth`` (12.5 Hz). Metadata: ``scenario``, ``robot/rK``
+(wheels and LEDs),
 ``smirror/floorplan`` (walls), ``smirror/requesters`` (how many robots request node images).
 """
 
@@ -18,6 +19,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -108,6 +110,27 @@ NODES: tuple[tuple[str, tuple[float, float, float], tuple[float, float, float]],
 """Node cameras: name, eye (m), look-at target (m). Corner mounts at 3 m, one per room."""
 
 
+class FleetRobot(NamedTuple):
+    """One robot of the simulated fleet: dock (m), LED colours (BGR) and hue ranges (LO-HI)."""
+
+    dock: tuple[float, float]
+    front_bgr: tuple[int, int, int]
+    front_hue: str
+    back_bgr: tuple[int, int, int]
+    back_hue: str
+
+
+FLEET = (
+    FleetRobot((13.5, 4.0), (60, 255, 60), "45-80", (255, 60, 255), "135-170"),
+    FleetRobot((13.5, 5.6), (40, 230, 255), "20-34", (255, 110, 30), "100-125"),
+    FleetRobot((13.5, 2.4), (255, 255, 40), "84-98", (40, 40, 255), "0-8"),
+)
+"""The robots of a fleet: dock (m), front LED colour (BGR) and hue range (OpenCV 0..180), back
+LED colour and hue range. r1 is the paper's robot (green front, magenta back); the others carry
+other colour pairs so that each robot tells its own LEDs from the others' (yellow/blue,
+cyan/red)."""
+
+
 def path_length_m(k: int) -> float:
     """Length of patrol loop ``k`` (metres)."""
     pts = [HOME, *PATHS[k]]
@@ -121,6 +144,10 @@ class SmirrorScenario:
     paths: int = 4
     people: int = 6
     requesters: int = 1
+    """Robots requesting node images: the fleet's robots plus others (traffic only)."""
+    robots: int = 1
+    """Robots that patrol, are rendered and log odometry (1..3, :data:`FLEET`); robot k starts
+    10 s after robot k-1, from its own dock, on the loops in turn from loop k."""
     seed: int = 0
     fps: float = 5.0
     width_px: int = 640
@@ -156,15 +183,19 @@ class SmirrorScenario:
             raise ValueError(f"paths must be 1..{len(PATHS)}, got {self.paths}")
         if self.people < 0 or self.requesters < 1:
             raise ValueError("people must be >= 0 and requesters >= 1")
+        if not 1 <= self.robots <= len(FLEET):
+            raise ValueError(f"robots must be 1..{len(FLEET)}, got {self.robots}")
         if self.fps <= 0 or self.fps > self.odom_hz:
             raise ValueError(f"fps must be in (0, {self.odom_hz}], got {self.fps}")
 
 
-def _drive(cfg: SmirrorScenario) -> tuple[np.ndarray, np.ndarray, list[float]]:
-    """True poses (n, 3) and true wheel increments (n, 2) on the odometry grid, path start times."""
+def _drive(cfg: SmirrorScenario, robot: int = 0) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """True poses (n, 3) and true wheel increments (n, 2) on the odometry grid, path start times,
+    of robot ``robot`` of the fleet."""
     dt = 1.0 / cfg.odom_hz
     half_b = cfg.wheel_base_m / 2
-    poses = [(HOME[0], HOME[1], 0.0)]
+    dock = FLEET[robot].dock
+    poses = [(dock[0], dock[1], 0.0)]
     incs = [(0.0, 0.0)]
     starts: list[float] = []
 
@@ -173,8 +204,9 @@ def _drive(cfg: SmirrorScenario) -> tuple[np.ndarray, np.ndarray, list[float]]:
             poses.append(poses[-1])
             incs.append((0.0, 0.0))
 
-    stay(cfg.dock_s)
-    for k in range(cfg.paths):
+    stay(cfg.dock_s + 10.0 * robot)
+    for j in range(cfg.paths):
+        k = (j + robot) % len(PATHS)
         starts.append(len(poses) * dt)
         for wx, wy in PATHS[k]:
             x, y, yaw = poses[-1]
@@ -264,12 +296,31 @@ _CLOTHES = [
 ]
 
 
+def _fleet(
+    cfg: SmirrorScenario, poses: np.ndarray, ticks: np.ndarray, rng: np.random.Generator
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(true poses, encoder ticks) of every robot on r1's clock: the others cut where r1's log
+    ends, or parked at their end."""
+    n = len(poses)
+    fleet = [(poses, ticks)]
+    for k in range(1, cfg.robots):
+        p_k, inc_k, _ = _drive(cfg, k)
+        t_k = _odometry(cfg, inc_k, rng)
+        pad = max(0, n - len(p_k))
+        fleet.append(
+            (
+                np.vstack([p_k, np.repeat(p_k[-1:], pad, axis=0)])[:n],
+                np.vstack([t_k, np.repeat(t_k[-1:], pad, axis=0)])[:n],
+            )
+        )
+    return fleet
+
+
 def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, int]:
     """Write an S-Mirror scenario log to ``out``; returns message counts per topic."""
     cfg = cfg or SmirrorScenario()
     rng = np.random.default_rng(cfg.seed)
     plan = three_rooms()
-    shape = RobotShape()
     poses, incs, starts = _drive(cfg)
     ticks = _odometry(cfg, incs, rng)
     dt = 1.0 / cfg.odom_hz
@@ -279,6 +330,13 @@ def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, 
         starts = [s for s in starts if s < keep * dt]
     n = len(poses)
     duration_s = n * dt
+    fleet = _fleet(cfg, poses, ticks, rng)
+    names = [f"r{k + 1}" for k in range(cfg.robots)]
+    shapes = [
+        replace(RobotShape(), front_bgr=FLEET[k].front_bgr, back_bgr=FLEET[k].back_bgr)
+        for k in range(cfg.robots)
+    ]
+    shape = shapes[0]
     # calibration errors are drawn before the people, so logs with and without people differ in
     # nothing else (the occlusion experiment of Figs. 4.8-4.10)
     true_models = node_models(cfg)
@@ -301,12 +359,12 @@ def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, 
         _, trj, x0, y0 = walkers[k]
         return trj.at(t)[0] + (x0, y0)
 
-    def robot_pose(t: float) -> np.ndarray:
+    def robot_pose(k: int, t: float) -> np.ndarray:
         f = min(t / dt, n - 1.0)
         i = min(int(f), n - 2)
         a = f - i
-        p = poses[i] * (1 - a) + poses[i + 1] * a
-        return p
+        p_k = fleet[k][0]
+        return p_k[i] * (1 - a) + p_k[i + 1] * a
 
     with LogWriter(out) as w:
         w.add_metadata(
@@ -316,24 +374,26 @@ def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, 
                 "seed": cfg.seed,
                 "paths": cfg.paths,
                 "people": cfg.people,
-                "requesters": cfg.requesters,
+                "requesters": max(cfg.requesters, cfg.robots),
+                "robots": cfg.robots,
                 "fps": cfg.fps,
                 "path_start_s": json.dumps([round(s, 3) for s in starts]),
                 "path_length_m": json.dumps([round(path_length_m(k), 2) for k in range(cfg.paths)]),
             },
         )
-        w.add_metadata(
-            "robot/r1",
-            {
+        for k, name in enumerate(names):
+            robot_md: dict[str, object] = {
                 "ticks_per_m": cfg.ticks_per_m,
                 "wheel_base_m": cfg.wheel_base_m,
                 "led_height_m": shape.led_height_m,
                 "led_front_m": shape.led_front_m,
                 "led_back_m": shape.led_back_m,
-            },
-        )
+            }
+            if k > 0:  # r1's colours are the defaults
+                robot_md.update(front_hue=FLEET[k].front_hue, back_hue=FLEET[k].back_hue)
+            w.add_metadata(f"robot/{name}", robot_md)
         w.add_metadata("smirror/floorplan", {"plan": json.dumps(plan.to_json())})
-        w.add_metadata("smirror/requesters", {"count": cfg.requesters})
+        w.add_metadata("smirror/requesters", {"count": max(cfg.requesters, cfg.robots)})
         for model in calib_models:
             put(w, topics.calibration(model.camera), to_foxglove_calibration(model), 0)
             put(w, topics.camera_model(model.camera), model, 0)
@@ -348,9 +408,9 @@ def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, 
                 tf = next_frame * frame_dt
                 tf_ns = int(round(tf * S))
                 people = [(person_xy(k, tf), shirts[k]) for k in range(len(walkers))]
-                robot = robot_pose(tf)
+                robots = [robot_pose(k, tf) for k in range(cfg.robots)]
                 for model, ren, lens in zip(true_models, renderers, lenses, strict=True):
-                    img = lens.apply(ren.render(people, [robot], shape, rng))
+                    img = lens.apply(ren.render(people, robots, shapes, rng))
                     ok, buf = cv2.imencode(
                         ".jpg", img, [int(cv2.IMWRITE_JPEG_QUALITY), cfg.jpeg_quality]
                     )
@@ -362,15 +422,18 @@ def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, 
                         tf_ns,
                     )
                 next_frame += 1
-            put(
-                w,
-                topics.odom("r1"),
-                WheelOdometry(t_ns, "robot/r1", int(ticks[i, 0]), int(ticks[i, 1])),
-                t_ns,
-            )
+            for name, (_, t_k) in zip(names, fleet, strict=True):
+                put(
+                    w,
+                    topics.odom(name),
+                    WheelOdometry(t_ns, f"robot/{name}", int(t_k[i, 0]), int(t_k[i, 1])),
+                    t_ns,
+                )
             if i % 2 == 0:
-                x, y, yaw = poses[i]
-                ents = [GroundTruthEntity("r1", Vec3(float(x), float(y), 0.0), float(yaw))]
+                ents = []
+                for name, (p_k, _) in zip(names, fleet, strict=True):
+                    x, y, yaw = p_k[i]
+                    ents.append(GroundTruthEntity(name, Vec3(float(x), float(y), 0.0), float(yaw)))
                 for k in range(len(walkers)):
                     p = person_xy(k, i * dt)
                     ents.append(

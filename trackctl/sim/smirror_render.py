@@ -46,6 +46,9 @@ class RobotShape:
     led_front_m: float = 0.15
     led_back_m: float = -0.15
     led_radius_m: float = 0.035
+    front_bgr: tuple[int, int, int] = LED_FRONT_BGR
+    back_bgr: tuple[int, int, int] = LED_BACK_BGR
+    """LED colours (robots of one fleet may carry different pairs to tell each other apart)."""
 
 
 def _clip_near(pts_c: np.ndarray, near: float = 0.05) -> np.ndarray:
@@ -261,7 +264,8 @@ class NodeRenderer:
         cv2.fillConvexPoly(img, hull, (50, 45, 40), cv2.LINE_AA, 4)
         top, _ = self.cam.project(box[4:])
         cv2.fillConvexPoly(img, np.round(top * 16).astype(np.int32), (80, 75, 70), cv2.LINE_AA, 4)
-        for off, color in ((shape.led_front_m, LED_FRONT_BGR), (shape.led_back_m, LED_BACK_BGR)):
+        leds = ((shape.led_front_m, shape.front_bgr), (shape.led_back_m, shape.back_bgr))
+        for off, color in leds:
             led = np.array([[x + off * c, y + off * s, shape.led_height_m]])
             ((u, v),) = self.cam.project(led)[0]
             depth = float(self.cam.to_camera(led)[0, 2])
@@ -274,24 +278,26 @@ class NodeRenderer:
         self,
         people: list[tuple[np.ndarray, tuple[int, int, int]]],
         robots: list[np.ndarray],
-        shape: RobotShape,
+        shape: RobotShape | list[RobotShape],
         rng: np.random.Generator,
     ) -> np.ndarray:
-        """One BGR frame: the background, then people and robots far to near, then noise."""
+        """One BGR frame: the background, then people and robots far to near, then noise.
+        ``shape`` is every robot's, or one per robot."""
+        shapes = shape if isinstance(shape, list) else [shape] * len(robots)
         img = self.background.copy()
         eye = self.cam.position[:2]
         things: list[tuple[float, str, object]] = []
         for xy, color in people:
             if np.isfinite(xy).all() and self._visible(xy):
                 things.append((float(np.linalg.norm(xy - eye)), "p", (xy, color)))
-        for pose in robots:
+        for pose, body in zip(robots, shapes, strict=True):
             if self._visible(pose[:2]):
-                things.append((float(np.linalg.norm(pose[:2] - eye)), "r", pose))
+                things.append((float(np.linalg.norm(pose[:2] - eye)), "r", (pose, body)))
         for _, kind, obj in sorted(things, key=lambda t: -t[0]):
             if kind == "p":
                 self._draw_person(img, *obj)  # type: ignore[misc]
             else:
-                self._draw_robot(img, obj, shape)  # type: ignore[arg-type]
+                self._draw_robot(img, *obj)  # type: ignore[misc]
         k = int(rng.integers(len(self._noise)))
         shift = int(rng.integers(self.w))
         noise = np.roll(self._noise[k], shift, axis=1)

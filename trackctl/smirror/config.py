@@ -40,7 +40,8 @@ class SmirrorConfig:
     requesters: int | None = None
     """Robots requesting images (ours + others); None: the log's ``smirror/requesters`` metadata."""
     robot: str | None = None
-    """The localized robot; None: the log's only ``robot/<NAME>`` metadata or odometry topic."""
+    """The one robot to localize; None: every robot of the log (``robot/<NAME>`` metadata, or
+    odometry topics without it)."""
     node: NodeConfig = field(default_factory=NodeConfig)
     filter: FilterConfig = field(default_factory=FilterConfig)
     beacon_period_s: float = 1.0
@@ -116,3 +117,5 @@ class SmirrorResult:
     """Ground-truth samples at which the robot had no pose yet (not scored as errors)."""
     nis: list[float] = field(default_factory=list)
     """Normalized innovation squared of each fix fused (3 dof; mean ~3 when consistent)."""
+    per_robot: dict[str, SmirrorResult] = field(default_factory=dict)
+    """Each localized robot's own figures (the run's are all robots' together)."""

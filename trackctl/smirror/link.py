@@ -46,16 +46,25 @@ class LinkConfig:
 
 @dataclass(frozen=True, slots=True)
 class Delivery:
-    """What became of one answer: when our copy arrives (ms after it was queued) or why not."""
+    """What became of one answer: when each of our robots' copies arrives, or why not."""
 
-    comm_ms: float | None
-    """Queueing + transmission + latency of our robot's copy; None when it never arrives."""
     queue_ms: float
     """Time the answer waited behind earlier ones (not counting a broadcast's DTIM wait)."""
     dropped: bool = False
     """The queue was full: nothing was sent."""
-    lost: bool = False
-    """Broadcast without link-layer retry: sent, but our robot did not receive it."""
+    arrivals: tuple[float | None, ...] = ()
+    """Per receiving robot of ours: queueing + transmission + latency of its copy (ms after the
+    answer was queued), None when a broadcast without link-layer retry did not reach it."""
+
+    @property
+    def comm_ms(self) -> float | None:
+        """The first receiving robot's arrival (None: none of ours received it)."""
+        return self.arrivals[0] if self.arrivals else None
+
+    @property
+    def lost(self) -> int:
+        """How many of our robots missed the broadcast."""
+        return sum(a is None for a in self.arrivals)
 
 
 class NodeLink:
@@ -76,14 +85,14 @@ class NodeLink:
         return self._dtim_phase + math.ceil((t_ms - self._dtim_phase) / d) * d
 
     def send(
-        self, t_ms: float, size_bytes: int, requests: int, broadcast: bool, ours: bool
+        self, t_ms: float, size_bytes: int, requests: int, broadcast: bool, ours: int
     ) -> Delivery:
-        """Queue one answer of ``size_bytes`` for ``requests`` requesters (our robot among them
-        when ``ours``)."""
+        """Queue one answer of ``size_bytes`` for ``requests`` requesters, ``ours`` of which are
+        robots this run localizes (the others are traffic)."""
         cfg = self.cfg
         queue_ms = max(0.0, self.busy_until_ms - t_ms)
         if queue_ms > cfg.max_queue_ms:
-            return Delivery(None, queue_ms, dropped=True)
+            return Delivery(queue_ms, dropped=True)
         if broadcast:
             # held for the next DTIM beacon (the channel stays free meanwhile), then sent
             # after whatever is queued ahead of it
@@ -91,14 +100,21 @@ class NodeLink:
             airtime = size_bytes / cfg.broadcast_kBps
             self.busy_until_ms = start + airtime
             self.sent_bytes += size_bytes
-            lost = ours and bool(self.rng.random() < cfg.broadcast_loss)
             done = self.busy_until_ms + cfg.latency_ms - t_ms
-            return Delivery(None if lost or not ours else done, queue_ms, lost=lost)
+            # no link-layer retry: each receiver misses it on its own
+            got = [bool(self.rng.random() >= cfg.broadcast_loss) for _ in range(ours)]
+            return Delivery(queue_ms, arrivals=tuple(done if g else None for g in got))
         start = max(t_ms, self.busy_until_ms)
         airtime = size_bytes / cfg.unicast_kBps
         self.busy_until_ms = start + requests * airtime
         self.sent_bytes += size_bytes * requests
-        if not ours:
-            return Delivery(None, queue_ms)
-        position = int(self.rng.integers(1, requests + 1))  # our copy's place among the copies
-        return Delivery(start + position * airtime + cfg.latency_ms - t_ms, queue_ms)
+        if ours <= 0:
+            return Delivery(queue_ms)
+        # our copies' places among the requests' copies
+        if ours == 1:
+            places = [int(self.rng.integers(1, requests + 1))]
+        else:
+            places = [int(k) + 1 for k in self.rng.choice(requests, ours, replace=False)]
+        return Delivery(
+            queue_ms, arrivals=tuple(start + k * airtime + cfg.latency_ms - t_ms for k in places)
+        )

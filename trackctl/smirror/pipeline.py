@@ -172,7 +172,34 @@ def report_metrics(
         "delivered_share": None
         if central or not res.ours_requested
         else round(res.fix_attempts / res.ours_requested, 4),
+        "robots": max(1, len(res.per_robot)),
+        **_per_robot(res, cfg),
     }
+
+
+PER_ROBOT_KEYS = (
+    "error_m_mean",
+    "error_m_mean_out_coverage",
+    "localized_share",
+    "first_fix_s",
+    "fixes_used",
+    "delivered_share",
+    "delay_ms_mean_in_coverage",
+)
+"""Figures reported per robot as ``KEY/<ROBOT>`` when a run localizes several robots."""
+
+
+def _per_robot(res: SmirrorResult, cfg: SmirrorConfig) -> dict[str, float | int | str | None]:
+    if len(res.per_robot) < 2:
+        return {}
+    out: dict[str, float | int | str | None] = {}
+    for name, one in res.per_robot.items():
+        m = report_metrics(one, cfg)
+        for key in PER_ROBOT_KEYS:
+            value = m[key]
+            assert not isinstance(value, bool)
+            out[f"{key}/{name}"] = value
+    return out
 
 
 NIS_95_3DOF = 7.815

@@ -22,7 +22,15 @@ from trackctl.smirror.config import Mode, SmirrorConfig
 from trackctl.smirror.node import MirrorNode
 from trackctl.smirror.robot import LedConfig
 
-__all__ = ["Coverage", "Site", "load_site", "camera_models", "robot_name", "floorplan"]
+__all__ = [
+    "Coverage",
+    "RobotSite",
+    "Site",
+    "load_site",
+    "camera_models",
+    "robot_names",
+    "floorplan",
+]
 
 
 class Coverage:
@@ -79,9 +87,11 @@ def camera_models(reader: LogReader) -> dict[str, CameraModel]:
     return out
 
 
-def robot_name(reader: LogReader, cfg: SmirrorConfig) -> str:
+def robot_names(reader: LogReader, cfg: SmirrorConfig) -> list[str]:
+    """The robots to localize: ``cfg.robot``, else every ``robot/<NAME>`` record (or, without
+    any, every robot odometry topic)."""
     if cfg.robot:
-        return cfg.robot
+        return [cfg.robot]
     records = {**reader.metadata(), **cfg.site}
     names = sorted(k.split("/", 1)[1] for k in records if k.startswith("robot/"))
     if not names:
@@ -95,11 +105,7 @@ def robot_name(reader: LogReader, cfg: SmirrorConfig) -> str:
             f"{reader.path}: no robot: neither robot/<NAME> metadata nor a {topics.odom('<NAME>')} "
             "topic; smirror localizes a robot carrying two LEDs"
         )
-    if len(names) > 1:
-        raise InputError(
-            f"{reader.path}: several robots ({', '.join(names)}); choose one with --robot"
-        )
-    return names[0]
+    return names
 
 
 def floorplan(reader: LogReader, metadata: Mapping[str, Mapping[str, str]]) -> FloorPlan | None:
@@ -115,26 +121,50 @@ def floorplan(reader: LogReader, metadata: Mapping[str, Mapping[str, str]]) -> F
 _ROBOT_KEYS = ("led_height_m", "led_front_m", "led_back_m", "ticks_per_m", "wheel_base_m")
 
 
+def _hue(
+    values: Mapping[str, str], key: str, default: tuple[int, int], where: str
+) -> tuple[int, int]:
+    """An OpenCV hue range ``LO-HI`` (0..180) from a robot record, ``default`` when absent."""
+    if key not in values:
+        return default
+    try:
+        lo, hi = (int(v) for v in str(values[key]).split("-"))
+    except ValueError:
+        raise InputError(
+            f"{where}: {key}={values[key]!r} is not a hue range LO-HI (OpenCV hue, 0..180)"
+        ) from None
+    if not 0 <= lo <= hi <= 180:
+        raise InputError(f"{where}: {key}={values[key]!r}: need 0 <= LO <= HI <= 180")
+    return lo, hi
+
+
 def _warn_defaults(
     reader: LogReader,
-    robot: str,
-    rmd: Mapping[str, str],
-    led: LedConfig,
-    drive: DiffDrive,
+    robots: list[tuple[str, Mapping[str, str], LedConfig, DiffDrive]],
     plan: FloorPlan | None,
 ) -> None:
     """One warning naming every site value the log does not give and the default used."""
-    values = {
-        "led_height_m": led.led_height_m,
-        "led_front_m": led.led_front_m,
-        "led_back_m": led.led_back_m,
-        "ticks_per_m": drive.ticks_per_m,
-        "wheel_base_m": drive.wheel_base_m,
-    }
-    missing = [f"{k}={values[k]:g}" for k in _ROBOT_KEYS if k not in rmd]
     parts = []
-    if missing:
-        parts.append(f"robot/{robot} {', '.join(missing)}")
+    for robot, rmd, led, drive in robots:
+        values = {
+            "led_height_m": led.led_height_m,
+            "led_front_m": led.led_front_m,
+            "led_back_m": led.led_back_m,
+            "ticks_per_m": drive.ticks_per_m,
+            "wheel_base_m": drive.wheel_base_m,
+        }
+        missing = [f"{k}={values[k]:g}" for k in _ROBOT_KEYS if k not in rmd]
+        if missing:
+            parts.append(f"robot/{robot} {', '.join(missing)}")
+    colours: dict[tuple[tuple[int, int], tuple[int, int]], list[str]] = {}
+    for robot, _, led, _ in robots:
+        colours.setdefault((led.front_hue, led.back_hue), []).append(robot)
+    for same in colours.values():
+        if len(same) > 1:
+            parts.append(
+                f"robots {', '.join(same)} carry the same LED colours (front_hue/back_hue): each "
+                "tells its LEDs from the others' only by its own predicted position"
+            )
     if plan is None:
         parts.append("no smirror/floorplan (walls do not block the nodes' views)")
     warn_site_defaults(reader.path, parts)
@@ -153,17 +183,26 @@ def metadata_float(values: Mapping[str, str], key: str, default: float, where: s
     return value
 
 
+@dataclass(frozen=True)
+class RobotSite:
+    """One robot of the site: its name, odometry topic, LEDs and wheels."""
+
+    name: str
+    odom_topic: str
+    led: LedConfig
+    drive: DiffDrive
+
+
 @dataclass
 class Site:
     """Everything a run needs to know about the log's site before the first message."""
 
     models: dict[str, CameraModel]
-    robot: str
-    odom_topic: str
+    robots: list[RobotSite]
+    """The robots this run localizes (each asks the nodes for images)."""
     use_odom: bool
-    led: LedConfig
-    drive: DiffDrive
     requesters: int
+    """Robots requesting images: ours plus others that are traffic only (at least ours)."""
     cams: dict[str, PinholeCamera]
     nodes: dict[str, MirrorNode]
     cover: Coverage
@@ -176,24 +215,9 @@ class Site:
         return [topics.image(n) for n in self.models]
 
 
-def load_site(reader: LogReader, cfg: SmirrorConfig) -> Site:
-    """The site of ``reader``'s log.
-
-    Raises:
-        MissingTopicError: no node camera, no robot, or (mirror+odom) no odometry for the robot.
-        InputError: malformed robot metadata or floor plan.
-    """
-    models = camera_models(reader)
-    robot = robot_name(reader, cfg)
-    present = reader.topics()
-    odom_topic = topics.odom(robot)
-    use_odom = cfg.mode is Mode.MIRROR_ODOM
-    if use_odom and odom_topic not in present:
-        raise MissingTopicError(
-            f"{reader.path}: {odom_topic} is missing: smirror --mode mirror+odom dead-reckons "
-            f"robot {robot!r} with its wheel odometry (use --mode centralized for vision only)"
-        )
-    metadata = {**reader.metadata(), **cfg.site}
+def _robot(
+    reader: LogReader, metadata: Mapping[str, Mapping[str, str]], robot: str
+) -> tuple[RobotSite, Mapping[str, str]]:
     rmd = metadata.get(f"robot/{robot}", {})
     where = f"{reader.path}: metadata robot/{robot}"
     led_default, drive_default = LedConfig(), DiffDrive()
@@ -201,26 +225,54 @@ def load_site(reader: LogReader, cfg: SmirrorConfig) -> Site:
         led_height_m=metadata_float(rmd, "led_height_m", led_default.led_height_m, where),
         led_front_m=metadata_float(rmd, "led_front_m", led_default.led_front_m, where),
         led_back_m=metadata_float(rmd, "led_back_m", led_default.led_back_m, where),
+        front_hue=_hue(rmd, "front_hue", led_default.front_hue, where),
+        back_hue=_hue(rmd, "back_hue", led_default.back_hue, where),
     )
     drive = DiffDrive(
         metadata_float(rmd, "ticks_per_m", drive_default.ticks_per_m, where),
         metadata_float(rmd, "wheel_base_m", drive_default.wheel_base_m, where),
     )
+    return RobotSite(robot, topics.odom(robot), led, drive), rmd
+
+
+def load_site(reader: LogReader, cfg: SmirrorConfig) -> Site:
+    """The site of ``reader``'s log.
+
+    Raises:
+        MissingTopicError: no node camera, no robot, or (mirror+odom) no odometry for a robot.
+        InputError: malformed robot metadata or floor plan; ``--start`` with several robots.
+    """
+    models = camera_models(reader)
+    names = robot_names(reader, cfg)
+    present = reader.topics()
+    use_odom = cfg.mode is Mode.MIRROR_ODOM
+    metadata = {**reader.metadata(), **cfg.site}
+    robots = [_robot(reader, metadata, name) for name in names]
+    if use_odom:
+        for robot, _ in robots:
+            if robot.odom_topic not in present:
+                raise MissingTopicError(
+                    f"{reader.path}: {robot.odom_topic} is missing: smirror --mode mirror+odom "
+                    f"dead-reckons robot {robot.name!r} with its wheel odometry (use --mode "
+                    "centralized for vision only, or --robot to choose another robot)"
+                )
+    if cfg.start is not None and len(robots) > 1:
+        raise InputError(
+            f"{reader.path}: --start gives one robot's start pose, but the log has robots "
+            f"{', '.join(names)}; choose one with --robot"
+        )
     n_req = cfg.requesters or int(metadata.get("smirror/requesters", {}).get("count", 1))
     plan = floorplan(reader, metadata)
-    _warn_defaults(reader, robot, rmd, led, drive, plan)
+    _warn_defaults(reader, [(r.name, rmd, r.led, r.drive) for r, rmd in robots], plan)
     cams = {n: PinholeCamera(m) for n, m in models.items()}
     nodes = {n: MirrorNode(m, cfg.node) for n, m in models.items()}
     return Site(
         models=models,
-        robot=robot,
-        odom_topic=odom_topic,
+        robots=[r for r, _ in robots],
         use_odom=use_odom,
-        led=led,
-        drive=drive,
-        requesters=n_req,
+        requesters=max(n_req, len(robots)),
         cams=cams,
         nodes=nodes,
-        cover=Coverage(cams, plan, cfg, led.led_height_m),
+        cover=Coverage(cams, plan, cfg, robots[0][0].led.led_height_m),
         start=cfg.start,
     )
