@@ -170,9 +170,13 @@ class IdentityBinder:
         self._detect_losses(t_ns, free)
         wants = {}
         ambiguous = False
+        # what every unbound phone compares with, once per frame
+        free_vids = {trk.vid for trk in free}
+        conv = [trk for trk in free if trk.hits >= self.cfg.converge_hits]  # velocity converged
+        z = np.array([complex(trk.kf.x[2, 0], trk.kf.x[3, 0]) for trk in conv])
         for mid in self.phones:
             if mid not in self.bound:
-                choice, unsure = self._filter_candidates(mid, t_ns, free)
+                choice, unsure = self._filter_candidates(mid, t_ns, free, free_vids, conv, z)
                 ambiguous |= unsure
                 if choice is not None:
                     wants[mid] = choice
@@ -322,20 +326,25 @@ class IdentityBinder:
         return False
 
     def _filter_candidates(
-        self, mid: str, t_ns: int, free: list[GroundTrack]
+        self,
+        mid: str,
+        t_ns: int,
+        free: list[GroundTrack],
+        free_vids: set[str],
+        conv: list[GroundTrack],
+        z: np.ndarray,
     ) -> tuple[tuple[GroundTrack, float, PairEvidence, Alignment | None] | None, bool]:
         """Candidate filtering of one unbound phone (initialization and loss recovery): the track
         it wants (with its score, evidence and alignment) once one candidate clearly beats the
-        others; and whether it is ambiguous (enough evidence, two or more tracks fit)."""
+        others; and whether it is ambiguous (enough evidence, two or more tracks fit). ``conv``
+        are the free tracks whose velocity has converged, ``z`` their velocities (x + iy)."""
         cfg = self.cfg
         zl = self.phone_lags(mid, t_ns)
         if np.isnan(zl).all():
             self.candidates.pop(mid, None)
             return None, False
         cands = self._table(self.candidates, mid)
-        cands.keep({trk.vid for trk in free})
-        conv = [trk for trk in free if trk.hits >= cfg.converge_hits]  # velocity has converged
-        z = np.array([complex(trk.v[0], trk.v[1]) for trk in conv])
+        cands.keep(free_vids)
         cands.add([trk.vid for trk in conv], z, zl)
         if self.evidence is not None:
             anon = [k for k, trk in enumerate(conv) if trk.first_mid is None]

@@ -21,7 +21,13 @@ from scipy.spatial import cKDTree
 from trackctl.logs.messages import TrackState
 from trackctl.vmtrack.config import Mode, VmTrackConfig
 from trackctl.vmtrack.identity import IdentityBinder
-from trackctl.vmtrack.tracker import GroundTrack, associate, merge_with_covariance
+from trackctl.vmtrack.tracker import (
+    GroundTrack,
+    associate,
+    merge_with_covariance,
+    predict_many,
+    update_many,
+)
 
 __all__ = ["FrameOut", "OnlineTracker", "Prediction"]
 
@@ -100,18 +106,45 @@ class OnlineTracker:
         tcfg, tracks = self.tcfg, self.tracks
         v_m = [self.identity.velocity(self.identity.owner(trk), t_ns) for trk in tracks]
         dts = [(t_ns - trk.t_ns) / 1e9 for trk in tracks]
-        pairs, lost_idx, new_idx = associate(tracks, dets, dts, v_m, tcfg, covs)
+        # every track's filter steps at once (a crowd is many tracks): the visual-only
+        # prediction scores the association and is the new state of tracks without a phone
+        x_pred = p_pred = None
+        if tracks:
+            x0 = np.stack([trk.kf.x for trk in tracks])
+            p0 = np.stack([trk.kf.P for trk in tracks])
+            x_pred, p_pred = predict_many(x0, p0, np.array(dts), tcfg.accel_sigma_mps2)
+            sv2 = (p_pred[:, 0, 0] + p_pred[:, 1, 1]) / 2
+            predicted = (x_pred[:, :2, 0], sv2)
+        else:
+            predicted = (np.empty((0, 2)), np.empty(0))
+        pairs, lost_idx, new_idx = associate(tracks, dets, dts, v_m, tcfg, covs, predicted)
         for i, trk in enumerate(tracks):
             trk.history.append((trk.t_ns, trk.kf.x.copy(), trk.kf.P.copy(), False))
-            trk.advance(t_ns, tcfg, v_m[i])
-        for i, j, _ in pairs:
-            trk = tracks[i]
-            trk.correct(dets[j], None if covs is None else covs[j])
-            trk.hits += 1
-            trk.last_hit_ns = t_ns
-            trk.hit_ns.append(t_ns)
-            if trk.hits >= tcfg.confirm_hits:
-                trk.state = TrackState.TRACKED
+            if v_m[i] is None:
+                assert x_pred is not None and p_pred is not None
+                trk.kf.x, trk.kf.P = x_pred[i], p_pred[i]
+                trk.t_ns = t_ns
+            else:
+                trk.advance(t_ns, tcfg, v_m[i])
+        if pairs:
+            took = [tracks[i] for i, _, _ in pairs]
+            cols = [j for _, j, _ in pairs]
+            r = np.broadcast_to(took[0].kf.R, (len(took), 2, 2)) if covs is None else covs[cols]
+            x1, p1 = update_many(
+                np.stack([trk.kf.x for trk in took]),
+                np.stack([trk.kf.P for trk in took]),
+                dets[cols][:, :, None],
+                r,
+                took[0].kf.H,
+            )
+            for k, (trk, j) in enumerate(zip(took, cols, strict=True)):
+                trk.kf.x, trk.kf.P = x1[k], p1[k]
+                trk.took(dets[j])
+                trk.hits += 1
+                trk.last_hit_ns = t_ns
+                trk.hit_ns.append(t_ns)
+                if trk.hits >= tcfg.confirm_hits:
+                    trk.state = TrackState.TRACKED
         for i in lost_idx:
             if tracks[i].state is not TrackState.TENTATIVE:
                 tracks[i].state = TrackState.PREDICTED

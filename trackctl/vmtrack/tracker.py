@@ -1,6 +1,7 @@
 """Appearance-free ground-plane tracking with optional motion-sensor fusion (VM-Tracking §3.1.2).
 
-Every track is a constant-velocity Kalman filter (filterpy) over (x, y, vx, vy) in the world
+Every track is a constant-velocity Kalman filter (filterpy's arithmetic, see
+:class:`ConstantVelocityKf`) over (x, y, vx, vy) in the world
 frame. A track bound to a phone (MID) also takes the phone's PDR velocity as a measurement, and is
 associated with detections by the paper's fused probability
 
@@ -14,11 +15,13 @@ and everyone in V-AF mode) are associated by q_ij alone.
 
 from __future__ import annotations
 
+import heapq
+import math
 from collections import deque
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
@@ -51,6 +54,12 @@ class TrackerConfig:
     lose_bound_after_s: float = 6.0
 
 
+_H_POS = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
+_H_VEL = np.array([[0, 0, 1.0, 0], [0, 0, 0, 1.0]])
+_H_POS.flags.writeable = False
+_H_VEL.flags.writeable = False
+
+
 def fused_probability(
     q: np.ndarray, r: np.ndarray, sv2: float | np.ndarray, sm2: float | np.ndarray
 ) -> np.ndarray:
@@ -59,12 +68,94 @@ def fused_probability(
     return np.power(q, a) * np.power(r, 1.0 - a)
 
 
+class ConstantVelocityKf:
+    """The Kalman filter of one track: filterpy's ``KalmanFilter.predict``/``update`` arithmetic
+    (same operations in the same order, so the same numbers), without its per-call bookkeeping.
+
+    Written out because a crowd runs it for every track in every frame: filterpy's ``update``
+    deep-copies the measurement and keeps prior/posterior copies, 50 us per call against 15 here,
+    which at 80 people in view is most of the per-frame budget. Smoothing stays filterpy's
+    (``rts_smoother`` over the tracks' histories).
+    """
+
+    __slots__ = ("x", "P", "R", "H")
+
+    _I = np.eye(4)
+
+    def __init__(self, x: np.ndarray, p: np.ndarray, r: np.ndarray, h: np.ndarray) -> None:
+        self.x, self.P, self.R, self.H = x, p, r, h
+
+    def predict(self, F: np.ndarray, Q: np.ndarray) -> None:  # noqa: N803 - filterpy's names
+        self.x = F @ self.x
+        self.P = 1.0 * ((F @ self.P) @ F.T) + Q
+
+    def update(
+        self,
+        z: np.ndarray,
+        R: np.ndarray | None = None,  # noqa: N803 - filterpy's names
+        H: np.ndarray | None = None,  # noqa: N803
+    ) -> None:
+        r = self.R if R is None else R
+        h = self.H if H is None else H
+        y = z - h @ self.x
+        pht = self.P @ h.T
+        s = h @ pht + r
+        k = pht @ np.linalg.inv(s)
+        self.x = self.x + k @ y
+        i_kh = self._I - k @ h
+        self.P = (i_kh @ self.P) @ i_kh.T + (k @ r) @ k.T
+
+
+@lru_cache(maxsize=64)
+def _transition(dt: float, accel_sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """Constant-velocity transition and white-acceleration process noise over ``dt`` (state
+    x, y, vx, vy); cached, since every track of a frame steps by the same ``dt``."""
+    f = np.eye(4)
+    f[0, 2] = f[1, 3] = dt
+    s2 = accel_sigma**2
+    pp, pv, vv = dt**4 / 4 * s2, dt**3 / 2 * s2, dt**2 * s2
+    q = np.array([[pp, 0, pv, 0], [0, pp, 0, pv], [pv, 0, vv, 0], [0, pv, 0, vv]])
+    f.flags.writeable = False
+    q.flags.writeable = False
+    return f, q
+
+
+def predict_many(
+    x: np.ndarray, p: np.ndarray, dts: np.ndarray, accel_sigma: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Constant-velocity predictions of many tracks at once: states ``x`` (n, 4, 1), covariances
+    ``p`` (n, 4, 4), steps ``dts`` (n,) seconds. The same arithmetic as
+    :meth:`ConstantVelocityKf.predict`, batched (numpy's stacked matmul)."""
+    n = len(dts)
+    f = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+    f[:, 0, 2] = f[:, 1, 3] = dts
+    s2 = accel_sigma**2
+    pp, pv, vv = dts**4 / 4 * s2, dts**3 / 2 * s2, dts**2 * s2
+    q = np.zeros((n, 4, 4))
+    q[:, 0, 0] = q[:, 1, 1] = pp
+    q[:, 0, 2] = q[:, 2, 0] = q[:, 1, 3] = q[:, 3, 1] = pv
+    q[:, 2, 2] = q[:, 3, 3] = vv
+    return f @ x, (f @ p) @ f.transpose(0, 2, 1) + q
+
+
+def update_many(
+    x: np.ndarray, p: np.ndarray, z: np.ndarray, r: np.ndarray, h: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Kalman updates of many tracks at once (Joseph form, as filterpy and
+    :meth:`ConstantVelocityKf.update`): ``z`` (n, 2, 1), ``r`` (n, 2, 2), ``h`` (2, 4)."""
+    y = z - h @ x
+    pht = p @ h.T
+    k = pht @ np.linalg.inv(h @ pht + r)
+    i_kh = np.eye(4) - k @ h
+    return x + k @ y, (i_kh @ p) @ i_kh.transpose(0, 2, 1) + (k @ r) @ k.transpose(0, 2, 1)
+
+
 @dataclass
 class GroundTrack:
     """One tracked person on the ground plane."""
 
     vid: str
-    kf: KalmanFilter
+    kf: ConstantVelocityKf
     t_ns: int
     mid: str | None = None
     hits: int = 1
@@ -96,13 +187,15 @@ class GroundTrack:
         cfg: TrackerConfig,
         cov: np.ndarray | None = None,
     ) -> GroundTrack:
-        kf = KalmanFilter(dim_x=4, dim_z=2)
-        kf.x = np.array([[xy[0]], [xy[1]], [0.0], [0.0]])
-        kf.P = np.diag([cfg.det_sigma_m**2] * 2 + [1.0, 1.0])
+        p = np.diag([cfg.det_sigma_m**2] * 2 + [1.0, 1.0])
         if cov is not None:
-            kf.P[:2, :2] = cov
-        kf.H = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
-        kf.R = np.eye(2) * cfg.det_sigma_m**2
+            p[:2, :2] = cov
+        kf = ConstantVelocityKf(
+            np.array([[xy[0]], [xy[1]], [0.0], [0.0]], float),
+            p,
+            np.eye(2) * cfg.det_sigma_m**2,
+            _H_POS,
+        )
         return cls(
             vid,
             kf,
@@ -144,13 +237,8 @@ class GroundTrack:
         return slope / den, pts[:, 0].astype(np.int64)
 
     def transition(self, dt: float, cfg: TrackerConfig) -> tuple[np.ndarray, np.ndarray]:
-        f = np.eye(4)
-        f[0, 2] = f[1, 3] = dt
-        # white-acceleration process noise per axis, state order (x, y, vx, vy)
-        s2 = cfg.accel_sigma_mps2**2
-        pp, pv, vv = dt**4 / 4 * s2, dt**3 / 2 * s2, dt**2 * s2
-        q = np.array([[pp, 0, pv, 0], [0, pp, 0, pv], [pv, 0, vv, 0], [0, pv, 0, vv]])
-        return f, q
+        """Transition and process noise over ``dt`` (read-only arrays)."""
+        return _transition(dt, cfg.accel_sigma_mps2)
 
     def predicted(self, dt: float, cfg: TrackerConfig) -> tuple[np.ndarray, float]:
         """Visual-only prediction of the position and its per-axis variance."""
@@ -171,19 +259,26 @@ class GroundTrack:
         dt = (t_ns - self.t_ns) / 1e9
         f, q = self.transition(dt, cfg)
         if v_m is not None:
-            hv = np.array([[0, 0, 1.0, 0], [0, 0, 0, 1.0]])
-            self.kf.update(v_m.reshape(2, 1), R=np.eye(2) * cfg.pdr_sigma_mps**2, H=hv)
+            self.kf.update(v_m.reshape(2, 1), R=np.eye(2) * cfg.pdr_sigma_mps**2, H=_H_VEL)
         self.kf.predict(F=f, Q=q)
         self.t_ns = t_ns
 
     def correct(self, xy: np.ndarray, cov: np.ndarray | None = None) -> None:
         """Update with a ground point; ``cov`` is its 2x2 covariance (None: ``det_sigma_m``)."""
-        hit = (self.t_ns, float(xy[0]), float(xy[1]))
+        self.kf.update(np.asarray(xy, float).reshape(2, 1), R=cov)
+        self.took(xy)
+
+    def took(self, xy: np.ndarray) -> None:
+        """Record a detection the filter has just been corrected with (its evidence, how far the
+        track has moved from its birth)."""
+        x, y = float(xy[0]), float(xy[1])
+        hit = (self.t_ns, x, y)
         self.recent.append(hit)
         self.hits_log.append(hit)
-        self.kf.update(np.asarray(xy, float).reshape(2, 1), R=cov)
         if self.born_xy is not None:
-            self.moved_m = max(self.moved_m, float(np.linalg.norm(self.xy - self.born_xy)))
+            st = self.kf.x
+            d = math.hypot(float(st[0, 0]) - self.born_xy[0], float(st[1, 0]) - self.born_xy[1])
+            self.moved_m = max(self.moved_m, d)
 
 
 def _mahalanobis2(diff: np.ndarray, var: np.ndarray, covs: np.ndarray) -> np.ndarray:
@@ -204,12 +299,15 @@ def associate(
     v_m: list[np.ndarray | None],
     cfg: TrackerConfig,
     covs: np.ndarray | None = None,
+    predicted: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[list[tuple[int, int, float]], list[int], list[int]]:
     """Global one-to-one association of tracks and detections.
 
     ``covs`` (N, 2, 2) are the detections' ground covariances (from the camera geometry); None
-    takes ``det_sigma_m`` for every detection. The probabilities of all pairs are computed at
-    once (numpy); the assignment is scipy's Hungarian solver.
+    takes ``det_sigma_m`` for every detection. ``predicted`` are the tracks' visual-only
+    predicted positions (n, 2) and per-axis variances (n,) when the caller has them. The
+    probabilities of all pairs are computed at once (numpy); the assignment is scipy's
+    Hungarian solver.
 
     Returns:
         (track index, detection index, probability) pairs, unmatched track and detection indices.
@@ -219,9 +317,12 @@ def associate(
     if covs is None:
         covs = np.broadcast_to(np.eye(2) * cfg.det_sigma_m**2, (len(dets), 2, 2))
     r2 = np.trace(covs, axis1=1, axis2=2) / 2  # per-axis variance, for the fusion weights
-    preds = [trk.predicted(dt[i], cfg) for i, trk in enumerate(tracks)]
-    pv = np.array([p for p, _ in preds])
-    sv2 = np.array([v for _, v in preds])
+    if predicted is None:
+        preds = [trk.predicted(dt[i], cfg) for i, trk in enumerate(tracks)]
+        pv = np.array([p for p, _ in preds])
+        sv2 = np.array([v for _, v in preds])
+    else:
+        pv, sv2 = predicted
     q = np.exp(-0.5 * _mahalanobis2(dets[None, :, :] - pv[:, None, :], sv2, covs))
     prob = q
     moving = [i for i, v in enumerate(v_m) if v is not None]
@@ -256,6 +357,62 @@ def merge_detections(points: list[tuple[str, np.ndarray]], merge_m: float) -> np
     return merge_with_covariance(points, None, merge_m)[0]
 
 
+def _agglomerate(
+    pairs: np.ndarray,
+    cent: np.ndarray,
+    sums: np.ndarray,
+    info: np.ndarray,
+    bits: np.ndarray,
+    alive: np.ndarray,
+    merge_m: float,
+) -> None:
+    """Merge clusters nearest fused centroids first while they share no camera and are closer
+    than ``merge_m``; only clusters linked by ``pairs`` (or by their members' pairs) are
+    compared. The arrays are updated in place.
+
+    A heap of candidate distances, entries made stale by a merge skipped by version: each merge
+    costs its cluster's neighbours, not all pairs (the merge of a dense crowd seen by six
+    cameras is a single linked group of ~100 points)."""
+    nb: dict[int, set[int]] = {}
+    for i, j in pairs.tolist():
+        nb.setdefault(i, set()).add(j)
+        nb.setdefault(j, set()).add(i)
+    ver = dict.fromkeys(nb, 0)
+    # the first candidates at once, (distance, lower index, higher index, versions)
+    lo, hi = pairs.min(axis=1), pairs.max(axis=1)
+    d0 = np.hypot(cent[lo, 0] - cent[hi, 0], cent[lo, 1] - cent[hi, 1])
+    ok = (d0 < merge_m) & ((bits[lo] & bits[hi]) == 0)  # not one camera's two people
+    heap = [
+        (float(d), int(i), int(j), 0, 0) for d, i, j in zip(d0[ok], lo[ok], hi[ok], strict=True)
+    ]
+    heapq.heapify(heap)
+
+    def push(i: int, j: int) -> None:
+        if i > j:
+            i, j = j, i
+        if bits[i] & bits[j]:
+            return  # same camera: two people
+        d = float(np.hypot(cent[i, 0] - cent[j, 0], cent[i, 1] - cent[j, 1]))
+        if d < merge_m:
+            heapq.heappush(heap, (d, i, j, ver[i], ver[j]))
+
+    while heap:
+        _, a, b, va, vb = heapq.heappop(heap)
+        if not (alive[a] and alive[b]) or va != ver[a] or vb != ver[b]:
+            continue
+        sums[a] += sums[b]
+        info[a] += info[b]
+        bits[a] |= bits[b]
+        cent[a] = np.linalg.solve(info[a], sums[a])
+        alive[b] = False
+        ver[a] += 1
+        nb[a] = (nb[a] | nb.pop(b)) - {a, b}
+        for k in sorted(nb[a]):
+            nb[k].discard(b)
+            nb[k].add(a)
+            push(a, k)
+
+
 def merge_with_covariance(
     points: list[tuple[str, np.ndarray]], covs: np.ndarray | None, merge_m: float
 ) -> tuple[np.ndarray, np.ndarray | None]:
@@ -266,8 +423,8 @@ def merge_with_covariance(
     are two people) that scipy's hierarchical clustering does not take. The two clusters with the
     nearest fused centroids merge first, as long as they share no camera and are closer than
     ``merge_m``. Only points with a neighbour from another camera within ``2 merge_m`` can take
-    part (a k-d tree finds them: scipy's ``cKDTree``), so the agglomeration runs on the few that
-    overlap; its distances and camera masks are numpy arrays.
+    part (a k-d tree finds them: scipy's ``cKDTree``), and a cluster is compared only with its
+    members' such neighbours, through a heap (:func:`_agglomerate`).
     """
     if not points:
         return np.empty((0, 2)), None if covs is None else np.empty((0, 2, 2))
@@ -290,23 +447,6 @@ def merge_with_covariance(
             # cameras as bits: int64 up to 62 cameras (vectorised), object ints beyond
             dtype = np.int64 if len(cam_bit) <= 62 else object
             bits = np.array([1 << c for c in codes], dtype=dtype)
-            live = np.unique(pairs)
-            while len(live) >= 2:
-                c = cent[live]
-                d = np.hypot(c[:, None, 0] - c[None, :, 0], c[:, None, 1] - c[None, :, 1])
-                b_live = bits[live]
-                shared = (b_live[:, None] & b_live[None, :]) != 0
-                d[shared.astype(bool)] = np.inf  # same camera (this also masks the diagonal)
-                flat = int(np.argmin(d))
-                i, j = divmod(flat, len(live))
-                if d[i, j] >= merge_m:
-                    break
-                a, b = int(live[i]), int(live[j])
-                sums[a] += sums[b]
-                info[a] += info[b]
-                bits[a] |= bits[b]
-                cent[a] = np.linalg.solve(info[a], sums[a])
-                alive[b] = False
-                live = live[live != b]
+            _agglomerate(pairs, cent, sums, info, bits, alive, merge_m)
     idx = np.flatnonzero(alive)
     return cent[idx], None if covs is None else np.linalg.inv(info[idx])
