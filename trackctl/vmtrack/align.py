@@ -199,15 +199,22 @@ class CandidateTable:
         ok = ~np.isnan(z_phone)
         zp = np.where(ok, z_phone, 0)
         z = np.asarray(z_tracks, complex)[:, None]
-        self.S[rows] += z * np.conj(zp)[None, :]
-        self.P[rows] += (np.abs(zp) ** 2)[None, :]
-        self.T[rows] += np.abs(z) ** 2 * ok[None, :]
-        self.n[rows] += ok[None, :]
+        # every row, in order (the usual frame): whole arrays instead of gather and scatter
+        sel: slice | np.ndarray = (
+            slice(None)
+            if len(rows) == len(self.vids) and bool((rows == np.arange(len(rows))).all())
+            else rows
+        )
+        self.S[sel] += z * np.conj(zp)[None, :]
+        self.P[sel] += (np.abs(zp) ** 2)[None, :]
+        self.T[sel] += np.abs(z) ** 2 * ok[None, :]
+        self.n[sel] += ok[None, :]
 
-    def add_rssi(self, vid: str, z2: float) -> None:
-        row = self._rows([vid])[0]
-        self.rssi_n[row] += 1
-        self.rssi_z2[row] += z2
+    def add_rssi(self, vids: list[str], z2: np.ndarray) -> None:
+        """One RSSI reading's squared standardized residual for each of the (distinct) tracks."""
+        rows = self._rows(vids)
+        self.rssi_n[rows] += 1
+        self.rssi_z2[rows] += z2
 
     def keep(self, live: set[str]) -> None:
         """Drop the rows of tracks that are gone."""
