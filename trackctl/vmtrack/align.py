@@ -162,6 +162,8 @@ class CandidateTable:
     """:class:`PairEvidence` of one phone with many tracks, one row per track (vectorised: a
     frame updates every candidate in a few array operations, whatever the crowd)."""
 
+    _FIELDS = ("S", "P", "T", "n", "rssi_n", "rssi_z2")
+
     def __init__(self, n_lags: int) -> None:
         self.n_lags = n_lags
         self.vids: list[str] = []
@@ -172,6 +174,9 @@ class CandidateTable:
         self.n = np.zeros((0, n_lags))
         self.rssi_n = np.zeros(0)
         self.rssi_z2 = np.zeros(0)
+        # the arrays are views of the first rows of these (room to grow without copying)
+        self._base = {name: getattr(self, name) for name in self._FIELDS}
+        self._cap = 0
 
     def __len__(self) -> int:
         return len(self.vids)
@@ -182,29 +187,28 @@ class CandidateTable:
             for v in new:
                 self.index[v] = len(self.vids)
                 self.vids.append(v)
-            k, L = len(new), self.n_lags
-            self.S = np.vstack([self.S, np.zeros((k, L), complex)])
-            self.P = np.vstack([self.P, np.zeros((k, L))])
-            self.T = np.vstack([self.T, np.zeros((k, L))])
-            self.n = np.vstack([self.n, np.zeros((k, L))])
-            self.rssi_n = np.concatenate([self.rssi_n, np.zeros(k)])
-            self.rssi_z2 = np.concatenate([self.rssi_z2, np.zeros(k)])
+            m = len(self.vids)
+            if m > self._cap:
+                cap = max(2 * self._cap, m, 16)
+                for name in self._FIELDS:
+                    old = getattr(self, name)
+                    base = np.zeros((cap, *old.shape[1:]), old.dtype)
+                    base[: len(old)] = old
+                    self._base[name] = base
+                self._cap = cap
+            for name in self._FIELDS:
+                setattr(self, name, self._base[name][:m])
         return np.array([self.index[v] for v in vids], int)
 
     def add(self, vids: list[str], z_tracks: np.ndarray, z_phone: np.ndarray) -> None:
         """One frame: each track's velocity (complex) against the phone's at every lag."""
         if not vids:
             return
-        rows = self._rows(vids)
+        # every row, in order (the usual frame): whole arrays instead of gather and scatter
+        sel: slice | np.ndarray = slice(None) if vids == self.vids else self._rows(vids)
         ok = ~np.isnan(z_phone)
         zp = np.where(ok, z_phone, 0)
         z = np.asarray(z_tracks, complex)[:, None]
-        # every row, in order (the usual frame): whole arrays instead of gather and scatter
-        sel: slice | np.ndarray = (
-            slice(None)
-            if len(rows) == len(self.vids) and bool((rows == np.arange(len(rows))).all())
-            else rows
-        )
         self.S[sel] += z * np.conj(zp)[None, :]
         self.P[sel] += (np.abs(zp) ** 2)[None, :]
         self.T[sel] += np.abs(z) ** 2 * ok[None, :]
@@ -218,13 +222,15 @@ class CandidateTable:
 
     def keep(self, live: set[str]) -> None:
         """Drop the rows of tracks that are gone."""
-        rows = [i for i, v in enumerate(self.vids) if v in live]
-        if len(rows) == len(self.vids):
+        if self.index.keys() <= live:
             return
+        rows = [i for i, v in enumerate(self.vids) if v in live]
         self.vids = [self.vids[i] for i in rows]
         self.index = {v: i for i, v in enumerate(self.vids)}
         self.S, self.P, self.T, self.n = self.S[rows], self.P[rows], self.T[rows], self.n[rows]
         self.rssi_n, self.rssi_z2 = self.rssi_n[rows], self.rssi_z2[rows]
+        self._base = {name: getattr(self, name) for name in self._FIELDS}
+        self._cap = len(rows)
 
     def frames(self) -> np.ndarray:
         return self.n.max(axis=1) if len(self.vids) else np.zeros(0)

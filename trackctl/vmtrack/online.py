@@ -104,7 +104,8 @@ class OnlineTracker:
 
     def _associate(self, t_ns: int, dets: np.ndarray, covs: np.ndarray | None) -> None:
         tcfg, tracks = self.tcfg, self.tracks
-        v_m = [self.identity.velocity(self.identity.owner(trk), t_ns) for trk in tracks]
+        owner = self.identity.owners()
+        v_m = [self.identity.velocity(owner.get(id(trk)), t_ns) for trk in tracks]
         dts = [(t_ns - trk.t_ns) / 1e9 for trk in tracks]
         # every track's filter steps at once (a crowd is many tracks): the visual-only
         # prediction scores the association and is the new state of tracks without a phone
@@ -155,9 +156,10 @@ class OnlineTracker:
         on unmatched detections that are not a duplicate view (overlapping cameras) of a track."""
         tcfg = self.tcfg
         keep = []
+        owner = self.identity.owners()
         for trk in self.tracks:
             age = (t_ns - trk.last_hit_ns) / 1e9
-            mid = self.identity.owner(trk)
+            mid = owner.get(id(trk))
             limit = tcfg.lose_bound_after_s if mid else tcfg.drop_unbound_after_s
             if (trk.state is TrackState.TENTATIVE and trk.last_hit_ns != t_ns) or age > limit:
                 if mid:
@@ -174,7 +176,7 @@ class OnlineTracker:
             self._static_deaths.popleft()
         if not self._pending_new:
             return
-        tree = cKDTree(np.array([trk.xy for trk in keep])) if keep else None
+        tree = cKDTree(np.array([trk.kf.x[:2, 0] for trk in keep])) if keep else None
         deaths = np.array([d[1:] for d in self._static_deaths]).reshape(-1, 2)
         for det, cov in self._pending_new:
             # a detection near a track (or near one started just now) is a duplicate view
@@ -199,7 +201,7 @@ class OnlineTracker:
         doomed: set[int] = set()
         if len(tracks) < 2:
             return
-        xy = np.array([trk.xy for trk in tracks])
+        xy = np.array([trk.kf.x[:2, 0] for trk in tracks])
         # only pairs closer than duplicate_m (k-d tree), in the order a full scan would meet them
         pairs = cKDTree(xy).query_pairs(self.cfg.duplicate_m, output_type="ndarray")
         for a, b in sorted(map(tuple, pairs.tolist())):
@@ -214,8 +216,9 @@ class OnlineTracker:
             tracks[:] = [tr for tr in tracks if id(tr) not in doomed]
 
     def _snapshot(self, t_ns: int) -> None:
+        owner = self.identity.owners()
         rows = [
-            (trk, self.identity.owner(trk), trk.state, len(trk.history))
+            (trk, owner.get(id(trk)), trk.state, len(trk.history))
             for trk in self.tracks
             if trk.state is not TrackState.TENTATIVE
         ]

@@ -362,55 +362,67 @@ def _agglomerate(
     cent: np.ndarray,
     sums: np.ndarray,
     info: np.ndarray,
-    bits: np.ndarray,
+    codes: list[int],
     alive: np.ndarray,
     merge_m: float,
 ) -> None:
     """Merge clusters nearest fused centroids first while they share no camera and are closer
     than ``merge_m``; only clusters linked by ``pairs`` (or by their members' pairs) are
-    compared. The arrays are updated in place.
+    compared. ``codes`` are the points' camera numbers. The arrays are updated in place.
 
     A heap of candidate distances, entries made stale by a merge skipped by version: each merge
     costs its cluster's neighbours, not all pairs (the merge of a dense crowd seen by six
-    cameras is a single linked group of ~100 points)."""
+    cameras is a single linked group of ~100 points). The loop runs on Python numbers (the 2x2
+    information solve in closed form), several times cheaper than numpy scalars and LAPACK
+    calls one at a time; the clusters' centroids and information go back into the arrays."""
     nb: dict[int, set[int]] = {}
     for i, j in pairs.tolist():
         nb.setdefault(i, set()).add(j)
         nb.setdefault(j, set()).add(i)
     ver = dict.fromkeys(nb, 0)
+    bits = {i: 1 << codes[i] for i in nb}  # cameras of each cluster, as bits
+    cx: dict[int, float] = {i: float(cent[i, 0]) for i in nb}
+    cy: dict[int, float] = {i: float(cent[i, 1]) for i in nb}
+    # information matrices (a, b; b, d) and vectors (s, t) of the clusters
+    im = {i: (float(info[i, 0, 0]), float(info[i, 0, 1]), float(info[i, 1, 1])) for i in nb}
+    iv = {i: (float(sums[i, 0]), float(sums[i, 1])) for i in nb}
     # the first candidates at once, (distance, lower index, higher index, versions)
     lo, hi = pairs.min(axis=1), pairs.max(axis=1)
     d0 = np.hypot(cent[lo, 0] - cent[hi, 0], cent[lo, 1] - cent[hi, 1])
-    ok = (d0 < merge_m) & ((bits[lo] & bits[hi]) == 0)  # not one camera's two people
     heap = [
-        (float(d), int(i), int(j), 0, 0) for d, i, j in zip(d0[ok], lo[ok], hi[ok], strict=True)
+        (d, i, j, 0, 0)
+        for d, i, j in zip(d0.tolist(), lo.tolist(), hi.tolist(), strict=True)
+        if d < merge_m and not bits[i] & bits[j]  # not one camera's two people
     ]
     heapq.heapify(heap)
-
-    def push(i: int, j: int) -> None:
-        if i > j:
-            i, j = j, i
-        if bits[i] & bits[j]:
-            return  # same camera: two people
-        d = float(np.hypot(cent[i, 0] - cent[j, 0], cent[i, 1] - cent[j, 1]))
-        if d < merge_m:
-            heapq.heappush(heap, (d, i, j, ver[i], ver[j]))
-
     while heap:
         _, a, b, va, vb = heapq.heappop(heap)
         if not (alive[a] and alive[b]) or va != ver[a] or vb != ver[b]:
             continue
-        sums[a] += sums[b]
-        info[a] += info[b]
+        (p, q, r), (p2, q2, r2) = im[a], im[b]
+        (s_, t_), (s2, t2) = iv[a], iv[b]
+        p, q, r, s_, t_ = p + p2, q + q2, r + r2, s_ + s2, t_ + t2
+        im[a], iv[a] = (p, q, r), (s_, t_)
+        det = p * r - q * q
+        cx[a], cy[a] = (r * s_ - q * t_) / det, (p * t_ - q * s_) / det  # 2x2 solve
         bits[a] |= bits[b]
-        cent[a] = np.linalg.solve(info[a], sums[a])
         alive[b] = False
         ver[a] += 1
         nb[a] = (nb[a] | nb.pop(b)) - {a, b}
+        xa, ya, ba, v = cx[a], cy[a], bits[a], ver[a]
         for k in sorted(nb[a]):
             nb[k].discard(b)
             nb[k].add(a)
-            push(a, k)
+            if ba & bits[k]:
+                continue  # same camera: two people
+            d = math.hypot(xa - cx[k], ya - cy[k])
+            if d < merge_m:
+                heapq.heappush(heap, (d, a, k, v, ver[k]) if a < k else (d, k, a, ver[k], v))
+    for i in nb:
+        if alive[i] and ver[i]:
+            cent[i] = cx[i], cy[i]
+            p, q, r = im[i]
+            info[i] = ((p, q), (q, r))
 
 
 def merge_with_covariance(
@@ -444,9 +456,6 @@ def merge_with_covariance(
         if len(pairs):
             pairs = pairs[codes_arr[pairs[:, 0]] != codes_arr[pairs[:, 1]]]
         if len(pairs):
-            # cameras as bits: int64 up to 62 cameras (vectorised), object ints beyond
-            dtype = np.int64 if len(cam_bit) <= 62 else object
-            bits = np.array([1 << c for c in codes], dtype=dtype)
-            _agglomerate(pairs, cent, sums, info, bits, alive, merge_m)
+            _agglomerate(pairs, cent, sums, info, codes, alive, merge_m)
     idx = np.flatnonzero(alive)
     return cent[idx], None if covs is None else np.linalg.inv(info[idx])
