@@ -101,20 +101,7 @@ def test_real_walks_at_100_hz_within_3_percent(carry: str) -> None:
     assert abs(detect_steps(t, acc).steps - true) <= 0.03 * true
 
 
-@pytest.mark.parametrize(
-    "carry",
-    [
-        *[c for c in CARRIES if c != "backpocket"],
-        pytest.param(
-            "backpocket",
-            marks=pytest.mark.xfail(
-                reason="known limit: at 5 Hz a back-pocket phone's stride harmonics fold onto the "
-                "step rate (-21 %); docs/pdr.md",
-                strict=True,
-            ),
-        ),
-    ],
-)
+@pytest.mark.parametrize("carry", CARRIES)
 def test_real_walks_decimated_to_5_hz_within_5_percent(carry: str) -> None:
     t, acc, true = _trace(carry)
     assert abs(detect_steps(t[::20], acc[::20]).steps - true) <= 0.05 * true

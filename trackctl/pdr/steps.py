@@ -163,7 +163,9 @@ def _cadence(x: np.ndarray, rate: float, cfg: StepConfig) -> np.ndarray:
     score = np.zeros((len(frames), len(cand)))
     last = spec.shape[1] - 1
     for k, w in ((1, 1.0), (2, 1.0), (3, 0.5), (4, 0.5)):
-        fk = k * cand / 2
+        # a tooth above Nyquist is where the sampling folded it (a phone sampling at 5 Hz
+        # without an anti-alias filter keeps the 3rd and 4th stride harmonics, folded)
+        fk = _folded(k * cand / 2, rate)
         ok = fk <= nyq
         if k == 1:
             # a "stride" inside the step band is a slower walker's step: crediting it would
@@ -189,6 +191,9 @@ def _cadence(x: np.ndarray, rate: float, cfg: StepConfig) -> np.ndarray:
     near = (np.abs(g_freqs[None, :] - f[:, None]) <= 0.15) | (
         np.abs(g_freqs[None, :] - f[:, None] / 2) <= 0.1
     )
+    for k in (3, 4):  # the 3rd and 4th stride harmonics where the sampling folded them
+        fk = _folded(k * f / 2, rate)
+        near |= (fk[:, None] < 0.98 * rate / 2) & (np.abs(g_freqs[None, :] - fk[:, None]) <= 0.1)
     total = g_spec.sum(axis=1)
     periodic = np.sum(np.where(near, g_spec, 0.0), axis=1) / np.maximum(total, 1e-12)
     std = frames.std(axis=1)
@@ -203,6 +208,11 @@ def _cadence(x: np.ndarray, rate: float, cfg: StepConfig) -> np.ndarray:
         np.abs(centres[prev] - np.arange(n)) < np.abs(centres[pos] - np.arange(n)), prev, pos
     )
     return np.asarray(per_window[nearest], float)
+
+
+def _folded(f: np.ndarray, rate: float) -> np.ndarray:
+    """Where frequencies ``f`` appear in a signal sampled at ``rate`` (aliasing)."""
+    return np.asarray(np.abs((f + rate / 2) % rate - rate / 2), float)
 
 
 def _refine(freqs: np.ndarray, spec: np.ndarray, k: np.ndarray) -> np.ndarray:
