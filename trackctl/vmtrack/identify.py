@@ -2,7 +2,7 @@
 
 The online stage (:mod:`~trackctl.vmtrack.identity`) binds phones as the paper's real-time system
 did, frame by frame. Offline we have every track's whole life and every phone's whole motion, so
-identity becomes a global problem, solved here in four steps:
+identity becomes a global problem, solved here in five steps:
 
 1. **Evidence per (phone, track, frame)**: the track's velocity from its *detections alone*
    (a centred least-squares slope over ``velocity_window_s``: never the filter state, which
@@ -18,7 +18,11 @@ identity becomes a global problem, solved here in four steps:
 3. **Refinement** (``refine_passes``): from the frames where the path names a track clearly,
    the phone's clock offset and step scale (one each) and its yaw over time are fitted; every
    track is re-scored under that alignment (direction counts again) and the path re-run.
-4. **Publication**: a stretch on one track with too few clear frames (``min_clear_frames``,
+4. **Bridging**: a short gap in the path (``bridge_s``) between two chains that connect (the
+   same chain throughout, or a handover where the two are within ``bridge_m``) is the same
+   carrier: a person moves continuously, while a fit over a window can fail for a while
+   (a chain's first seconds, a merged detection).
+5. **Publication**: a stretch on one track with too few clear frames (``min_clear_frames``,
    ``min_clear_share``) is a guess and is not published (the report counts it); where two
    phones' paths meet on one track, the better fit keeps it.
 
@@ -79,6 +83,12 @@ class IdentifyConfig:
     yaw_slack_deg: float = 10.0
     """Under a known alignment, a window's yaw may still differ this much from the local fit
     (indoor magnetic disturbance is 10-20 deg)."""
+    bridge_s: float = 10.0
+    """A gap in a phone's path (on no track) no longer than this is bridged when the chains
+    before and after it connect: the same chain published throughout (a person does not leave
+    their track and come back to it), or the one before handing over to the one after at some
+    frame of the gap where they are within ``bridge_m`` (a carrier moves continuously)."""
+    bridge_m: float = 1.0
 
 
 @dataclass
@@ -101,6 +111,15 @@ class _Chain:
     """Frame times (ns) at which the chain is published."""
     z: np.ndarray
     """Detection-only velocity (complex) per frame, NaN without enough detections."""
+    hits: np.ndarray = field(default_factory=lambda: np.empty((0, 3)))
+    """The detections the chain took (t_ns, x, y), in time order."""
+
+    def xy_at(self, t_ns: int) -> tuple[float, float]:
+        """Where the chain's detections put it at ``t_ns`` (linear between detections)."""
+        h = self.hits
+        if not len(h):
+            return math.nan, math.nan
+        return float(np.interp(t_ns, h[:, 0], h[:, 1])), float(np.interp(t_ns, h[:, 0], h[:, 2]))
 
 
 def _visual_velocity(hits: np.ndarray, times: np.ndarray, half_s: float) -> np.ndarray:
@@ -168,7 +187,7 @@ def _chains(frames: Sequence[FrameOut], plan: Publication, velocity_half_s: floa
     for head, ts in times.items():
         t = np.array(sorted(set(ts)), np.int64)
         h = np.array(hits[head], float).reshape(-1, 3)
-        out.append(_Chain(head, t, _visual_velocity(h, t, velocity_half_s)))
+        out.append(_Chain(head, t, _visual_velocity(h, t, velocity_half_s), h))
     return out
 
 
@@ -234,10 +253,15 @@ def identify(
     costs: dict[str, np.ndarray] = {}
     half_v = cfg.velocity_window_s / 2
     dead_reckoned = {mid: _dead_reckoned(phone) for mid, phone in phones.items()}
+    present = np.zeros((n_f, len(chains)), bool)
+    for c, r in enumerate(rows):
+        present[r, c] = True
+    frame_s = float(np.median(np.diff(frame_t))) / 1e9 if n_f > 1 else 1.0
     for mid in sorted(phones):
         paths[mid], costs[mid] = _phone_path(
             dead_reckoned[mid], chains, rows, n_f, lags, lag_ns, acfg, cfg, aligned
         )
+        _bridge(paths[mid], present, chains, frame_t, int(cfg.bridge_s / frame_s), cfg.bridge_m)
     ambiguous = np.zeros(n_f, bool)
     for mid, path in paths.items():
         cost = costs[mid]
@@ -460,6 +484,48 @@ def _viterbi(cost: np.ndarray, cfg: IdentifyConfig) -> np.ndarray:
         path[f] = -1 if state == none else state
         state = int(back[f, state])
     return path
+
+
+def _bridge(
+    path: np.ndarray,
+    present: np.ndarray,
+    chains: list[_Chain],
+    frame_t: np.ndarray,
+    max_frames: int,
+    max_m: float,
+) -> None:
+    """Bridge the gaps of at most ``max_frames`` frames in ``path`` (in place) between a chain
+    ``a`` before and a chain ``b`` after: with ``a`` until a handover frame ``h``, with ``b``
+    from it, where each is published over its part and ``a``'s last position lies within
+    ``max_m`` of ``b``'s first (the closest such handover; ``a == b``: held throughout)."""
+    n = len(path)
+    f = 0
+    while f < n:
+        if path[f] >= 0:
+            f += 1
+            continue
+        g = f
+        while g < n and path[g] < 0:
+            g += 1
+        if 0 < f and g < n and g - f <= max_frames:
+            a, b = int(path[f - 1]), int(path[g])
+            if a == b:
+                if present[f:g, a].all():
+                    path[f:g] = a
+            else:
+                best: tuple[float, int] | None = None
+                for h in range(f, g + 1):
+                    if not (present[f:h, a].all() and present[h:g, b].all()):
+                        continue
+                    xa = chains[a].xy_at(int(frame_t[h - 1]))
+                    xb = chains[b].xy_at(int(frame_t[h]))
+                    d = math.hypot(xa[0] - xb[0], xa[1] - xb[1])
+                    if d <= max_m and (best is None or d < best[0]):
+                        best = (d, h)
+                if best is not None:
+                    path[f : best[1]] = a
+                    path[best[1] : g] = b
+        f = g
 
 
 def _drop_unanchored(
