@@ -69,3 +69,15 @@ def test_long_gaps_and_open_ends_stay() -> None:
     before = path.copy()
     _bridge(path, present, chains, frame_t, 10, 1.0)
     assert (path == before).all()
+
+
+def test_a_route_through_a_third_chain() -> None:
+    # the carrier's track breaks twice: 0-3 s, 2.5-6 s, 5.5-10 s, each taking over from the last
+    chains = [_chain(1, 0, 3, 0, 3), _chain(2, 2.5, 6, 2.6, 6), _chain(3, 5.5, 10, 5.6, 10)]
+    frame_t, present = _setup(chains, 31)
+    path = np.full(31, -1)
+    path[:6] = 0
+    path[21:] = 2
+    _bridge(path, present, chains, frame_t, 30, 1.0)
+    assert (path >= 0).all()
+    assert list(dict.fromkeys(path.tolist())) == [0, 1, 2]  # through chain 1, in order

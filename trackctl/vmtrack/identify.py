@@ -85,9 +85,9 @@ class IdentifyConfig:
     (indoor magnetic disturbance is 10-20 deg)."""
     bridge_s: float = 10.0
     """A gap in a phone's path (on no track) no longer than this is bridged when the chains
-    before and after it connect: the same chain published throughout (a person does not leave
-    their track and come back to it), or the one before handing over to the one after at some
-    frame of the gap where they are within ``bridge_m`` (a carrier moves continuously)."""
+    before and after it connect through published chains: the same chain throughout (a person
+    does not leave their track and come back to it), or hand-overs between chains within
+    ``bridge_m`` of each other (a carrier moves continuously), the fewest and closest."""
     bridge_m: float = 1.0
 
 
@@ -495,9 +495,9 @@ def _bridge(
     max_m: float,
 ) -> None:
     """Bridge the gaps of at most ``max_frames`` frames in ``path`` (in place) between a chain
-    ``a`` before and a chain ``b`` after: with ``a`` until a handover frame ``h``, with ``b``
-    from it, where each is published over its part and ``a``'s last position lies within
-    ``max_m`` of ``b``'s first (the closest such handover; ``a == b``: held throughout)."""
+    ``a`` before and a chain ``b`` after, through published chains: staying on a chain is free,
+    handing over to another costs 1 plus the distance between the two at the handover, which
+    must be within ``max_m``. The cheapest such route fills the gap; none leaves it."""
     n = len(path)
     f = 0
     while f < n:
@@ -508,24 +508,55 @@ def _bridge(
         while g < n and path[g] < 0:
             g += 1
         if 0 < f and g < n and g - f <= max_frames:
-            a, b = int(path[f - 1]), int(path[g])
-            if a == b:
-                if present[f:g, a].all():
-                    path[f:g] = a
-            else:
-                best: tuple[float, int] | None = None
-                for h in range(f, g + 1):
-                    if not (present[f:h, a].all() and present[h:g, b].all()):
-                        continue
-                    xa = chains[a].xy_at(int(frame_t[h - 1]))
-                    xb = chains[b].xy_at(int(frame_t[h]))
-                    d = math.hypot(xa[0] - xb[0], xa[1] - xb[1])
-                    if d <= max_m and (best is None or d < best[0]):
-                        best = (d, h)
-                if best is not None:
-                    path[f : best[1]] = a
-                    path[best[1] : g] = b
+            route = _route(int(path[f - 1]), int(path[g]), f, g, present, chains, frame_t, max_m)
+            if route is not None:
+                path[f:g] = route
         f = g
+
+
+def _route(
+    a: int,
+    b: int,
+    f: int,
+    g: int,
+    present: np.ndarray,
+    chains: list[_Chain],
+    frame_t: np.ndarray,
+    max_m: float,
+) -> list[int] | None:
+    """The chain at each frame ``f..g-1`` of the cheapest continuous route from chain ``a`` at
+    frame ``f - 1`` to chain ``b`` at frame ``g`` (dynamic programming over the frames)."""
+    cost: dict[int, float] = {a: 0.0}
+    back: list[dict[int, int]] = []
+    for k in range(f, g + 1):
+        live = [b] if k == g else [int(c) for c in np.flatnonzero(present[k])]
+        t_prev, t_now = int(frame_t[k - 1]), int(frame_t[k])
+        prev_xy = {i: chains[i].xy_at(t_prev) for i in cost}
+        nxt: dict[int, float] = {}
+        came: dict[int, int] = {}
+        for j in live:
+            xj = chains[j].xy_at(t_now)
+            for i, ci in cost.items():
+                if i == j:
+                    c = ci
+                else:
+                    d = math.hypot(prev_xy[i][0] - xj[0], prev_xy[i][1] - xj[1])
+                    if not d <= max_m:
+                        continue
+                    c = ci + 1.0 + d
+                if j not in nxt or c < nxt[j]:
+                    nxt[j], came[j] = c, i
+        if not nxt:
+            return None
+        cost = nxt
+        back.append(came)
+    # back[k - f] maps a chain at frame k to the chain it came from at frame k - 1
+    route: list[int] = []
+    c = b
+    for k in range(g, f, -1):
+        c = back[k - f][c]
+        route.append(c)
+    return route[::-1]
 
 
 def _drop_unanchored(
