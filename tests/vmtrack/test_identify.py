@@ -72,8 +72,8 @@ def test_long_gaps_and_open_ends_stay() -> None:
 
 
 def test_a_route_through_a_third_chain() -> None:
-    # the carrier's track breaks twice: 0-3 s, 2.5-6 s, 5.5-10 s, each taking over from the last
-    chains = [_chain(1, 0, 3, 0, 3), _chain(2, 2.5, 6, 2.6, 6), _chain(3, 5.5, 10, 5.6, 10)]
+    # the carrier's track breaks twice: 0-3 s, 2-6 s, 5-10 s, each taking over from the last
+    chains = [_chain(1, 0, 3, 0, 3), _chain(2, 2, 6, 2.1, 6), _chain(3, 5, 10, 5.1, 10)]
     frame_t, present = _setup(chains, 31)
     path = np.full(31, -1)
     path[:6] = 0
