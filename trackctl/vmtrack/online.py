@@ -120,7 +120,8 @@ class OnlineTracker:
             predicted = (np.empty((0, 2)), np.empty(0))
         pairs, lost_idx, new_idx = associate(tracks, dets, dts, v_m, tcfg, covs, predicted)
         for i, trk in enumerate(tracks):
-            trk.history.append((trk.t_ns, trk.kf.x.copy(), trk.kf.P.copy(), False))
+            # no copies: a track's filter replaces its state arrays, never writes into them
+            trk.history.append((trk.t_ns, trk.kf.x, trk.kf.P, False))
             if v_m[i] is None:
                 assert x_pred is not None and p_pred is not None
                 trk.kf.x, trk.kf.P = x_pred[i], p_pred[i]

@@ -79,6 +79,8 @@ class ConstantVelocityKf:
     """
 
     __slots__ = ("x", "P", "R", "H")
+    # predict and update assign new arrays to x and P and never write into them: a track's
+    # history keeps references to its past states, not copies
 
     _I = np.eye(4)
 
