@@ -120,7 +120,8 @@ class OnlineTracker:
             predicted = (np.empty((0, 2)), np.empty(0))
         pairs, lost_idx, new_idx = associate(tracks, dets, dts, v_m, tcfg, covs, predicted)
         for i, trk in enumerate(tracks):
-            # no copies: a track's filter replaces its state arrays, never writes into them
+            # no copies: filterpy's predict and update (and the batched step) assign new state
+            # arrays, never write into them
             trk.history.append((trk.t_ns, trk.kf.x, trk.kf.P, False))
             if v_m[i] is None:
                 assert x_pred is not None and p_pred is not None
