@@ -68,6 +68,8 @@ class RobotRun:
     gt_wait: list[tuple[int, float, float]] = field(default_factory=list)
     last_gt_xy: tuple[float, float] | None = None
     path_m: float = 0.0
+    _covering: tuple[tuple[float, float], str | None] | None = None
+    """The node covering the last pose asked about (the nodes' frames of one instant ask alike)."""
 
     @property
     def name(self) -> str:
@@ -81,8 +83,10 @@ class RobotRun:
         if not self.filt.localized:
             return True
         x, y, _ = self.filt.pose
-        cov = cover.covering((x, y))
-        return cov is not None and cov[0] == node
+        if self._covering is None or self._covering[0] != (x, y):
+            cov = cover.covering((x, y))
+            self._covering = ((x, y), None if cov is None else cov[0])
+        return self._covering[1] == node
 
 
 class Localizer:
