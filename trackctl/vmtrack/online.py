@@ -92,9 +92,8 @@ class OnlineTracker:
         t0 = time.perf_counter()
         self.frame_count += 1
         cov_arr = None if covs is None else np.array(covs, float).reshape(-1, 2, 2)
-        dets, det_covs = merge_with_covariance(points, cov_arr, self.cfg.merge_m)
         self.raw_points[t_ns] = np.array([xy for _, xy in points]).reshape(-1, 2)
-        self._associate(t_ns, dets, det_covs)
+        self._associate(t_ns, points, cov_arr)
         self._retire(t_ns)
         self._prune_duplicates()
         if self.mode is Mode.VM:
@@ -102,8 +101,21 @@ class OnlineTracker:
         self._snapshot(t_ns)
         self.seconds += time.perf_counter() - t0
 
-    def _associate(self, t_ns: int, dets: np.ndarray, covs: np.ndarray | None) -> None:
+    def _associate(
+        self, t_ns: int, points: list[tuple[str, np.ndarray]], covs: np.ndarray | None
+    ) -> None:
+        """Each camera's detections are assigned to the predicted tracks on their own (one
+        detection per track and camera: a camera does not see one person twice); a track then
+        takes the information-weighted fusion of what its cameras gave it. Detections no track
+        took are merged across cameras into candidates for new tracks.
+
+        Merging the cameras' detections first and then associating the merged points (the
+        former design) is blind to the tracks: in a crowd, with each camera's calibration a
+        few decimetres off, it fuses two people walking a metre apart into one point between
+        them, and the tracks swap on it. Assigned per camera, the tracks' predictions decide
+        which detection is whose."""
         tcfg, tracks = self.tcfg, self.tracks
+        xy_all = np.array([xy for _, xy in points], float).reshape(-1, 2)
         owner = self.identity.owners()
         v_m = [self.identity.velocity(owner.get(id(trk)), t_ns) for trk in tracks]
         dts = [(t_ns - trk.t_ns) / 1e9 for trk in tracks]
@@ -118,7 +130,38 @@ class OnlineTracker:
             predicted = (x_pred[:, :2, 0], sv2)
         else:
             predicted = (np.empty((0, 2)), np.empty(0))
-        pairs, lost_idx, new_idx = associate(tracks, dets, dts, v_m, tcfg, covs, predicted)
+        by_cam: dict[str, list[int]] = {}
+        for k, (cam, _) in enumerate(points):
+            by_cam.setdefault(cam, []).append(k)
+        given: dict[int, list[int]] = {}
+        left: list[int] = []
+        for cam in sorted(by_cam):
+            idx = by_cam[cam]
+            cam_pairs, _, cam_new = associate(
+                tracks, xy_all[idx], dts, v_m, tcfg, None if covs is None else covs[idx], predicted
+            )
+            for i, j, _ in cam_pairs:
+                given.setdefault(i, []).append(idx[j])
+            left.extend(idx[j] for j in cam_new)
+        # one fused measurement per track: information-weighted mean of its cameras' points
+        took_idx = sorted(given)
+        fused = np.empty((len(took_idx), 2))
+        fused_cov = np.empty((len(took_idx), 2, 2))
+        for k, i in enumerate(took_idx):
+            ks = given[i]
+            if covs is None:
+                fused[k] = xy_all[ks].mean(axis=0)
+                fused_cov[k] = np.eye(2) * tcfg.det_sigma_m**2 / len(ks)
+            else:
+                info = np.linalg.inv(covs[ks])
+                fused_cov[k] = np.linalg.inv(info.sum(axis=0))
+                fused[k] = fused_cov[k] @ np.einsum("nij,nj->i", info, xy_all[ks])
+        pairs = [(i, k) for k, i in enumerate(took_idx)]
+        lost_idx = [i for i in range(len(tracks)) if i not in given]
+        rest = [points[k] for k in left]
+        dets, new_covs = merge_with_covariance(
+            rest, None if covs is None else covs[left], self.cfg.merge_m
+        )
         for i, trk in enumerate(tracks):
             # no copies: filterpy's predict and update (and the batched step) assign new state
             # arrays, never write into them
@@ -130,19 +173,18 @@ class OnlineTracker:
             else:
                 trk.advance(t_ns, tcfg, v_m[i])
         if pairs:
-            took = [tracks[i] for i, _, _ in pairs]
-            cols = [j for _, j, _ in pairs]
-            r = np.broadcast_to(took[0].kf.R, (len(took), 2, 2)) if covs is None else covs[cols]
+            took = [tracks[i] for i, _ in pairs]
+            cols = [j for _, j in pairs]
             x1, p1 = update_many(
                 np.stack([trk.kf.x for trk in took]),
                 np.stack([trk.kf.P for trk in took]),
-                dets[cols][:, :, None],
-                r,
+                fused[cols][:, :, None],
+                fused_cov[cols],
                 took[0].kf.H,
             )
             for k, (trk, j) in enumerate(zip(took, cols, strict=True)):
                 trk.kf.x, trk.kf.P = x1[k], p1[k]
-                trk.took(dets[j])
+                trk.took(fused[j])
                 trk.hits += 1
                 trk.last_hit_ns = t_ns
                 trk.hit_ns.append(t_ns)
@@ -151,7 +193,9 @@ class OnlineTracker:
         for i in lost_idx:
             if tracks[i].state is not TrackState.TENTATIVE:
                 tracks[i].state = TrackState.PREDICTED
-        self._pending_new = [(dets[j], None if covs is None else covs[j]) for j in new_idx]
+        self._pending_new = [
+            (dets[j], None if new_covs is None else new_covs[j]) for j in range(len(dets))
+        ]
 
     def _retire(self, t_ns: int) -> None:
         """Drop tentative tracks that missed, and tracks unseen for too long; then start tracks
