@@ -53,7 +53,13 @@ from trackctl.logs.messages import (
 from trackctl.logs.writer import LogWriter
 from trackctl.sim.phones import PhoneRealism, PhoneTruth, realistic_imu
 from trackctl.sim.render import PersonLook, floor_image, render_frame
-from trackctl.sim.walkers import Trajectory, load_trajectories_csv, random_waypoint
+from trackctl.sim.walkers import (
+    SocialForce,
+    Trajectory,
+    load_trajectories_csv,
+    random_waypoint,
+    random_waypoint_crowd,
+)
 
 __all__ = ["VmScenario", "VmRealism", "PRESETS", "simulate_vm", "FIELDS", "mac_of"]
 
@@ -87,6 +93,9 @@ class VmRealism:
       stationary rate and mean episode length.
     * ``static_fps`` / ``static_fp_rate``: fixed places per camera (a poster, a plant) that the
       detector reports as a person in this share of frames.
+    * ``avoid``: random-waypoint walkers avoid each other (:class:`~trackctl.sim.walkers.
+      SocialForce`, Helbing and Molnar 1995); None: they walk through each other (the paper's
+      simulation-style independent walkers).
     * ``rssi_at_1m_dbm``, ``path_loss_exponent``, ``shadowing_db``: each AP's path loss drawn
       from these ranges (indoor 2.0-3.5, Rappaport; per-device offsets of +-7 dB at 1 m), so
       the pipeline's default model is not the simulator's.
@@ -99,6 +108,7 @@ class VmRealism:
     miss_episode_s: float = 0.0
     static_fps: int = 0
     static_fp_rate: float = 0.0
+    avoid: SocialForce | None = None
     rssi_at_1m_dbm: tuple[float, float] = (-40.0, -40.0)
     path_loss_exponent: tuple[float, float] = (2.5, 2.5)
     shadowing_db: float = 3.0
@@ -114,6 +124,7 @@ PRESETS: dict[str, VmRealism] = {
         miss_episode_s=1.5,
         static_fps=1,
         static_fp_rate=0.3,
+        avoid=SocialForce(),
         rssi_at_1m_dbm=(-47.0, -33.0),
         path_loss_exponent=(2.0, 3.5),
         shadowing_db=5.0,
@@ -271,13 +282,20 @@ def _people(
                 raise InputError(f"--phones: no trajectory with id {p!r} in {cfg.trajectories}")
         phones = {p: mac_of(i) for i, p in enumerate(cfg.phones)}
         return trajs, phones
-    trajs = []
-    phones = {}
-    for i in range(cfg.users + cfg.nonusers):
-        name = f"u{i}" if i < cfg.users else f"n{i - cfg.users}"
-        trajs.append(random_waypoint(name, rng, size, cfg.duration_s, speed_range=cfg.speed_mps))
-        if i < cfg.users:
-            phones[name] = mac_of(i)
+    names = [
+        f"u{i}" if i < cfg.users else f"n{i - cfg.users}" for i in range(cfg.users + cfg.nonusers)
+    ]
+    phones = {name: mac_of(i) for i, name in enumerate(names[: cfg.users])}
+    avoid = cfg.realism.avoid
+    if avoid is not None:
+        crowd = random_waypoint_crowd(
+            names, rng, size, cfg.duration_s, speed_range=cfg.speed_mps, force=avoid
+        )
+        return crowd, phones
+    trajs = [
+        random_waypoint(name, rng, size, cfg.duration_s, speed_range=cfg.speed_mps)
+        for name in names
+    ]
     return trajs, phones
 
 
