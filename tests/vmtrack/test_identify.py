@@ -1,10 +1,10 @@
-"""Offline identity: bridging a phone's path across short gaps where its chains connect."""
+"""Offline identity: the phone's path over chains (swaps at encounters), bridging short gaps."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from trackctl.vmtrack.identify import _bridge, _Chain
+from trackctl.vmtrack.identify import IdentifyConfig, _bridge, _Chain, _encounters, _viterbi
 
 S = 1_000_000_000
 
@@ -81,3 +81,35 @@ def test_a_route_through_a_third_chain() -> None:
     _bridge(path, present, chains, frame_t, 30, 1.0)
     assert (path >= 0).all()
     assert list(dict.fromkeys(path.tolist())) == [0, 1, 2]  # through chain 1, in order
+
+
+def _crossing() -> tuple[list[_Chain], np.ndarray, list[np.ndarray]]:
+    """Two chains crossing at x = 5 m at 5 s (one walks 0 -> 10 m, the other 10 -> 0 m)."""
+    chains = [_chain(1, 0, 10, 0, 10), _chain(2, 0, 10, 10, 0)]
+    frame_t, present = _setup(chains, 31)
+    rows = [np.flatnonzero(present[:, c]) for c in range(2)]
+    return chains, frame_t, _encounters(chains, rows, frame_t, 1.0)
+
+
+def test_encounters_are_the_frames_where_chains_pass_close() -> None:
+    _, frame_t, near = _crossing()
+    close = [f for f in range(len(frame_t)) if len(near[f])]
+    assert close == [14, 15, 16]  # within 1 m of each other: 4.5-5.5 s
+    assert sorted(near[15][0].tolist()) == [0, 1]
+
+
+def test_a_swap_at_an_encounter_moves_the_phone_where_a_switch_would_not() -> None:
+    # the tracker swapped the two people at the crossing: the phone fits chain 0 before it and
+    # chain 1 after it, each by a little
+    chains, frame_t, near = _crossing()
+    cost = np.full((31, 2), 0.1)
+    cost[:15, 0] = 0.02
+    cost[15:, 1] = 0.05
+    cfg = IdentifyConfig()
+    # staying on chain 0 costs 16 x 0.05 more than it should, less than switch_cost 2
+    assert (_viterbi(cost, cfg) == 0).all()
+    path = _viterbi(cost, cfg, near)
+    assert (path[:15] == 0).all() and (path[16:] == 1).all()
+    # chains that never meet are not swapped on such thin evidence
+    far = [np.empty((0, 2), int)] * 31
+    assert (_viterbi(cost, cfg, far) == 0).all()

@@ -12,7 +12,9 @@ identity becomes a global problem, solved here in five steps:
    what does not depend on it: pace, stops and starts, turns and their timing.
 2. **A path per phone** (Viterbi): at each frame the phone is on one track or on none; staying
    costs the evidence, switching tracks costs ``switch_cost``, being on no track costs
-   ``none_cost`` (a track that fits worse than that is not the carrier). People walking
+   ``none_cost`` (a track that fits worse than that is not the carrier). Where two chains
+   pass within ``encounter_m`` the tracker may have swapped the people (position alone cannot
+   tell them apart), so moving the phone between them costs only ``handover_cost``. People walking
    together fit alike for a while; the path keeps the phone where the evidence before and after
    puts it, and frames where two tracks fit within ``ratio`` are counted as ambiguous.
 3. **Refinement** (``refine_passes``): from the frames where the path names a track clearly,
@@ -37,6 +39,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from trackctl.vmtrack.align import AlignConfig, Alignment, PairEvidence, best_fit, lag_grid
 from trackctl.vmtrack.motion import PhoneMotion
@@ -89,6 +92,12 @@ class IdentifyConfig:
     does not leave their track and come back to it), or hand-overs between chains within
     ``bridge_m`` of each other (a carrier moves continuously), the fewest and closest."""
     bridge_m: float = 1.0
+    encounter_m: float = 1.0
+    """Two chains closer than this may have swapped people (no tracker tells two people a
+    metre apart by position alone, without appearance)..."""
+    handover_cost: float = 0.3
+    """...so the phone moves between them for this much (1.5 frames at the none cost) instead
+    of ``switch_cost``: after a swap, a few frames of evidence put it back on its carrier."""
 
 
 @dataclass
@@ -191,6 +200,30 @@ def _chains(frames: Sequence[FrameOut], plan: Publication, velocity_half_s: floa
     return out
 
 
+def _encounters(
+    chains: list[_Chain], rows: list[np.ndarray], frame_t: np.ndarray, within_m: float
+) -> list[np.ndarray]:
+    """Per frame, the pairs of chains (indices, (k, 2)) closer than ``within_m`` by their
+    detections (k-d tree per frame)."""
+    n_f = len(frame_t)
+    pos = np.full((n_f, len(chains), 2), np.nan)
+    for c, chain in enumerate(chains):
+        h = chain.hits
+        if len(h):
+            pos[rows[c], c, 0] = np.interp(chain.times, h[:, 0], h[:, 1])
+            pos[rows[c], c, 1] = np.interp(chain.times, h[:, 0], h[:, 2])
+    out = []
+    none = np.empty((0, 2), int)
+    for f in range(n_f):
+        live = np.flatnonzero(~np.isnan(pos[f, :, 0]))
+        if len(live) < 2:
+            out.append(none)
+            continue
+        pairs = cKDTree(pos[f, live]).query_pairs(within_m, output_type="ndarray")
+        out.append(live[pairs] if len(pairs) else none)
+    return out
+
+
 def _window_sums(
     times: np.ndarray, z_track: np.ndarray, z_phone: np.ndarray, half_s: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -257,9 +290,10 @@ def identify(
     for c, r in enumerate(rows):
         present[r, c] = True
     frame_s = float(np.median(np.diff(frame_t))) / 1e9 if n_f > 1 else 1.0
+    near = _encounters(chains, rows, frame_t, cfg.encounter_m)
     for mid in sorted(phones):
         paths[mid], costs[mid] = _phone_path(
-            dead_reckoned[mid], chains, rows, n_f, lags, lag_ns, acfg, cfg, aligned
+            dead_reckoned[mid], chains, rows, n_f, lags, lag_ns, acfg, cfg, aligned, near
         )
         _bridge(paths[mid], present, chains, frame_t, int(cfg.bridge_s / frame_s), cfg.bridge_m)
     ambiguous = np.zeros(n_f, bool)
@@ -313,6 +347,7 @@ def _phone_path(
     acfg: AlignConfig,
     cfg: IdentifyConfig,
     aligned: bool,
+    near: list[np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One phone's path over the chains (chain index per frame, -1: none) and its cost matrix:
     the free fit first, then ``refine_passes`` under the alignment the last path implies.
@@ -333,9 +368,9 @@ def _phone_path(
     if aligned:
         # the paper's setting, declared by the user: heading = walk, one clock, 0.7 m steps
         cost = _known_costs(free, (len(lags) // 2, np.ones(n_f, complex)), chains, rows, zls, cfg)
-        return _viterbi(cost, cfg), cost
+        return _viterbi(cost, cfg, near), cost
     cost = free
-    path = _viterbi(cost, cfg)
+    path = _viterbi(cost, cfg, near)
     for _ in range(cfg.refine_passes):
         # the phone's alignment over time, from where the path names its carrier clearly; then
         # every chain is scored under it (direction counts again), the free fit elsewhere
@@ -345,7 +380,7 @@ def _phone_path(
         if known is None:
             break
         cost = _known_costs(free, known, chains, rows, zls, cfg)
-        path = _viterbi(cost, cfg)
+        path = _viterbi(cost, cfg, near)
     return path, cost
 
 
@@ -439,12 +474,15 @@ def _known_costs(
     return cost
 
 
-def _viterbi(cost: np.ndarray, cfg: IdentifyConfig) -> np.ndarray:
+def _viterbi(
+    cost: np.ndarray, cfg: IdentifyConfig, near: list[np.ndarray] | None = None
+) -> np.ndarray:
     """The phone's cheapest path over frames: chain index per frame, -1 for none.
 
     States are the chains and "none". Staying is free; moving between two chains costs
-    ``switch_cost``, between a chain and none half of it; a chain that stops being published
-    releases the phone to none for free (the person left, or the fragment ended)."""
+    ``switch_cost`` (``handover_cost`` between chains ``near`` each other at that frame),
+    between a chain and none half of it; a chain that stops being published releases the
+    phone to none for free (the person left, or the fragment ended)."""
     n_f, n_c = cost.shape
     none = n_c
     acc = np.full(n_c + 1, math.inf)
@@ -467,6 +505,17 @@ def _viterbi(cost: np.ndarray, cfg: IdentifyConfig) -> np.ndarray:
             better[none] = False
             into[better] = cand
             src[better] = origin
+        if near is not None and len(near[f]):
+            # a swap at an encounter: hand the phone over cheaply, both ways
+            i = np.concatenate([near[f][:, 0], near[f][:, 1]])
+            j = np.concatenate([near[f][:, 1], near[f][:, 0]])
+            via = acc[i] + cfg.handover_cost
+            # a chain near several: the cheapest comes last, and the last assignment stays
+            order = np.argsort(-via, kind="stable")
+            i, j, via = i[order], j[order], via[order]
+            better = via < into[j]
+            into[j[better]] = via[better]
+            src[j[better]] = i[better]
         # into none: from the best chain (half the switch), or free from a chain that ended
         if n_c:
             if best_trk + half < into[none]:
