@@ -4,7 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from trackctl.vmtrack.identify import IdentifyConfig, _bridge, _Chain, _encounters, _viterbi
+from trackctl.vmtrack.align import AlignConfig
+from trackctl.vmtrack.identify import (
+    IdentifyConfig,
+    _alignment_track,
+    _bridge,
+    _Chain,
+    _encounters,
+    _viterbi,
+)
 
 S = 1_000_000_000
 
@@ -113,3 +121,28 @@ def test_a_swap_at_an_encounter_moves_the_phone_where_a_switch_would_not() -> No
     # chains that never meet are not swapped on such thin evidence
     far = [np.empty((0, 2), int)] * 31
     assert (_viterbi(cost, cfg, far) == 0).all()
+
+
+def test_a_carry_change_starts_a_new_alignment_at_once() -> None:
+    # a walker turning now and then; the phone's heading offset flips by 180 deg when it moves
+    # from one pocket to another at frame 150 (its motion stage reports the change)
+    n_f = 300
+    frame_t = np.round(np.arange(n_f) * S / 3).astype(np.int64)
+    heading = np.cumsum(np.where(np.arange(n_f) % 40 < 5, 0.3, 0.0))
+    z_track = 1.2 * np.exp(1j * heading)
+    flip = np.where(np.arange(n_f) < 150, 1.0, -1.0)
+    z_phone = (z_track / flip)[:, None]  # z_track = a z_phone, a = +1 then -1
+    hits = np.column_stack([frame_t, np.zeros(n_f), np.zeros(n_f)]).astype(float)
+    chain = _Chain(1, frame_t, z_track, hits)
+    rows = [np.arange(n_f)]
+    args = ([chain], rows, [z_phone], frame_t, np.array([0.0]), AlignConfig(), IdentifyConfig())
+    path = np.zeros(n_f, int)
+    known = _alignment_track(path, *args, carry_changes=frame_t[[150]])
+    assert known is not None
+    yaw = np.degrees(np.angle(known[1]))
+    assert np.all(np.abs(yaw[:150]) < 1) and np.all(np.abs(np.abs(yaw[150:]) - 180) < 1)
+    assert np.allclose(np.abs(known[1]), 1.0, atol=0.01)  # the step scale: right throughout
+    # without the change, the windows near it mix the two carries: opposite velocities cancel,
+    # and the fitted scale collapses (to the lowest allowed)
+    _, blind = _alignment_track(path, *args)  # type: ignore[misc]
+    assert np.all(np.abs(blind[130:170]) < 0.8)

@@ -293,7 +293,17 @@ def identify(
     near = _encounters(chains, rows, frame_t, cfg.encounter_m)
     for mid in sorted(phones):
         paths[mid], costs[mid] = _phone_path(
-            dead_reckoned[mid], chains, rows, n_f, lags, lag_ns, acfg, cfg, aligned, near
+            dead_reckoned[mid],
+            chains,
+            rows,
+            frame_t,
+            lags,
+            lag_ns,
+            acfg,
+            cfg,
+            aligned,
+            near,
+            phones[mid].carry_changes,
         )
         _bridge(paths[mid], present, chains, frame_t, int(cfg.bridge_s / frame_s), cfg.bridge_m)
     ambiguous = np.zeros(n_f, bool)
@@ -341,17 +351,20 @@ def _phone_path(
     path_pts: np.ndarray,
     chains: list[_Chain],
     rows: list[np.ndarray],
-    n_f: int,
+    frame_t: np.ndarray,
     lags: np.ndarray,
     lag_ns: np.ndarray,
     acfg: AlignConfig,
     cfg: IdentifyConfig,
     aligned: bool,
     near: list[np.ndarray] | None = None,
+    carry_changes: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One phone's path over the chains (chain index per frame, -1: none) and its cost matrix:
     the free fit first, then ``refine_passes`` under the alignment the last path implies.
-    ``path_pts``: the phone's dead-reckoned path (:func:`_dead_reckoned`)."""
+    ``path_pts``: the phone's dead-reckoned path (:func:`_dead_reckoned`); ``carry_changes``:
+    phone-clock times at which its carry changed (its alignment is fitted between them)."""
+    n_f = len(frame_t)
     zls = []
     free = np.full((n_f, len(chains)), np.inf)
     for c, chain in enumerate(chains):
@@ -375,7 +388,7 @@ def _phone_path(
         # the phone's alignment over time, from where the path names its carrier clearly; then
         # every chain is scored under it (direction counts again), the free fit elsewhere
         known = _alignment_track(
-            _clear_path(path, cost, cfg), chains, rows, zls, n_f, lags, acfg, cfg
+            _clear_path(path, cost, cfg), chains, rows, zls, frame_t, lags, acfg, cfg, carry_changes
         )
         if known is None:
             break
@@ -389,14 +402,16 @@ def _alignment_track(
     chains: list[_Chain],
     rows: list[np.ndarray],
     zls: list[np.ndarray],
-    n_f: int,
+    frame_t: np.ndarray,
     lags: np.ndarray,
     acfg: AlignConfig,
     cfg: IdentifyConfig,
+    carry_changes: np.ndarray | None = None,
 ) -> tuple[int, np.ndarray] | None:
     """The phone's lag (one, over all assigned frames) and its ``a`` per frame (a centred
-    ``align_window_s`` fit over the assigned frames; NaN where too few): None when the path
-    holds too little evidence."""
+    ``align_window_s`` fit over the assigned frames, within the carry the frame is in; NaN
+    where too few): None when the path holds too little evidence."""
+    n_f = len(frame_t)
     n_l = len(lags)
     s = np.zeros((n_f, n_l), complex)
     p = np.zeros((n_f, n_l))
@@ -429,19 +444,33 @@ def _alignment_track(
     cp = np.concatenate([[0], np.cumsum(p[:, k])])
     cn = np.concatenate([[0], np.cumsum(n[:, k])])
     idx = np.arange(n_f)
-    lo, hi = np.clip(idx - half, 0, n_f), np.clip(idx + half + 1, 0, n_f)
+    # a carry's frames: the changes in camera time (phone time - lag)
+    cuts = np.empty(0, int)
+    if carry_changes is not None and len(carry_changes):
+        cam = carry_changes - int(round(lags[k] * 1e9))
+        cuts = np.unique(np.searchsorted(frame_t, cam))
+    seg = np.searchsorted(cuts, idx, side="right")
+    start = np.r_[0, cuts][seg]
+    stop = np.r_[cuts, n_f][seg]
+    lo, hi = np.maximum(idx - half, start), np.minimum(idx + half + 1, stop)
     sw, pw, nw = cs[hi] - cs[lo], cp[hi] - cp[lo], cn[hi] - cn[lo]
     a, _ = best_fit(sw, pw, np.zeros(n_f), nw, acfg)
     a = np.where((nw >= cfg.min_window_frames * 2) & (np.abs(sw) > 0), a, np.nan)
-    # before the first and after the last well-fitted stretch (and between stretches) the
-    # nearest fit holds: a carry stays until the phone is taken out
-    good = np.flatnonzero(~np.isnan(a))
-    if not len(good):
+    # before the first and after the last well-fitted stretch of a carry (and between
+    # stretches) the nearest fit of that carry holds: a carry stays until the phone is moved
+    out = np.full(n_f, np.nan, complex)
+    for s0 in np.unique(seg):
+        span = np.flatnonzero(seg == s0)
+        good = span[~np.isnan(a[span])]
+        if not len(good):
+            continue
+        pos = np.searchsorted(good, span)
+        nearest = good[np.clip(pos, 0, len(good) - 1)]
+        prev = good[np.clip(pos - 1, 0, len(good) - 1)]
+        out[span] = a[np.where(np.abs(prev - span) < np.abs(nearest - span), prev, nearest)]
+    if np.isnan(out).all():
         return None
-    nearest = good[np.clip(np.searchsorted(good, idx), 0, len(good) - 1)]
-    prev = good[np.clip(np.searchsorted(good, idx) - 1, 0, len(good) - 1)]
-    pick = np.where(np.abs(prev - idx) < np.abs(nearest - idx), prev, nearest)
-    return k, a[pick]
+    return k, out
 
 
 def _known_costs(

@@ -42,6 +42,11 @@ class MotionConfig:
     """The cadence is evaluated every ``hop_s`` and interpolated (fast at 50-200 Hz)."""
     axis_window_s: float = 4.0
     """The heading's device axis is the one most level over this centred window."""
+    attitude_change_deg: float = 30.0
+    """The phone was moved to another carry (taken out of a pocket, put in a bag) where its
+    "up" direction, in the device's own frame, turns by more than this between the
+    ``attitude_window_s`` before and after: its heading offset from the walk is new there."""
+    attitude_window_s: float = 2.0
 
 
 class PhoneMotion:
@@ -60,6 +65,9 @@ class PhoneMotion:
         self.v = np.empty((0, 2))
         self.heading = np.empty(0)
         self.speed = np.empty(0)
+        self.carry_changes = np.empty(0, np.int64)
+        """Phone-clock times (ns) at which the phone changed carry (its device attitude or its
+        heading axis changed): the device-to-walk yaw before and after are unrelated."""
 
     def add(self, imu: Imu) -> None:
         """Add one sample (non-finite samples are skipped and counted)."""
@@ -89,10 +97,15 @@ class PhoneMotion:
         known = np.isfinite(quat).all(axis=1)
         vert = np.linalg.norm(acc, axis=1) - G
         heading = np.full(len(t), math.nan)
+        # "up" in the device frame: the orientation's world z, else the mean specific force
+        up = acc / np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), 1e-9)
+        axis = np.zeros(len(t), int)
         if known.any():
             rot = Rotation.from_quat(quat[known]).as_matrix()  # device -> world, (n, 3, 3)
             vert[known] = np.einsum("nj,nj->n", rot[:, 2, :], acc[known]) - G
-            heading[known] = self._axis_heading(ts[known], rot)
+            heading[known], axis[known] = self._axis_heading(ts[known], rot)
+            up[known] = rot[:, 2, :]
+        self.carry_changes = t[self._carry_changes(ts, up, axis)]
         if np.isnan(heading).any():
             gz = np.asarray(self._gyro_z)
             integrated = np.concatenate(([0.0], np.cumsum(np.diff(ts) * gz[1:])))
@@ -104,10 +117,33 @@ class PhoneMotion:
         self.v = np.column_stack([speed * np.cos(heading), speed * np.sin(heading)])
         self._t, self._acc, self._quat, self._gyro_z = [], [], [], []
 
-    def _axis_heading(self, ts: np.ndarray, rot: np.ndarray) -> np.ndarray:
+    def _carry_changes(self, ts: np.ndarray, up: np.ndarray, axis: np.ndarray) -> np.ndarray:
+        """Sample indices where the phone changed carry: its heading axis changed, or its
+        device-frame "up" (``up``, (n, 3) unit vectors) turned by more than
+        ``attitude_change_deg`` between the windows before and after (one index per change)."""
+        cfg = self.config
+        if len(ts) < 3:
+            return np.empty(0, int)
+        half = cfg.attitude_window_s
+        cum = np.vstack([np.zeros(3), np.cumsum(up, axis=0)])
+        lo = np.searchsorted(ts, ts - half, side="left")
+        hi = np.searchsorted(ts, ts + half, side="right")
+        mid = np.arange(len(ts))
+        before = cum[mid + 1] - cum[lo]
+        after = cum[hi] - cum[mid]
+        nb = np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
+        cos = np.einsum("ij,ij->i", before, after) / np.maximum(nb, 1e-12)
+        moved = cos < math.cos(math.radians(cfg.attitude_change_deg))
+        moved[1:] |= axis[1:] != axis[:-1]
+        # one change per run of flagged samples: its middle
+        edges = np.flatnonzero(np.diff(np.r_[0, moved.astype(np.int8), 0]))
+        return ((edges[0::2] + edges[1::2] - 1) // 2).astype(int)
+
+    def _axis_heading(self, ts: np.ndarray, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Heading (rad) of the device axis that lies most level over a centred window: the
         x or y axis of a phone held flat, the z axis (out of the screen) of one upright in a
-        pocket. A change of axis (the phone was moved) is a jump the identity stage re-fits."""
+        pocket; and that axis per sample. A change of axis (the phone was moved) is a jump the
+        identity stage re-fits."""
         rate = (len(ts) - 1) / max(ts[-1] - ts[0], 1e-9) if len(ts) > 1 else 1.0
         n = max(1, int(round(self.config.axis_window_s * rate)))
         tilt = (
@@ -122,7 +158,7 @@ class PhoneMotion:
                 cur = int(np.argmin(tilt[k]))
             axis[k] = cur
         rows = np.arange(len(ts))
-        return np.arctan2(rot[rows, 1, axis], rot[rows, 0, axis])
+        return np.arctan2(rot[rows, 1, axis], rot[rows, 0, axis]), axis
 
     def _speeds(self, ts: np.ndarray, vert: np.ndarray) -> np.ndarray:
         cfg = self.config
