@@ -96,6 +96,11 @@ class IdentifyConfig:
     """Two chains closer than this may have swapped people (no tracker tells two people a
     metre apart by position alone, without appearance)..."""
     handover_cost: float = 0.3
+    coast_grace_s: float = 1.0
+    coast_cost: float = 0.2
+    """A chain without a detection for longer than ``coast_grace_s`` is only its filter's guess
+    of where the person went: each such frame costs this much more, what a frame on no track
+    costs (a chain that took the person's detections meanwhile is where the phone is)."""
     """...so the phone moves between them for this much (1.5 frames at the none cost) instead
     of ``switch_cost``: after a swap, a few frames of evidence put it back on its carrier."""
 
@@ -365,6 +370,7 @@ def _phone_path(
     ``path_pts``: the phone's dead-reckoned path (:func:`_dead_reckoned`); ``carry_changes``:
     phone-clock times at which its carry changed (its alignment is fitted between them)."""
     n_f = len(frame_t)
+    coast = _coasting(chains, rows, n_f, cfg)
     zls = []
     free = np.full((n_f, len(chains)), np.inf)
     for c, chain in enumerate(chains):
@@ -381,9 +387,9 @@ def _phone_path(
     if aligned:
         # the paper's setting, declared by the user: heading = walk, one clock, 0.7 m steps
         cost = _known_costs(free, (len(lags) // 2, np.ones(n_f, complex)), chains, rows, zls, cfg)
-        return _viterbi(cost, cfg, near), cost
+        return _viterbi(cost + coast, cfg, near), cost
     cost = free
-    path = _viterbi(cost, cfg, near)
+    path = _viterbi(cost + coast, cfg, near)
     for _ in range(cfg.refine_passes):
         # the phone's alignment over time, from where the path names its carrier clearly; then
         # every chain is scored under it (direction counts again), the free fit elsewhere
@@ -393,8 +399,24 @@ def _phone_path(
         if known is None:
             break
         cost = _known_costs(free, known, chains, rows, zls, cfg)
-        path = _viterbi(cost, cfg, near)
+        path = _viterbi(cost + coast, cfg, near)
     return path, cost
+
+
+def _coasting(
+    chains: list[_Chain], rows: list[np.ndarray], n_f: int, cfg: IdentifyConfig
+) -> np.ndarray:
+    """``coast_cost`` at each (frame, chain) where the chain has had no detection for longer
+    than ``coast_grace_s``; 0 elsewhere."""
+    out = np.zeros((n_f, len(chains)))
+    grace = int(cfg.coast_grace_s * 1e9)
+    for c, chain in enumerate(chains):
+        if not len(chain.hits):
+            continue
+        hit_t = np.unique(chain.hits[:, 0]).astype(np.int64)
+        last = hit_t[np.clip(np.searchsorted(hit_t, chain.times, side="right") - 1, 0, None)]
+        out[rows[c], c] = np.where(chain.times - last > grace, cfg.coast_cost, 0.0)
+    return out
 
 
 def _alignment_track(
