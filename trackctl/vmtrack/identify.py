@@ -430,9 +430,9 @@ def _alignment_track(
     cfg: IdentifyConfig,
     carry_changes: np.ndarray | None = None,
 ) -> tuple[int, np.ndarray] | None:
-    """The phone's lag (one, over all assigned frames) and its ``a`` per frame (a centred
-    ``align_window_s`` fit over the assigned frames, within the carry the frame is in; NaN
-    where too few): None when the path holds too little evidence."""
+    """The phone's lag (one over the log: the one its local fits explain best) and its ``a``
+    per frame (a centred ``align_window_frames`` fit over the assigned frames, within the
+    carry the frame is in; NaN where too few): None when the path holds too little evidence."""
     n_f = len(frame_t)
     n_l = len(lags)
     s = np.zeros((n_f, n_l), complex)
@@ -452,30 +452,40 @@ def _alignment_track(
         p[f] += np.abs(zp) ** 2
         t[f] += np.abs(z0) ** 2
         n[f] += ok
-    total = PairEvidence(n_l)
-    total.S, total.P, total.T, total.n = s.sum(0), p.sum(0), t.sum(0), n.sum(0)
-    if total.frames < cfg.min_window_frames * 2:
+    if n.sum(0).max() < cfg.min_window_frames * 2:
         return None
-    al = total.fit(acfg, lags)
-    if al is None:
-        return None
-    k = al.lag_index
     # frames are uniform enough: the window in frames from the median frame interval
     half = max(1, int(round(cfg.align_window_frames / 2)))
-    cs = np.concatenate([[0], np.cumsum(s[:, k])])
-    cp = np.concatenate([[0], np.cumsum(p[:, k])])
-    cn = np.concatenate([[0], np.cumsum(n[:, k])])
+    cum = [
+        np.concatenate([np.zeros((1, n_l), q.dtype), np.cumsum(q, axis=0)]) for q in (s, p, t, n)
+    ]
     idx = np.arange(n_f)
-    # a carry's frames: the changes in camera time (phone time - lag)
-    cuts = np.empty(0, int)
-    if carry_changes is not None and len(carry_changes):
-        cam = carry_changes - int(round(lags[k] * 1e9))
-        cuts = np.unique(np.searchsorted(frame_t, cam))
-    seg = np.searchsorted(cuts, idx, side="right")
-    start = np.r_[0, cuts][seg]
-    stop = np.r_[cuts, n_f][seg]
-    lo, hi = np.maximum(idx - half, start), np.minimum(idx + half + 1, stop)
-    sw, pw, nw = cs[hi] - cs[lo], cp[hi] - cp[lo], cn[hi] - cn[lo]
+
+    def windows(lag_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        # each frame's centred window, within its carry (the changes in camera time: phone
+        # time - lag)
+        cuts = np.empty(0, int)
+        if carry_changes is not None and len(carry_changes):
+            cuts = np.unique(np.searchsorted(frame_t, carry_changes - int(round(lag_s * 1e9))))
+        seg = np.searchsorted(cuts, idx, side="right")
+        lo = np.maximum(idx - half, np.r_[0, cuts][seg])
+        hi = np.minimum(idx + half + 1, np.r_[cuts, n_f][seg])
+        return lo, hi, seg
+
+    # the lag (one clock offset per phone) that the local fits explain best: a single yaw
+    # over the whole log would judge lags by how well they survive the carry's changes
+    lo, hi, _ = windows(0.0)
+    sw, pw, tw, nw = (c[hi] - c[lo] for c in cum)
+    _, r = best_fit(sw, pw, tw, nw, acfg)
+    use = nw >= cfg.min_window_frames * 2
+    cover = np.where(use, nw, 0.0).sum(axis=0)
+    resid = np.where(use, r * nw, 0.0).sum(axis=0) / np.maximum(cover, 1e-9)
+    resid[cover < 0.8 * cover.max()] = np.inf
+    if not np.isfinite(resid).any():
+        return None
+    k = int(np.argmin(resid))
+    lo, hi, seg = windows(float(lags[k]))
+    sw, pw, nw = (cum[i][hi, k] - cum[i][lo, k] for i in (0, 1, 3))
     a, _ = best_fit(sw, pw, np.zeros(n_f), nw, acfg)
     a = np.where((nw >= cfg.min_window_frames * 2) & (np.abs(sw) > 0), a, np.nan)
     # before the first and after the last well-fitted stretch of a carry (and between
