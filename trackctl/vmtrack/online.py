@@ -144,18 +144,23 @@ class OnlineTracker:
                 given.setdefault(i, []).append(idx[j])
             left.extend(idx[j] for j in cam_new)
         # one fused measurement per track: information-weighted mean of its cameras' points
+        # (all tracks at once: sums of information matrices and vectors by track)
         took_idx = sorted(given)
-        fused = np.empty((len(took_idx), 2))
-        fused_cov = np.empty((len(took_idx), 2, 2))
-        for k, i in enumerate(took_idx):
-            ks = given[i]
-            if covs is None:
-                fused[k] = xy_all[ks].mean(axis=0)
-                fused_cov[k] = np.eye(2) * tcfg.det_sigma_m**2 / len(ks)
-            else:
-                info = np.linalg.inv(covs[ks])
-                fused_cov[k] = np.linalg.inv(info.sum(axis=0))
-                fused[k] = fused_cov[k] @ np.einsum("nij,nj->i", info, xy_all[ks])
+        slot = {i: k for k, i in enumerate(took_idx)}
+        det_k = np.array([k for i in took_idx for k in given[i]], int)
+        det_slot = np.array([slot[i] for i in took_idx for _ in given[i]], int)
+        cov_k = (
+            np.broadcast_to(np.eye(2) * tcfg.det_sigma_m**2, (len(det_k), 2, 2))
+            if covs is None
+            else covs[det_k]
+        )
+        info = np.linalg.inv(cov_k)
+        info_sum = np.zeros((len(took_idx), 2, 2))
+        vec_sum = np.zeros((len(took_idx), 2))
+        np.add.at(info_sum, det_slot, info)
+        np.add.at(vec_sum, det_slot, np.einsum("nij,nj->ni", info, xy_all[det_k]))
+        fused_cov = np.linalg.inv(info_sum) if len(took_idx) else info_sum
+        fused = np.einsum("nij,nj->ni", fused_cov, vec_sum)
         pairs = [(i, k) for k, i in enumerate(took_idx)]
         lost_idx = [i for i in range(len(tracks)) if i not in given]
         rest = [points[k] for k in left]
