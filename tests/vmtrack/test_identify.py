@@ -7,8 +7,10 @@ import numpy as np
 from trackctl.vmtrack.align import AlignConfig
 from trackctl.vmtrack.identify import (
     IdentifyConfig,
+    Identities,
     _alignment_track,
     _bridge,
+    _carry_through_unseen,
     _Chain,
     _encounters,
     _viterbi,
@@ -146,3 +148,37 @@ def test_a_carry_change_starts_a_new_alignment_at_once() -> None:
     # and the fitted scale collapses (to the lowest allowed)
     _, blind = _alignment_track(path, *args)  # type: ignore[misc]
     assert np.all(np.abs(blind[130:170]) < 0.8)
+
+
+def _unseen(b_x0: float) -> Identities:
+    """A carrier walks along x at 1 m/s for 20 s; chain 1 shows them until 8 s, chain 2 from
+    12 s (starting at ``b_x0``); the phone's dead-reckoned path is the walk, rotated by 90 deg
+    (its device heading) and on its own clock, 0.5 s ahead."""
+    a, b = _chain(1, 0, 8, 0, 8), _chain(2, 12, 20, b_x0, b_x0 + 8)
+    frame_t = np.round(np.arange(61) * S / 3).astype(np.int64)
+    out = Identities()
+    for ch in (a, b):
+        for t in ch.times:
+            out.mid_at[(ch.key, int(t))] = "m1"
+    t = np.arange(0, 21, 0.1)
+    dr = np.column_stack([(t + 0.5) * S, np.zeros_like(t), t])  # phone time = camera + 0.5 s
+    lags = np.array([0.0, 0.5])
+    cfg = IdentifyConfig()
+    known = (1, np.full(len(frame_t), np.exp(-1j * np.pi / 2)))  # z_track = a z_phone
+    _carry_through_unseen("m1", out, [a, b], frame_t, dr, lags, known, cfg)
+    return out
+
+
+def test_a_carrier_no_camera_sees_is_walked_on_their_phone() -> None:
+    out = _unseen(12.0)
+    times = sorted(out.unseen)
+    assert [round(t / S, 2) for t in (times[0], times[-1])] == [8.33, 11.67]
+    for t_ns in times:
+        ((mid, (x, y), (vx, _)),) = out.unseen[t_ns]
+        assert mid == "m1"
+        assert abs(x - t_ns / S) < 0.05 and abs(y) < 0.05 and abs(vx - 1.0) < 0.1
+
+
+def test_a_gap_the_phone_did_not_walk_is_left_empty() -> None:
+    # the chain after starts 3 m from where the phone's walk ends: somebody else
+    assert _unseen(15.0).unseen == {}

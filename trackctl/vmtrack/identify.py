@@ -96,6 +96,11 @@ class IdentifyConfig:
     """Two chains closer than this may have swapped people (no tracker tells two people a
     metre apart by position alone, without appearance)..."""
     handover_cost: float = 0.3
+    unseen_s: float = 10.0
+    """A gap of at most this between two published stretches of a phone is walked on the
+    phone's dead reckoning (:func:`_carry_through_unseen`; 0: never)..."""
+    unseen_m: float = 1.0
+    """...when it ends within this (+ 15 % of the walk) of where the next stretch starts."""
     coast_grace_s: float = 1.0
     coast_cost: float = 0.2
     """A chain without a detection for longer than ``coast_grace_s`` is only its filter's guess
@@ -116,6 +121,10 @@ class Identities:
     unanchored_frames: int = 0
     """Phone-frames left unpublished: a stretch with no unambiguous frame."""
     alignments: dict[str, Alignment] = field(default_factory=dict)
+    unseen: dict[int, list[tuple[str, tuple[float, float], tuple[float, float]]]] = field(
+        default_factory=dict
+    )
+    """frame ns -> (MID, xy, velocity) of carriers no chain showed, walked on their phone."""
 
 
 @dataclass
@@ -296,8 +305,9 @@ def identify(
         present[r, c] = True
     frame_s = float(np.median(np.diff(frame_t))) / 1e9 if n_f > 1 else 1.0
     near = _encounters(chains, rows, frame_t, cfg.encounter_m)
+    known: dict[str, tuple[int, np.ndarray] | None] = {}
     for mid in sorted(phones):
-        paths[mid], costs[mid] = _phone_path(
+        paths[mid], costs[mid], known[mid] = _phone_path(
             dead_reckoned[mid],
             chains,
             rows,
@@ -336,7 +346,73 @@ def identify(
             out.mid_at[(keys[c], int(frame_t[fi]))] = mid
     out.ambiguous_frames = int(ambiguous.sum())
     out.alignments = _alignments(out, chains, dead_reckoned, lags, lag_ns, acfg, half_v)
+    for mid in sorted(phones):
+        al = known[mid]
+        if al is not None and cfg.unseen_s > 0:
+            _carry_through_unseen(mid, out, chains, frame_t, dead_reckoned[mid], lags, al, cfg)
     return out
+
+
+def _carry_through_unseen(
+    mid: str,
+    out: Identities,
+    chains: list[_Chain],
+    frame_t: np.ndarray,
+    path_pts: np.ndarray,
+    lags: np.ndarray,
+    known: tuple[int, np.ndarray],
+    cfg: IdentifyConfig,
+) -> None:
+    """Where a phone's published chains stop for at most ``unseen_s`` and start again (the
+    carrier went where no camera sees, or nobody detected them), its carrier walked what the
+    phone dead-reckoned: the aligned path from where the chain before left them, with the
+    misfit at the chain after spread over the gap. A gap whose dead-reckoned walk misses the
+    chain after by more than ``unseen_m`` (+ 15 % of the walk) is not the same carrier's and is
+    left empty. Positions go to ``out.unseen`` (published as ``predicted``)."""
+    if len(path_pts) < 2:
+        return
+    k, a = known
+    by_key: dict[int, _Chain] = {c.key: c for c in chains}
+    on = np.zeros(len(frame_t), bool)
+    key_at = np.full(len(frame_t), -1, np.int64)
+    index = {int(t): i for i, t in enumerate(frame_t)}
+    for (key, t_ns), m in out.mid_at.items():
+        if m == mid:
+            on[index[t_ns]] = True
+            key_at[index[t_ns]] = key
+    # the phone's dead-reckoned position (complex) at each frame, in phone time
+    lag_ns = int(round(float(lags[k]) * 1e9))
+    dr = np.interp(frame_t + lag_ns, path_pts[:, 0], path_pts[:, 1]) + 1j * np.interp(
+        frame_t + lag_ns, path_pts[:, 0], path_pts[:, 2]
+    )
+    inside = (frame_t + lag_ns >= path_pts[0, 0]) & (frame_t + lag_ns <= path_pts[-1, 0])
+    step = np.r_[0, np.diff(dr)] * np.nan_to_num(a, nan=0.0)
+    max_frames = int(cfg.unseen_s / (float(np.median(np.diff(frame_t))) / 1e9 or 1.0))
+    f = 1
+    n = len(frame_t)
+    while f < n:
+        if on[f] or not on[f - 1]:
+            f += 1
+            continue
+        g = f
+        while g < n and not on[g]:
+            g += 1
+        if g < n and g - f <= max_frames and inside[f - 1 : g + 1].all():
+            if not np.isnan(a[f - 1 : g + 1]).any():
+                ta, tb = int(frame_t[f - 1]), int(frame_t[g])
+                pa = complex(*by_key[int(key_at[f - 1])].xy_at(ta))
+                pb = complex(*by_key[int(key_at[g])].xy_at(tb))
+                walk = np.cumsum(step[f : g + 1])  # displacement from frame f - 1
+                miss = pb - (pa + walk[-1])
+                if abs(miss) <= cfg.unseen_m + 0.15 * abs(walk[-1]):
+                    share = np.arange(1, g - f + 1) / (g - f + 1)
+                    xy = pa + walk[:-1] + share * miss
+                    v = np.gradient(xy, frame_t[f:g] / 1e9) if g - f > 1 else np.zeros(1, complex)
+                    for i, t_ns in enumerate(frame_t[f:g]):
+                        out.unseen.setdefault(int(t_ns), []).append(
+                            (mid, (xy[i].real, xy[i].imag), (v[i].real, v[i].imag))
+                        )
+        f = g
 
 
 def _clear_path(path: np.ndarray, cost: np.ndarray, cfg: IdentifyConfig) -> np.ndarray:
@@ -364,9 +440,10 @@ def _phone_path(
     aligned: bool,
     near: list[np.ndarray] | None = None,
     carry_changes: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """One phone's path over the chains (chain index per frame, -1: none) and its cost matrix:
-    the free fit first, then ``refine_passes`` under the alignment the last path implies.
+) -> tuple[np.ndarray, np.ndarray, tuple[int, np.ndarray] | None]:
+    """One phone's path over the chains (chain index per frame, -1: none), its cost matrix and
+    its alignment (lag index, ``a`` per frame; None when never fitted): the free fit first,
+    then ``refine_passes`` under the alignment the last path implies.
     ``path_pts``: the phone's dead-reckoned path (:func:`_dead_reckoned`); ``carry_changes``:
     phone-clock times at which its carry changed (its alignment is fitted between them)."""
     n_f = len(frame_t)
@@ -386,10 +463,12 @@ def _phone_path(
         free[rows[c], c] = np.where(np.isfinite(r), r, cfg.none_cost)
     if aligned:
         # the paper's setting, declared by the user: heading = walk, one clock, 0.7 m steps
-        cost = _known_costs(free, (len(lags) // 2, np.ones(n_f, complex)), chains, rows, zls, cfg)
-        return _viterbi(cost + coast, cfg, near), cost
+        known0 = (len(lags) // 2, np.ones(n_f, complex))
+        cost = _known_costs(free, known0, chains, rows, zls, cfg)
+        return _viterbi(cost + coast, cfg, near), cost, known0
     cost = free
     path = _viterbi(cost + coast, cfg, near)
+    found: tuple[int, np.ndarray] | None = None
     for _ in range(cfg.refine_passes):
         # the phone's alignment over time, from where the path names its carrier clearly; then
         # every chain is scored under it (direction counts again), the free fit elsewhere
@@ -398,9 +477,10 @@ def _phone_path(
         )
         if known is None:
             break
+        found = known
         cost = _known_costs(free, known, chains, rows, zls, cfg)
         path = _viterbi(cost + coast, cfg, near)
-    return path, cost
+    return path, cost, found
 
 
 def _coasting(

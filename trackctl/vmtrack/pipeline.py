@@ -418,6 +418,18 @@ def _frame_tracks(
                     state=TrackState.PREDICTED,
                 )
             )
+    # carriers no camera showed, walked on their phone between two stretches of their chains
+    for mid, (ux, uy), (vx, vy) in ids.unseen.get(fr.t_ns, ()) if ids is not None else ():
+        if mid not in names:
+            names.add(mid)
+            tracks.append(
+                Track(
+                    mid,
+                    Vec3(float(ux), float(uy), 0.0),
+                    Vec3(float(vx), float(vy), 0.0),
+                    state=TrackState.PREDICTED,
+                )
+            )
     return tracks
 
 
