@@ -5,7 +5,7 @@ sample-logs:  ## regenerate the shipped sample logs (deterministic: same bytes e
 	trackctl simulate demo --out sample_logs/demo.mcap --seed 0 --duration 20
 	trackctl simulate ev --out sample_logs/ev.mcap --people 400 --area 600 --duration 1200 --seed 0
 	trackctl simulate bridgeloc --out sample_logs/bridgeloc.mcap --field lobby --tags 6 --duration 10 --infra-fps 1 --seed 0 --quiet
-	trackctl simulate vm --out sample_logs/vm-office.mcap --field office --users 2 --nonusers 1 --duration 18 --seed 3 --frames --jpeg-quality 50
+	trackctl simulate vm --out sample_logs/vm-office.mcap --field office --users 2 --nonusers 1 --duration 30 --seed 3 --frames --jpeg-quality 40
 	trackctl simulate smirror --out sample_logs/smirror.mcap --paths 1 --size 320x240 --fps 2 --jpeg-quality 70 --duration 36 --seed 0 -q
 
 test:

@@ -23,7 +23,7 @@ from trackctl.vmtrack.pipeline import SCENE_TOPIC, TRACKS_TOPIC
 
 VM_SAMPLE = ROOT / "sample_logs" / "vm-office.mcap"
 SAMPLE_SCENARIO = VmScenario(
-    field="office", users=2, nonusers=1, duration_s=18, seed=3, frames=True, jpeg_quality=50
+    field="office", users=2, nonusers=1, duration_s=30, seed=3, frames=True, jpeg_quality=40
 )
 
 
@@ -74,11 +74,10 @@ def test_readme_main_job_on_the_sample_log(tmp_path: Path) -> None:
     proc = run_cli("vm-track", str(VM_SAMPLE), "--out", str(out), "--json")
     assert proc.returncode == 0, proc.stderr.decode()
     report = json.loads(proc.stdout)
-    # the sample is 18 s of realistic phones (pockets, bags, own clocks): too short to name
-    # every carrier without assuming how phones are carried (test_realistic.py measures that on
-    # longer logs); here: the main job runs on frames, finds the people, and reports
+    # 30 s of realistic phones (pockets, bags, own clocks): the main job runs on frames, finds
+    # the people, names both carriers and reports (test_realistic.py measures longer logs)
     assert report["source"] == "frames" and report["det_recall"] >= 0.9
-    assert report["idf1"] is not None and "ambiguous_frames" in report
+    assert report["idf1"] >= 0.9 and "ambiguous_frames" in report
     from tests.vmtrack.test_realistic import assert_one_track_per_phone
 
     assert assert_one_track_per_phone(out) == report["frames"]
