@@ -79,10 +79,11 @@ def test_parallel_lines_walk_opposite_ways(tmp_path: Path) -> None:
 
 
 def test_vm_compare_runs_end_to_end(capsys: pytest.CaptureFixture[str]) -> None:
-    # the paper's setting: in 20 s, realistic phones (pockets, own clocks) are not identified
-    # reliably yet (docs/vmtrack.md, Results); the claim below is the paper's
+    # the paper's phones, 40 s: the pipeline assumes nothing about how phones are carried, so
+    # a phone is named over windows of 16 s of walking (20 s logs are a coin toss either way:
+    # office seeds 1-6 read 0.26-0.97); the claim below is the paper's
     rc = vm_compare.main(
-        ["--field", "office", "--users", "2", "--nonusers", "1", "--duration", "20"]
+        ["--field", "office", "--users", "2", "--nonusers", "1", "--duration", "40"]
         + ["--seeds", "3", "--trackers", "vm,v-af", "--preset", "paper"]
     )
     out = capsys.readouterr().out
