@@ -225,3 +225,17 @@ def test_output_directory_not_writable_in_process(
         "cannot create o.mcap.partial (Permission denied)",
     )
     assert not out.exists()
+
+
+@pytest.mark.parametrize("engine", ["local", "spark"])
+def test_ev_match_on_a_log_without_e_scenarios(
+    sample_log: Path, tmp_path: Path, engine: str
+) -> None:
+    # the matcher's clean-up ran before anything was opened and masked the missing topic
+    out = tmp_path / "ev.mcap"
+    _one_line_error(
+        ["ev-match", str(sample_log), "--out", str(out), "--engine", engine],
+        str(sample_log),
+        "/ev/e",
+    )
+    assert not out.exists()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -40,6 +42,8 @@ def spark_session() -> Iterator[object]:
         warnings.filterwarnings("ignore", message=".*pandas >= 3.*")
         from pyspark.sql import SparkSession  # the dev extra installs pyspark: no skip
 
+        # workers run this interpreter, as trackctl's own local sessions do (engines.py)
+        os.environ.setdefault("PYSPARK_PYTHON", sys.executable)
         session = (
             SparkSession.builder.master("local[2]")
             .appName("trackctl-tests")

@@ -16,6 +16,8 @@ and therefore the matches, are identical whichever engine ran them.
 from __future__ import annotations
 
 import operator
+import os
+import sys
 import warnings
 from collections.abc import Callable, Collection, Mapping, Sequence
 from typing import Any, Protocol
@@ -221,6 +223,12 @@ class SparkEngine:
                     .config("spark.ui.enabled", "false")
                     .config("spark.ui.showConsoleProgress", "false")
                 )
+                if master.startswith("local") and "spark.pyspark.python" not in (conf or {}):
+                    # local workers run this interpreter: the `python3` on PATH (what pyspark
+                    # starts otherwise) may be one without numpy and pandas when trackctl runs
+                    # from a virtual environment that is not activated. pyspark reads the
+                    # worker's interpreter from the environment when the context starts.
+                    os.environ.setdefault("PYSPARK_PYTHON", sys.executable)
                 for key, value in (conf or {}).items():
                     builder = builder.config(key, value)
                 self._session = builder.getOrCreate()

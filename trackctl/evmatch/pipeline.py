@@ -65,9 +65,9 @@ def match_log(
     # a cut log is indexed once, so that V-scenario fetches seek instead of rescanning it
     reader.reindex()
     engine = make_engine(config.engine, config.master, dict(config.spark_conf))
-    vstore: VStore | SparkVStore
+    vstore: VStore | SparkVStore | None = None
+    data: ECatalog | EIndex | None = None
     try:
-        data: ECatalog | EIndex
         if isinstance(engine, SparkEngine) and config.algorithm == Algorithm.SS:
             # the E table and the V-scenarios stay on the executors (trackctl.evmatch.spark)
             data, _ = spark_index(reader, engine, config.seed)
@@ -88,10 +88,12 @@ def match_log(
                 data, vstore, requested, engine, config.params, config.seed, progress
             )
     finally:
+        # whatever was opened before a failure is closed; the failure itself propagates
         if isinstance(data, EIndex):
             data.close()
         engine.close()
-        vstore.close()
+        if vstore is not None:
+            vstore.close()
     _warn_incomplete(reader, catalog, vstore, outcome)
     stages = {"seconds_load_e": t1 - t0, **outcome.stage_seconds}
     return outcome, catalog, vstore, stages
