@@ -96,6 +96,8 @@ class IdentifyConfig:
     """Two chains closer than this may have swapped people (no tracker tells two people a
     metre apart by position alone, without appearance)..."""
     handover_cost: float = 0.3
+    """...so the phone moves between them for this much (1.5 frames at the none cost) instead
+    of ``switch_cost``: after a swap, a few frames of evidence put it back on its carrier."""
     unseen_s: float = 10.0
     """A gap of at most this between two published stretches of a phone is walked on the
     phone's dead reckoning (:func:`_carry_through_unseen`; 0: never)..."""
@@ -106,8 +108,6 @@ class IdentifyConfig:
     """A chain without a detection for longer than ``coast_grace_s`` is only its filter's guess
     of where the person went: each such frame costs this much more, what a frame on no track
     costs (a chain that took the person's detections meanwhile is where the phone is)."""
-    """...so the phone moves between them for this much (1.5 frames at the none cost) instead
-    of ``switch_cost``: after a swap, a few frames of evidence put it back on its carrier."""
 
 
 @dataclass
