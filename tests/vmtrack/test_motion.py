@@ -50,3 +50,29 @@ def test_a_phone_kept_in_one_carry_does_not_change() -> None:
     phone = _walk([(60.0, Rotation.from_euler("x", 35, degrees=True))])
     assert len(phone.carry_changes) == 0
     assert np.median(phone.speed) > 1.0  # it walked: 1.8 steps/s x 0.7 m
+
+
+def test_real_walks_in_one_carry_are_not_cut_up() -> None:
+    # the Oxford step-counter walks: ~3 minutes each with the phone in one place (hand, pockets,
+    # bag, armband, neck pouch), put there at the start and taken out at the end
+    import pandas as pd
+
+    from tests.conftest import SHARED_DATA, shared_file
+
+    shared_file("phones", "README.md")
+    middle = []
+    for path in sorted((SHARED_DATA / "phones").glob("*.csv")):
+        d = pd.read_csv(path, header=None).to_numpy()
+        phone = PhoneMotion(path.stem)
+        for row in d:
+            phone.add(
+                Imu(
+                    t_ns=int(row[0] - d[0, 0]),
+                    frame_id="phone/x",
+                    accel_mps2=Vec3(float(row[1]), float(row[2]), float(row[3])),
+                )
+            )
+        phone.finish()
+        span = (d[-1, 0] - d[0, 0]) / S
+        middle += [t for t in phone.carry_changes / S if 10 < t < span - 10]
+    assert len(middle) <= 1  # one adjustment (the armband at 56 s) in 20 minutes of walking

@@ -134,6 +134,8 @@ class PhoneMotion:
         nb = np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1)
         cos = np.einsum("ij,ij->i", before, after) / np.maximum(nb, 1e-12)
         moved = cos < math.cos(math.radians(cfg.attitude_change_deg))
+        # a window cut short by the log's start or end compares a few samples: no evidence
+        moved &= (ts >= ts[0] + half) & (ts <= ts[-1] - half)
         moved[1:] |= axis[1:] != axis[:-1]
         # one change per run of flagged samples: its middle
         edges = np.flatnonzero(np.diff(np.r_[0, moved.astype(np.int8), 0]))
