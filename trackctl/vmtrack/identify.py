@@ -305,6 +305,7 @@ def identify(
         present[r, c] = True
     frame_s = float(np.median(np.diff(frame_t))) / 1e9 if n_f > 1 else 1.0
     near = _encounters(chains, rows, frame_t, cfg.encounter_m)
+    coast = _coasting(chains, rows, n_f, cfg)  # the chains' own: the same for every phone
     known: dict[str, tuple[int, np.ndarray] | None] = {}
     for mid in sorted(phones):
         paths[mid], costs[mid], known[mid] = _phone_path(
@@ -319,6 +320,7 @@ def identify(
             aligned,
             near,
             phones[mid].carry_changes,
+            coast,
         )
         _bridge(paths[mid], present, chains, frame_t, int(cfg.bridge_s / frame_s), cfg.bridge_m)
     ambiguous = np.zeros(n_f, bool)
@@ -440,14 +442,17 @@ def _phone_path(
     aligned: bool,
     near: list[np.ndarray] | None = None,
     carry_changes: np.ndarray | None = None,
+    coast: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, tuple[int, np.ndarray] | None]:
     """One phone's path over the chains (chain index per frame, -1: none), its cost matrix and
     its alignment (lag index, ``a`` per frame; None when never fitted): the free fit first,
     then ``refine_passes`` under the alignment the last path implies.
     ``path_pts``: the phone's dead-reckoned path (:func:`_dead_reckoned`); ``carry_changes``:
-    phone-clock times at which its carry changed (its alignment is fitted between them)."""
+    phone-clock times at which its carry changed (its alignment is fitted between them);
+    ``coast``: :func:`_coasting` of the chains (computed here when not given)."""
     n_f = len(frame_t)
-    coast = _coasting(chains, rows, n_f, cfg)
+    if coast is None:
+        coast = _coasting(chains, rows, n_f, cfg)
     zls = []
     free = np.full((n_f, len(chains)), np.inf)
     for c, chain in enumerate(chains):
