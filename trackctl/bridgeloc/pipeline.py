@@ -100,6 +100,16 @@ def _pass_metrics(rp: RobotPass, setup: Setup, cfg: BridgeLocConfig) -> dict[str
             sm = _score(rows, rp.truth, cfg, n_tags, {})
             metrics[f"success_rate_{m.value}"] = sm["success_rate"]
             metrics[f"error_m_mean_{m.value}"] = sm["error_m_mean"]
+    basic = rp.other.get(Mode.BASIC)
+    if cfg.mode is Mode.FULL and basic:
+        # like for like: this mode's error where bridging alone gives a pose too
+        where = {t for t, p in basic if p is not None}
+        errs = [
+            math.dist(p[:2], rp.truth[t])
+            for t, p in rp.est
+            if p is not None and t in where and t in rp.truth
+        ]
+        metrics["error_m_mean_where_basic"] = round(float(np.mean(errs)), 4) if errs else None
     metrics.update(asdict(rp.stats))
     frames = rp.stats.robot_frames
     metrics["pose_share"] = round(rp.stats.frames_with_pose / frames, 4) if frames else None
@@ -176,20 +186,26 @@ OFFICE_DISTANCES = (1.0, 2.0, 3.0, 4.0)
 OFFICE_ANGLES = (-60.0, -45.0, -30.0, 0.0, 30.0, 45.0, 60.0)
 
 
+def _office_spot(xy: tuple[float, float], tag: dict) -> tuple[float, float] | None:
+    """The test spot (distance, view angle to the tag) the robot stands on, or None."""
+    nrm = np.array(tag["normal"])
+    v = np.array(xy) - np.array(tag["center_m"][:2])
+    d = float(np.linalg.norm(v))
+    a = math.degrees(math.atan2(float(v @ np.array([-nrm[1], nrm[0]])), float(v @ nrm)))
+    for dd in OFFICE_DISTANCES:
+        for aa in OFFICE_ANGLES:
+            if abs(d - dd) < 0.03 and abs(a - aa) < 1.0:
+                return dd, aa
+    return None
+
+
 def _office_grid(per_frame: list[tuple[float, float, float]], tag: dict) -> dict[str, float | None]:
     """Median error per test spot (distance x view angle to the tag), Fig. 4.20."""
-    c = np.array(tag["center_m"][:2])
-    nrm = np.array(tag["normal"])
-    tang = np.array([-nrm[1], nrm[0]])
     cells: dict[tuple[float, float], list[float]] = {}
     for x, y, e in per_frame:
-        v = np.array([x, y]) - c
-        d = float(np.linalg.norm(v))
-        a = math.degrees(math.atan2(float(v @ tang), float(v @ nrm)))
-        for dd in OFFICE_DISTANCES:
-            for aa in OFFICE_ANGLES:
-                if abs(d - dd) < 0.03 and abs(a - aa) < 1.0:
-                    cells.setdefault((dd, aa), []).append(e)
+        spot = _office_spot((x, y), tag)
+        if spot is not None:
+            cells.setdefault(spot, []).append(e)
     out: dict[str, float | None] = {}
     near = []
     for (dd, aa), es in sorted(cells.items()):

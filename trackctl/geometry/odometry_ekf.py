@@ -33,7 +33,13 @@ class OdometryNoise:
     yaw_per_m_sigma: float = 0.03
     """Heading random walk per metre travelled (rad/sqrt(m)): uneven floor, slip."""
     yaw_rel_sigma: float = 0.05
-    """Relative error of a heading increment (turns in place scrub the wheels)."""
+    """Relative error of a heading increment (encoder quantization and timing in fast turns)."""
+    yaw_per_rad_sigma: float = 0.06
+    """Heading random walk per radian turned (rad/sqrt(rad)): the effective wheel base is a few
+    percent off and tyres scrub differently in every turn (UMBmark), so a 90° turn errs by
+    ~5 % (0.075 rad). A random walk in the angle turned keeps that figure whatever the
+    odometry rate; a relative error per increment alone would shrink with the square root of
+    the number of increments in a turn."""
     heading_bias_sigma: float = 0.1
     """Prior std of the heading bias per metre (rad/m): +-1.5 % opposite wheel-scale errors on a
     0.30 m wheel base (UMBmark: 1-2 % on uncalibrated platforms)."""
@@ -73,7 +79,12 @@ class DiffDriveEkf(ExtendedKalmanFilter):  # type: ignore[misc]  # filterpy has 
         # bias's random walk
         g = np.array([[c, -0.5 * ds * s], [s, 0.5 * ds * c], [0, 1.0], [0, 0]])
         var_ds = (noise.rel_sigma * ds) ** 2 + 1e-8
-        var_dyaw = (noise.yaw_rel_sigma * dyaw) ** 2 + noise.yaw_per_m_sigma**2 * abs(ds) + 1e-8
+        var_dyaw = (
+            (noise.yaw_rel_sigma * dyaw) ** 2
+            + noise.yaw_per_rad_sigma**2 * abs(dyaw)
+            + noise.yaw_per_m_sigma**2 * abs(ds)
+            + 1e-8
+        )
         q = g @ np.diag([var_ds, var_dyaw]) @ g.T
         q[3, 3] += noise.heading_bias_walk**2 * abs(ds) + 1e-12
         self.Q = q

@@ -92,6 +92,16 @@ class Realism:
       from the calibrated pose in the log by this much (floor-point PnP calibration at ~1 px).
     * ``mount_deg`` the robot camera's true mount differs from the calibrated one.
     * ``ir_offset_m`` the IR light sits this far ahead of the base centre (mounting).
+    * ``wheelbase_err`` std of the effective wheel base's relative error, drawn once per robot:
+      the contact points of soft tyres are not where the drawing puts them, so every turn is
+      read this much too large or small (UMBmark, Borenstein & Feng 1996: the wheel base is
+      the dominant systematic error in turns, a few percent before calibration).
+    * ``slip_k_m`` non-systematic wheel slip: each wheel's measured travel errs with variance
+      ``slip_k_m`` x its travel (Chong & Kleeman 1997's odometry error model; floor
+      roughness, dust, carpet seams), a heading random walk of sqrt(2 k) / wheel base per
+      sqrt(m).
+    * ``turn_slip`` std of the relative heading error of each turn in place (tyres scrub
+      sideways while turning; the error differs from turn to turn).
     """
 
     posters: int = 0
@@ -107,6 +117,9 @@ class Realism:
     infra_calib_m: float = 0.0
     mount_deg: float = 0.0
     ir_offset_m: float = 0.0
+    wheelbase_err: float = 0.0
+    slip_k_m: float = 0.0
+    turn_slip: float = 0.0
 
 
 PRESETS: dict[str, Realism] = {
@@ -125,6 +138,9 @@ PRESETS: dict[str, Realism] = {
         infra_calib_m=0.02,
         mount_deg=0.5,
         ir_offset_m=0.05,
+        wheelbase_err=0.02,
+        slip_k_m=2e-5,
+        turn_slip=0.03,
     ),
 }
 """``paper``: the dissertation's idealised setting (clean renders, exact calibration), kept for
@@ -361,6 +377,32 @@ def _segments(
         for _ in range(int(round(hold / dt))):
             out.append((x, y, yaw))
     return np.array(out)
+
+
+def _wheel_travel(
+    ds: np.ndarray, dyaw: np.ndarray, wheel_base: float, real: Realism, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """What each wheel's encoder measures for the true increments (m per odometry step): the
+    rolling travel, read through the effective wheel base, each turn's scrubbing and slip.
+    The models (:class:`Realism`) draw from their own stream, so the paper preset's bytes and
+    every other random choice of a log stay as they were."""
+    turn = dyaw * wheel_base / 2
+    if not (real.wheelbase_err or real.slip_k_m or real.turn_slip):
+        return ds - turn, ds + turn
+    rng = np.random.default_rng([seed, 4_3])
+    # a wheel base longer than drawn makes the wheels roll farther for the same turn
+    turn = turn * (1.0 + real.wheelbase_err * float(rng.standard_normal()))
+    # scrubbing: one relative error per turn in place (a run of steps turning without driving)
+    turning = (np.abs(dyaw) > 1e-9) & (np.abs(ds) < 1e-9)
+    starts = np.flatnonzero(turning & ~np.r_[False, turning[:-1]])
+    run_id = np.cumsum(np.isin(np.arange(len(ds)), starts)) - 1
+    scrub = 1.0 + real.turn_slip * rng.standard_normal(max(1, len(starts)))
+    turn = np.where(turning, turn * scrub[np.maximum(run_id, 0)], turn)
+    left, right = ds - turn, ds + turn
+    # slip: variance proportional to each wheel's travel (Chong & Kleeman 1997)
+    left = left + rng.standard_normal(len(ds)) * np.sqrt(real.slip_k_m * np.abs(left))
+    right = right + rng.standard_normal(len(ds)) * np.sqrt(real.slip_k_m * np.abs(right))
+    return left, right
 
 
 def _office_spots(
@@ -780,12 +822,9 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
     ds = np.hypot(
         np.diff(poses[:, 0], prepend=poses[0, 0]), np.diff(poses[:, 1], prepend=poses[0, 1])
     )
-    left = np.cumsum(
-        (ds - dyaw * wheel_base / 2) * ticks_per_m * 1.015 + rng.normal(0, 1.0, len(ds))
-    )
-    right = np.cumsum(
-        (ds + dyaw * wheel_base / 2) * ticks_per_m * 0.985 + rng.normal(0, 1.0, len(ds))
-    )
+    travel_l, travel_r = _wheel_travel(ds, dyaw, wheel_base, real, cfg.seed)
+    left = np.cumsum(travel_l * ticks_per_m * 1.015 + rng.normal(0, 1.0, len(ds)))
+    right = np.cumsum(travel_r * ticks_per_m * 0.985 + rng.normal(0, 1.0, len(ds)))
     for k in range(len(poses)):
         t_ns = int(round(k * dt * S))
         events.append(
