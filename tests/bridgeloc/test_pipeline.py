@@ -175,3 +175,30 @@ def test_full_mode_without_ground_truth(tmp_path: Path) -> None:
 
 
 POSE = "/bridgeloc/pose"
+
+
+def test_smoothing_uses_the_future_and_no_smooth_gives_the_filter(tmp_path: Path) -> None:
+    """Full mode's poses are smoothed by default: the same frames as the causal filter, the
+    same pose at the last frame (nothing follows it), other poses moved by what followed;
+    ``--no-smooth`` gives the filter's poses. (That smoothing closes gaps is tested in
+    tests/bridgeloc/test_smooth.py.)"""
+    out: dict[str, dict] = {}
+    poses: dict[str, dict[int, tuple[float, float]]] = {}
+    for flag in ("--smooth", "--no-smooth"):
+        target = tmp_path / f"{flag}.mcap"
+        res = CliRunner().invoke(
+            app, ["bridgeloc", "eval", str(SAMPLE), "--out", str(target), flag, "--json", "-q"]
+        )
+        assert res.exit_code == 0, res.output
+        out[flag] = json.loads(res.stdout)
+        poses[flag] = {
+            m.log_time_ns: (m.message.pose.position.x, m.message.pose.position.y)
+            for m in LogReader(target).messages([POSE])
+        }
+    smooth, causal = poses["--smooth"], poses["--no-smooth"]
+    assert sorted(smooth) == sorted(causal) and smooth
+    last = max(smooth)
+    assert smooth[last] == pytest.approx(causal[last], abs=1e-9)
+    moved = [t for t in smooth if abs(smooth[t][0] - causal[t][0]) > 0.01]
+    assert len(moved) > len(smooth) // 2
+    assert out["--smooth"]["pose_share"] == out["--no-smooth"]["pose_share"]

@@ -58,6 +58,12 @@ class BridgeLocConfig:
     association: on the realistic lobby, 60 s x 2 seeds, dropping the cap gave Full 91.2 %
     success with 10 tags against 99.0 % with it (0.123 against 0.138 m error with 8 tags). The
     paper's prototype read tags to ~4 m."""
+    smooth: bool = True
+    """Full mode: Rauch-Tung-Striebel smoothing (:mod:`trackctl.bridgeloc.smooth`): every pose
+    also uses what the log holds after it (``--no-smooth``: the filter's causal poses)."""
+    smooth_lag_s: float = 60.0
+    """The smoother emits a pose once it holds at least this much of the log after it (memory
+    stays flat in log length)."""
     ir_threshold: int = 235
     ir_min_area_px: int = 2
     ekf: EkfConfig = field(default_factory=EkfConfig)

@@ -20,6 +20,7 @@ from functools import cache
 import numpy as np
 from scipy.stats import chi2
 
+from trackctl.bridgeloc.smooth import RtsSmoother
 from trackctl.geometry.odometry_ekf import DiffDriveEkf, OdometryNoise, nis, wrap
 
 __all__ = ["EkfConfig", "RobotEkf", "pose_cov", "wrap", "chi2_95", "gate"]
@@ -76,14 +77,39 @@ class EkfConfig:
 class RobotEkf:
     """Odometry prediction, pose and position updates with NIS gating."""
 
-    def __init__(self, config: EkfConfig | None = None) -> None:
+    def __init__(
+        self, config: EkfConfig | None = None, smoother: RtsSmoother | None = None
+    ) -> None:
         self.cfg = config or EkfConfig()
         self.kf = DiffDriveEkf()
         self.initialized = False
         self.nis_values: list[tuple[float, int]] = []
         """(NIS, dof) of every update tested against the state."""
+        self.smoother = smoother
+        """Records the filter's nodes for offline smoothing (None: filtering only)."""
+        self.t_ns = 0
+        """Time of the updates that follow (set by the caller)."""
+
+    def _node(self) -> None:
+        """An update is about to change the state at ``t_ns``: the smoother keeps the prior."""
+        if self.smoother is not None and self.initialized:
+            self.smoother.open(self.t_ns, self.kf.x, self.kf.P)
+
+    def output(self, t_ns: int) -> None:
+        """A pose is wanted at ``t_ns`` (the smoother emits it once it knows what followed)."""
+        if self.smoother is not None and self.initialized:
+            self.smoother.output(t_ns, self.kf.x, self.kf.P)
+
+    def finish(self) -> None:
+        """The log is over: the smoother emits what it holds."""
+        if self.smoother is not None and self.initialized:
+            self.smoother.finish(self.kf.x, self.kf.P)
 
     def init(self, pose: tuple[float, float, float], cov: np.ndarray) -> None:
+        if self.smoother is not None:
+            if self.initialized:
+                self.smoother.close(self.kf.x, self.kf.P)
+            self.smoother.restart()
         self.kf.x = np.array([[pose[0]], [pose[1]], [wrap(pose[2])], [0.0]])
         p = np.zeros((4, 4))
         p[:3, :3] = cov
@@ -108,7 +134,11 @@ class RobotEkf:
     def predict(self, ds: float, dyaw: float) -> None:
         """Control c_t from the wheel encoders (Eq. 4.10's g, with the heading bias)."""
         if self.initialized:
+            if self.smoother is not None:
+                self.smoother.close(self.kf.x, self.kf.P)
             self.kf.predict_odometry(ds, dyaw, self.cfg.odometry)
+            if self.smoother is not None:
+                self.smoother.predicted(self.kf.F)
 
     def pose_nis(self, pose: tuple[float, float, float], cov: np.ndarray) -> float:
         """NIS a pose measurement would have (for choosing among tags sharing a pattern)."""
@@ -127,6 +157,7 @@ class RobotEkf:
             return True
         if not self._gate(self.pose_nis(pose, cov), 3):
             return False
+        self._node()
         self.kf.update(
             np.array(pose, float)[:, None],
             lambda _x: np.eye(3, 4),
@@ -156,6 +187,7 @@ class RobotEkf:
         if not self._gate(self.measurement_nis(z, hx, jac, r), len(z)):
             return False
         h = np.hstack([jac, np.zeros((len(z), 1))])
+        self._node()
         self.kf.update(
             np.asarray(z, float)[:, None],
             lambda _x: h,
@@ -172,6 +204,9 @@ class RobotEkf:
         p = self.kf.P[:2, :2]
         low = float(np.linalg.eigvalsh(p).min())
         if low < sigma_m**2:
+            self._node()
+            if self.smoother is not None:
+                self.smoother.unfloored(self.kf.P)
             self.kf.P[:2, :2] = p + np.eye(2) * (sigma_m**2 - low)
 
     def update_position(self, xy: np.ndarray, cov: np.ndarray) -> bool:
@@ -183,6 +218,7 @@ class RobotEkf:
         if not self._gate(self.position_nis(xy, cov), 2):
             return False
         h = np.eye(2, 4)
+        self._node()
         self.kf.update(np.asarray(xy, float)[:2, None], lambda _x: h, lambda s: h @ s, R=cov)
         self.kf.x[2, 0] = wrap(float(self.kf.x[2, 0]))
         return True

@@ -42,6 +42,7 @@ from trackctl.bridgeloc.config import (
 )
 from trackctl.bridgeloc.detect import DetectorConfig, TagDetection, detect_tags, read_oriented
 from trackctl.bridgeloc.ekf import RobotEkf, pose_cov
+from trackctl.bridgeloc.smooth import RtsSmoother, position_sigma
 from trackctl.bridgeloc.tags import check_family
 from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
@@ -562,7 +563,9 @@ class RobotPass:
             float(rmeta.get("ticks_per_m", default.ticks_per_m)),
             float(rmeta.get("wheel_base_m", default.wheel_base_m)),
         )
-        self.ekf = RobotEkf(cfg.ekf)
+        self.ekf = RobotEkf(
+            cfg.ekf, RtsSmoother(self._emit_full, cfg.smooth_lag_s) if cfg.smooth else None
+        )
         self.truth: dict[int, tuple[float, float]] = {}
         self.est: Estimates = []
         self.sigmas: dict[int, float] = {}
@@ -570,6 +573,7 @@ class RobotPass:
         self.other: dict[Mode, Estimates] = {m: [] for m in Mode}
         self.other_sigmas: dict[int, float] = {}
         self.bridge_only: Estimates = []
+        self._causal_sigma: dict[int, float] = {}
         self.robot_sightings: dict[int, int] = {}
         """Map tag (index in the map) -> robot frames that used it."""
         self.stats = RobotPassStats()
@@ -622,6 +626,7 @@ class RobotPass:
             self._icam_next += 1
             cands = self.icam.fixes[t]
             ekf = self.ekf
+            ekf.t_ns = t
             if not ekf.initialized:
                 fix = self.icam.at(t)
                 if fix is not None:  # position only; a tag then gives the heading
@@ -703,23 +708,45 @@ class RobotPass:
             basic_pose = (float(fix[0]), float(fix[1]), bridge[0][2] if bridge else 0.0)
         elif bridge is not None:
             basic_pose = bridge[0]
+        self.ekf.t_ns = t_ns
         fused = self._ekf_update(t_ns, bridge, obs)
         if fused or fix is not None or bridge is not None:
             self.stats.frames_with_fix += 1
-        full_pose: Pose | None = self.ekf.pose if self.ekf.initialized else None
-        if full_pose is not None:
-            self.other_sigmas[t_ns] = self.ekf.sigma_m
         self.bridge_only.append((t_ns, None if raw is None else raw[0]))
         self.other[Mode.ICAM].append((t_ns, icam_pose))
         self.other[Mode.BASIC].append((t_ns, basic_pose))
-        self.other[Mode.FULL].append((t_ns, full_pose))
-        pose = {Mode.ICAM: icam_pose, Mode.BASIC: basic_pose, Mode.FULL: full_pose}[self.cfg.mode]
-        self.est.append((t_ns, pose))
-        if pose is not None:
-            self.stats.frames_with_pose += 1
+        if self.ekf.initialized:
             if self.cfg.mode is Mode.FULL:
-                self.sigmas[t_ns] = self.ekf.sigma_m
-            self.writer.write(POSE_TOPIC, pose_in_frame(t_ns, pose[0], pose[1], pose[2]), t_ns)
+                self.stats.frames_with_pose += 1
+            if self.ekf.smoother is not None:
+                # the smoothed covariance also counts the map's and the cameras' systematic
+                # errors as independent between fixes, and reads ~10x too sure of itself: the
+                # std reported with a smoothed pose is the filter's (the larger of the two)
+                self._causal_sigma[t_ns] = self.ekf.sigma_m
+                self.ekf.output(t_ns)  # emitted by the smoother once it knows what followed
+            else:
+                self._emit_full(t_ns, self.ekf.kf.x, self.ekf.kf.P)
+        else:
+            self.other[Mode.FULL].append((t_ns, None))
+            if self.cfg.mode is Mode.FULL:
+                self.est.append((t_ns, None))
+        if self.cfg.mode is not Mode.FULL:
+            pose = icam_pose if self.cfg.mode is Mode.ICAM else basic_pose
+            self.est.append((t_ns, pose))
+            if pose is not None:
+                self.stats.frames_with_pose += 1
+                self.writer.write(POSE_TOPIC, pose_in_frame(t_ns, pose[0], pose[1], pose[2]), t_ns)
+
+    def _emit_full(self, t_ns: int, x: np.ndarray, p: np.ndarray) -> None:
+        """Full mode's pose at a robot frame (smoothed unless ``--no-smooth``)."""
+        pose = (float(x[0, 0]), float(x[1, 0]), float(x[2, 0]))
+        sigma = self._causal_sigma.pop(t_ns, None) or position_sigma(p)
+        self.other_sigmas[t_ns] = sigma
+        self.other[Mode.FULL].append((t_ns, pose))
+        if self.cfg.mode is Mode.FULL:
+            self.est.append((t_ns, pose))
+            self.sigmas[t_ns] = sigma
+            self.writer.write(POSE_TOPIC, pose_in_frame(t_ns, *pose), t_ns)
 
     def _ekf_update(
         self,
@@ -824,8 +851,10 @@ class RobotPass:
         return ok, tag
 
     def finish(self) -> None:
-        """I-Cam mode writes its poses once the pass is over: one per infrastructure frame that
-        saw the IR light, at that frame's time (the ground truth is only where they are scored)."""
+        """The smoother emits the poses it still holds. I-Cam mode writes its poses once the
+        pass is over: one per infrastructure frame that saw the IR light, at that frame's time
+        (the ground truth is only where they are scored)."""
+        self.ekf.finish()
         if self.cfg.mode is Mode.ICAM:
             for t in self.icam.times.tolist():
                 fix = self.icam.at(int(t))

@@ -81,6 +81,7 @@ def run(
             "tag_family": setup.det_cfg.family,
             "tag_size_m": setup.tag_size_m,
             "max_sigma_m": cfg.max_sigma_m,
+            "smooth": cfg.smooth,
             "success_m": cfg.success_m,
             "max_range_m": robot_pass.max_range_m
             if math.isfinite(robot_pass.max_range_m)

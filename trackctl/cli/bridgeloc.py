@@ -118,6 +118,14 @@ def eval_(
             "default: the site's max_range_m, else 4.5."
         ),
     ] = None,
+    smooth: Annotated[
+        bool,
+        typer.Option(
+            "--smooth/--no-smooth",
+            help="Full mode: smooth the EKF over the whole log (RTS, each pose also uses what "
+            "came after it); --no-smooth gives the causal filter's poses.",
+        ),
+    ] = True,
     site: Annotated[Path | None, typer.Option(help=SITE_HELP)] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     plot: Annotated[
@@ -142,6 +150,7 @@ def eval_(
             success_m=success_m,
             max_range_m=None if max_range is None else (max_range if max_range > 0 else math.inf),
             tag_family=tag_family,
+            smooth=smooth,
             site=load_site_file(site),
         )
     )
