@@ -276,6 +276,9 @@ class IcamFix:
     xy: np.ndarray
     cov: np.ndarray
     camera: str
+    systematic_m: float = 0.0
+    """The part of the std that is the same for every fix of this camera there (calibration,
+    the light's offset): repeated fixes do not average it out."""
 
 
 class IcamFixes:
@@ -451,8 +454,9 @@ def _icam_fix(
     per_px = d * d / (f * drop)
     e = cfg.ekf
     # pixel noise and the camera's calibration error, both magnified by the grazing ray
-    sigma = math.hypot(e.icam_floor_m, e.icam_sigma_px * per_px, e.calib_rad * f * per_px)
-    return IcamFix(g[:2].copy(), np.eye(2) * sigma**2, pin.model.camera)
+    systematic = math.hypot(e.icam_floor_m, e.calib_rad * f * per_px)
+    sigma = math.hypot(systematic, e.icam_sigma_px * per_px)
+    return IcamFix(g[:2].copy(), np.eye(2) * sigma**2, pin.model.camera, systematic)
 
 
 def _in_front(pose: Pose, world: np.ndarray, cam: CameraGeometry, min_depth_m: float = 0.2) -> bool:
@@ -634,6 +638,9 @@ class RobotPass:
                 continue
             best = min(cands, key=lambda c: ekf.position_nis(c.xy, c.cov))
             ok = ekf.update_position(best.xy, best.cov)
+            if ok:
+                # like a mapped tag's error, the camera's does not average out over its fixes
+                ekf.floor_position(best.systematic_m)
             self.stats.icam_fused += ok
             self.stats.rejected_updates += not ok
             self._icam_rejects = 0 if ok else self._icam_rejects + 1
