@@ -20,7 +20,7 @@ from functools import cache
 import numpy as np
 from scipy.stats import chi2
 
-from trackctl.bridgeloc.smooth import RtsSmoother
+from trackctl.bridgeloc.smooth import RtsSmoother, position_sigma
 from trackctl.geometry.odometry_ekf import DiffDriveEkf, OdometryNoise, nis, wrap
 
 __all__ = ["EkfConfig", "RobotEkf", "pose_cov", "wrap", "chi2_95", "gate"]
@@ -125,7 +125,7 @@ class RobotEkf:
     @property
     def sigma_m(self) -> float:
         """Largest position standard deviation (m)."""
-        return float(math.sqrt(max(np.linalg.eigvalsh(self.kf.P[:2, :2]).max(), 0.0)))
+        return position_sigma(self.kf.P)
 
     @property
     def sigma_yaw(self) -> float:

@@ -575,7 +575,6 @@ class RobotPass:
         self.sigmas: dict[int, float] = {}
         """Full mode: the EKF's largest position std at every output pose."""
         self.other: dict[Mode, Estimates] = {m: [] for m in Mode}
-        self.other_sigmas: dict[int, float] = {}
         self.bridge_only: Estimates = []
         self._causal_sigma: dict[int, float] = {}
         self.robot_sightings: dict[int, int] = {}
@@ -748,7 +747,6 @@ class RobotPass:
         """Full mode's pose at a robot frame (smoothed unless ``--no-smooth``)."""
         pose = (float(x[0, 0]), float(x[1, 0]), float(x[2, 0]))
         sigma = self._causal_sigma.pop(t_ns, None) or position_sigma(p)
-        self.other_sigmas[t_ns] = sigma
         self.other[Mode.FULL].append((t_ns, pose))
         if self.cfg.mode is Mode.FULL:
             self.est.append((t_ns, pose))

@@ -21,6 +21,7 @@ future behind it); the rest stays for the next block. At the end everything is e
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -135,8 +136,11 @@ class RtsSmoother:
             x[2, 0] = wrap(float(x[2, 0]))
             p = cur.p_post + c @ (ps[k + 1] - nxt.p_prior) @ c.T
             xs[k], ps[k] = x, 0.5 * (p + p.T)
-        keep = len(nodes) if before_ns is None else _first_at(nodes, before_ns)
-        # the oldest kept node must keep its link: only drop whole prefixes
+        keep = (
+            len(nodes)
+            if before_ns is None
+            else bisect.bisect_left([n.t_ns for n in nodes], before_ns)
+        )
         for k in range(keep):
             if nodes[k].output:
                 self.emit(nodes[k].t_ns, xs[k], ps[k])
@@ -149,13 +153,6 @@ def _gain(p_post: np.ndarray, f: np.ndarray, p_prior: np.ndarray) -> np.ndarray:
         return np.linalg.solve(p_prior.T, (p_post @ f.T).T).T
     except np.linalg.LinAlgError:
         return np.zeros_like(p_post)
-
-
-def _first_at(nodes: list[Node], t_ns: int) -> int:
-    for k, n in enumerate(nodes):
-        if n.t_ns >= t_ns:
-            return k
-    return len(nodes)
 
 
 def position_sigma(p: np.ndarray) -> float:
