@@ -9,6 +9,7 @@ from trackctl.vmtrack.align import AlignConfig
 from trackctl.vmtrack.frames import FrameConfig
 from trackctl.vmtrack.identify import IdentifyConfig
 from trackctl.vmtrack.motion import MotionConfig
+from trackctl.vmtrack.retrack import RetrackConfig
 from trackctl.vmtrack.stitch import StitchConfig
 from trackctl.vmtrack.tracker import TrackerConfig
 
@@ -103,3 +104,6 @@ class VmTrackConfig:
     """Offline identity parameters."""
     stitch: StitchConfig = field(default_factory=StitchConfig)
     """Offline clean-up of visual-only tracks (coasting tails, fragments, short tracks)."""
+    retrack: RetrackConfig = field(default_factory=RetrackConfig)
+    """Offline: each carrier followed through the raw detections by their phone
+    (:mod:`~trackctl.vmtrack.retrack`); it names the tracks where it finds the carrier."""

@@ -125,6 +125,9 @@ class Identities:
         default_factory=dict
     )
     """frame ns -> (MID, xy, velocity) of carriers no chain showed, walked on their phone."""
+    known: dict[str, tuple[float, np.ndarray]] = field(default_factory=dict)
+    """MID -> (clock offset s, ``a`` per frame: device-to-walk rotation and step scale, NaN
+    where not fitted): each phone's alignment over time, as its path implies."""
 
 
 @dataclass
@@ -350,6 +353,8 @@ def identify(
     out.alignments = _alignments(out, chains, dead_reckoned, lags, lag_ns, acfg, half_v)
     for mid in sorted(phones):
         al = known[mid]
+        if al is not None:
+            out.known[mid] = (float(lags[al[0]]), al[1])
         if al is not None and cfg.unseen_s > 0:
             _carry_through_unseen(mid, out, chains, frame_t, dead_reckoned[mid], lags, al, cfg)
     return out

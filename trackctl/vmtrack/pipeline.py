@@ -41,12 +41,14 @@ from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.metrics.tracking import InitialIdentity, MotAccumulator
 from trackctl.processing.base import Progress
+from trackctl.vmtrack.align import Alignment
 from trackctl.vmtrack.config import Identity, Mode, Source, VmTrackConfig
 from trackctl.vmtrack.frames import FrameDetector, detections_topic, image_cameras
 from trackctl.vmtrack.identify import Identities, identify
 from trackctl.vmtrack.identity import BindingStats, IdentityBinder
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.online import FrameOut, OnlineTracker
+from trackctl.vmtrack.retrack import PhoneTrack, retrack
 from trackctl.vmtrack.scene import scene_update
 from trackctl.vmtrack.stitch import Publication, plan_publication
 from trackctl.vmtrack.tracker import GroundTrack, TrackerConfig
@@ -373,10 +375,14 @@ def _frame_tracks(
     plan: Publication,
     positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
     ids: Identities | None = None,
+    carriers: tuple[dict[str, PhoneTrack], int, float] | None = None,
 ) -> list[Track]:
     """The tracks published at one frame: the online rows the clean-up keeps, under their
     published ids (the offline identity's MID, else the online binding's, else the visual
-    id), plus interpolated positions across stitched gaps."""
+    id), plus interpolated positions across stitched gaps. ``carriers``: the re-tracked
+    carriers, this frame's index and the gate (m); a re-tracked phone's MID is published only
+    where its re-tracking put it, on the nearest track within the gate (or on its own)."""
+    retracked = carriers[0] if carriers is not None else {}
     tracks: list[Track] = []
     names: set[str] = set()
     # tracks bound now name first: one phone (MID) is never on two tracks in one frame, so a
@@ -387,7 +393,7 @@ def _frame_tracks(
             continue
         out_id = plan.name.get(id(trk), trk.vid)
         if ids is not None:
-            out_id = ids.mid_at.get((plan.head.get(id(trk), id(trk)), fr.t_ns), out_id)
+            out_id = _chain_mid(ids, plan.head.get(id(trk), id(trk)), fr.t_ns, retracked, out_id)
         elif mid_now is not None:
             out_id = mid_now
         elif trk.first_mid is not None and trk.identity_from_ns <= fr.t_ns < (
@@ -407,7 +413,7 @@ def _frame_tracks(
     for name, xy, v in plan.fills.get(fr.t_ns, ()):
         out_id = name
         if ids is not None:
-            out_id = ids.mid_at.get((plan.head_of_name.get(name, -1), fr.t_ns), name)
+            out_id = _chain_mid(ids, plan.head_of_name.get(name, -1), fr.t_ns, retracked, name)
         if out_id not in names:
             names.add(out_id)
             tracks.append(
@@ -418,9 +424,11 @@ def _frame_tracks(
                     state=TrackState.PREDICTED,
                 )
             )
+    if carriers is not None:
+        _place_carriers(tracks, names, *carriers)
     # carriers no camera showed, walked on their phone between two stretches of their chains
     for mid, (ux, uy), (vx, vy) in ids.unseen.get(fr.t_ns, ()) if ids is not None else ():
-        if mid not in names:
+        if mid not in names and mid not in retracked:
             names.add(mid)
             tracks.append(
                 Track(
@@ -431,6 +439,49 @@ def _frame_tracks(
                 )
             )
     return tracks
+
+
+def _chain_mid(
+    ids: Identities, head: int, t_ns: int, retracked: dict[str, PhoneTrack], default: str
+) -> str:
+    """The MID the offline identity gives chain ``head`` at ``t_ns`` (``default`` if none, or
+    if that phone was re-tracked: then its re-tracking alone places it)."""
+    mid = ids.mid_at.get((head, t_ns))
+    return default if mid is None or mid in retracked else mid
+
+
+def _place_carriers(
+    tracks: list[Track], names: set[str], retracked: dict[str, PhoneTrack], k: int, gate: float
+) -> None:
+    """Name the re-tracked carriers at frame ``k`` (in place): each MID takes the nearest
+    anonymous track within ``gate`` of where its phone put the carrier, at that position; a
+    carrier no track is near is published on its own (``predicted`` where no detection was on
+    its path)."""
+    for mid in sorted(retracked):
+        pt = retracked[mid]
+        xy = pt.xy.get(k)
+        if xy is None or mid in names:
+            continue
+        v = pt.velocity[k]
+        vel = Vec3(0.0, 0.0, 0.0) if np.isnan(v).any() else Vec3(float(v[0]), float(v[1]), 0.0)
+        state = TrackState.TRACKED if k in pt.seen else TrackState.PREDICTED
+        best, best_d = -1, gate
+        for i, trk in enumerate(tracks):
+            if trk.track_id in retracked:
+                continue
+            d = math.hypot(trk.position_m.x - xy[0], trk.position_m.y - xy[1])
+            if d < best_d:
+                best, best_d = i, d
+        pos = Vec3(float(xy[0]), float(xy[1]), 0.0)
+        if best >= 0:
+            old = tracks[best]
+            names.discard(old.track_id)
+            tracks[best] = Track(
+                mid, pos, vel, old.covariance_m2, state=old.state, visual_id=old.visual_id
+            )
+        else:
+            tracks.append(Track(mid, pos, vel, state=state))
+        names.add(mid)
 
 
 def _write_and_score(
@@ -467,12 +518,21 @@ def _write_and_score(
         if offline
         else None
     )
+    retracked: dict[str, PhoneTrack] = {}
+    if ids is not None and cfg.retrack.enabled:
+        frame_t = np.array([fr.t_ns for fr in frames], np.int64)
+        points = [raw_points.get(int(t), np.empty((0, 2))) for t in frame_t]
+        retracked = retrack(
+            frame_t, points, phones, ids.known, cfg.align, cfg.retrack, cfg.phones_aligned
+        )
+        ids.alignments.update(_retrack_alignments(retracked))
     published: dict[str, int] = {}
     coasting = shown = 0
     wrong_s = 0.0
     frame_s = (frames[-1].t_ns - frames[0].t_ns) / 1e9 / max(len(frames) - 1, 1) if frames else 0.0
-    for fr in frames:
-        tracks = _frame_tracks(fr, plan, positions, ids)
+    for k_fr, fr in enumerate(frames):
+        placed = (retracked, k_fr, cfg.retrack.gate_m) if retracked else None
+        tracks = _frame_tracks(fr, plan, positions, ids, placed)
         hyp = {m.track_id: (m.position_m.x, m.position_m.y) for m in tracks}
         for msg in tracks:
             published[msg.track_id] = published.get(msg.track_id, 0) + 1
@@ -561,6 +621,21 @@ def _write_and_score(
         **_no_truth_metrics(online, published, coasting, shown, plan),
         **_identity_metrics(ids, stats, phones),
     }
+
+
+def _retrack_alignments(retracked: dict[str, PhoneTrack]) -> dict[str, Alignment]:
+    """Each re-tracked phone's alignment for the report: its clock offset, and the circular
+    mean of its yaw and the median of its scale over the frames it was seen."""
+    out = {}
+    for mid, pt in retracked.items():
+        seen = np.array(sorted(pt.seen), int)
+        a = pt.a[seen] if len(seen) else pt.a
+        a = a[~np.isnan(a)]
+        if not len(a):
+            continue
+        yaw = np.angle(np.mean(a / np.abs(a)))
+        out[mid] = Alignment(complex(float(np.median(np.abs(a))) * np.exp(1j * yaw)), pt.lag_s, -1)
+    return out
 
 
 def _identity_metrics(

@@ -1,0 +1,431 @@
+"""Phone-guided re-tracking: each carrier followed through the raw detections by their phone.
+
+Visual tracks swap people where people pass close (without appearance, position alone cannot
+tell two walkers apart), and in a crowd they do so every few seconds; a phone bound to a chain
+of such tracks inherits every swap. Offline, a phone is a far better motion model than a
+constant-velocity filter: once its alignment is known (device-to-walk yaw, step scale, clock
+offset; :mod:`~trackctl.vmtrack.align`), its dead reckoning says how its carrier moved between
+two frames to a few centimetres. So each phone is tracked on its own, through the raw
+detections of every frame, not through the visual tracks:
+
+* **Model.** The carrier's position ``x_k`` moves by the phone's aligned displacement ``u_k``
+  plus a random walk (``walk_sigma_mps`` per square-root second: step-length and heading error,
+  a camera's calibration bias taking over from another's); a detection within reach costs
+  ``d^2 / (2 det_sigma_m^2)``, no detection near costs ``miss_cost`` (the carrier is missed,
+  hidden or out of view: the cap keeps a long unseen stretch from dragging the path onto
+  whoever is nearest).
+* **Global path** (Viterbi over a position grid of ``cell_m``): the whole log is searched at
+  once, so the path needs no starting point and the carrier is wherever their phone's walk
+  fits the detections best over the log. The displacement shifts the grid each frame (the
+  fraction carried over), the random walk is a 3 x 3 neighbourhood, and the distance to the
+  nearest detection is a Euclidean distance transform of the frame's detections (scipy).
+  This is the Viterbi algorithm written out, not a library's: it runs over an image-shaped
+  state whose transition is a shift (no library offers that).
+* **Alignment search.** The chains' alignment (:mod:`~trackctl.vmtrack.identify`) is learnt
+  from visual tracks and in a crowd from the wrong person; it starts nothing here. The yaw is
+  searched instead: the same forward pass, without back-pointers, for every yaw on a
+  ``yaw_step_deg`` grid at once (the grid coarser, ``search_cell_m``), over windows of
+  ``window_s``; a Viterbi over the windows picks the yaw of each (a carry change that the
+  phone did not notice is a jump at ``yaw_jump_cost``). Then ``refine_passes`` times the path
+  is found and the alignment refitted from the detections on it (a ``align_window_s`` window
+  per frame, the clock offset from all of them).
+* **Publication.** A frame is published where the path has a detection within ``gate_m`` and
+  across gaps up to ``fill_s`` between two such frames; the position is the phone's walk plus
+  the detections' offset from it, smoothed over ``smooth_s`` (so the noise of one detection
+  does not show, and the phone's walk fills the gaps).
+
+Memory is the grid's back-pointers: one byte per cell and frame per phone, while that phone is
+processed (a 30 x 20 m site at 0.2 m and 3 frames per second: 45 kB per frame).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from trackctl.vmtrack.align import AlignConfig, best_fit, lag_grid
+from trackctl.vmtrack.identify import _dead_reckoned, _visual_velocity
+from trackctl.vmtrack.motion import PhoneMotion
+
+__all__ = ["RetrackConfig", "PhoneTrack", "retrack"]
+
+
+@dataclass(frozen=True, slots=True)
+class RetrackConfig:
+    """Phone-guided re-tracking parameters (metres, seconds, costs in ``d^2 / 2 sigma^2``)."""
+
+    enabled: bool = True
+    cell_m: float = 0.2
+    """Grid cell of the final paths."""
+    search_cell_m: float = 0.3
+    """Grid cell of the yaw search."""
+    det_sigma_m: float = 0.35
+    """A detection's ground error: the detector's (~0.28 m) with a camera's calibration bias."""
+    walk_sigma_mps: float = 0.2
+    """Random walk of the carrier about the phone's aligned walk, m per sqrt(s): a 10 % step
+    length or 5 deg heading error at 1.3 m/s, and a camera's bias taking over from another's."""
+    miss_cost: float = 3.0
+    """Cost of a frame with no detection near the path (missed, hidden, out of view)."""
+    gate_m: float = 1.0
+    """A frame counts as seen when a detection is this near the path."""
+    fill_s: float = 2.0
+    """Gaps up to this between seen frames are published on the phone's walk."""
+    smooth_s: float = 1.5
+    """Gaussian time constant of the offset between the phone's walk and its detections."""
+    yaw_step_deg: float = 15.0
+    window_s: float = 40.0
+    """Yaw search windows (overlapping by half)."""
+    yaw_jump_cost: float = 80.0
+    """Cost of a yaw change by more than one step between two windows (an unnoticed carry
+    change: rare, and a window's cost in a crowd varies by tens); one step costs an eighth
+    of it (drift, magnetic disturbance)."""
+    refine_passes: int = 2
+    align_window_s: float = 30.0
+    """Centred window of the alignment refitted from the path's detections."""
+    min_align_frames: int = 10
+    """Detections a refit window needs."""
+
+
+@dataclass
+class PhoneTrack:
+    """One phone's re-tracked carrier."""
+
+    xy: dict[int, tuple[float, float]]
+    """Frame index -> published position."""
+    seen: set[int]
+    """Frame indices with a detection on the path (the rest of ``xy`` is filled)."""
+    velocity: np.ndarray
+    """(n_frames, 2) aligned phone velocity, m/s (NaN where unknown)."""
+    lag_s: float
+    a: np.ndarray
+    """Alignment per frame (complex: scale and yaw), NaN where unknown."""
+
+
+class _Grid:
+    """A site-sized position grid with the frames' detection-distance emissions."""
+
+    def __init__(self, points: Sequence[np.ndarray], cell_m: float) -> None:
+        pts = [p for p in points if len(p)]
+        allp = np.vstack(pts) if pts else np.zeros((1, 2))
+        self.lo = allp.min(axis=0) - 2.0
+        hi = allp.max(axis=0) + 2.0
+        self.cell = cell_m
+        size = ((hi - self.lo) / cell_m).astype(int) + 1
+        self.shape = (int(size[1]), int(size[0]))
+
+    def emission(self, pts: np.ndarray, sigma: float, cap: float) -> np.ndarray | float:
+        """Cost of each cell at one frame: min(d^2 / 2 sigma^2, cap), d the distance to the
+        nearest detection (a distance transform; detections snapped to cells)."""
+        if not len(pts):
+            return cap
+        mask = np.ones(self.shape, bool)
+        ij = np.round((pts - self.lo) / self.cell).astype(int)
+        ok = (ij >= 0).all(axis=1) & (ij[:, 0] < self.shape[1]) & (ij[:, 1] < self.shape[0])
+        mask[ij[ok, 1], ij[ok, 0]] = False
+        if mask.all():
+            return cap
+        dist = ndimage.distance_transform_edt(mask, sampling=self.cell)
+        return np.minimum(dist * dist / (2 * sigma * sigma), cap).astype(np.float32)
+
+    def xy(self, cells: np.ndarray) -> np.ndarray:
+        return self.lo + cells[:, ::-1] * self.cell
+
+
+_OFFS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+_BIG = np.float32(1e9)
+
+
+def _slices(d: int, n: int) -> tuple[slice, slice]:
+    """Source and destination slices of a shift by ``d`` cells along an axis of ``n``."""
+    return (slice(0, n - d), slice(d, n)) if d >= 0 else (slice(-d, n), slice(0, n + d))
+
+
+def _shift(a: np.ndarray, sy: int, sx: int) -> np.ndarray:
+    """``a`` moved by (sy, sx) cells along its last two axes; what enters is unreachable."""
+    out = np.full_like(a, _BIG)
+    ys, yd = _slices(sy, a.shape[-2])
+    xs, xd = _slices(sx, a.shape[-1])
+    out[..., yd, xd] = a[..., ys, xs]
+    return out
+
+
+def _step_costs(cell: float, dt: float, cfg: RetrackConfig) -> np.ndarray:
+    var = max(cfg.walk_sigma_mps**2 * dt, 1e-6)
+    return np.array([(dy * dy + dx * dx) * cell * cell / (2 * var) for dy, dx in _OFFS], np.float32)
+
+
+def _displacements(
+    frame_t: np.ndarray, track: np.ndarray, lag_s: float, a: np.ndarray
+) -> np.ndarray:
+    """The phone's aligned displacement (complex) into each frame; NaN where the phone has no
+    walk (outside its samples, or the alignment unknown)."""
+    u = np.full(len(frame_t), np.nan, complex)
+    if len(track) < 2:
+        return u
+    tq = frame_t + int(round(lag_s * 1e9))
+    inside = (tq >= track[0, 0]) & (tq <= track[-1, 0])
+    d = np.interp(tq, track[:, 0], track[:, 1]) + 1j * np.interp(tq, track[:, 0], track[:, 2])
+    step = np.r_[0, np.diff(d)] * a
+    u[inside] = step[inside]
+    u[0] = np.nan if not inside[0] else 0j
+    # a frame whose predecessor is outside the walk starts afresh
+    u[1:][~inside[:-1]] = np.nan
+    return u
+
+
+def _forward_costs(
+    grid: _Grid,
+    emissions: Sequence[np.ndarray | float],
+    u: np.ndarray,
+    rot: np.ndarray,
+    steps: np.ndarray,
+) -> np.ndarray:
+    """Forward pass for several rotations of the walk at once (no back-pointers): the cheapest
+    path's total cost per rotation ``rot`` (complex, applied to ``u``)."""
+    n_r = len(rot)
+    acc = np.zeros((n_r, *grid.shape), np.float32)
+    total = np.zeros(n_r)
+    frac = np.zeros((n_r, 2))
+    # grey erosion subtracts its structure: a negative step cost adds it
+    structure = -steps.reshape(1, 3, 3)
+    for k, uk in enumerate(u):
+        if np.isnan(uk):
+            acc[:] = acc.min(axis=(1, 2), keepdims=True)
+        else:
+            moved = np.empty_like(acc)
+            for r in range(n_r):
+                v = rot[r] * uk
+                frac[r] += (v.real / grid.cell, v.imag / grid.cell)
+                sx, sy = int(round(frac[r, 0])), int(round(frac[r, 1]))
+                frac[r] -= (sx, sy)
+                moved[r] = _shift(acc[r], sy, sx)
+            acc = ndimage.grey_erosion(moved, structure=structure, mode="constant", cval=_BIG)
+        acc += emissions[k]
+        m = acc.min(axis=(1, 2))
+        total += m
+        acc -= m[:, None, None]
+    return total
+
+
+def _viterbi_path(
+    grid: _Grid, emissions: Sequence[np.ndarray | float], u: np.ndarray, steps: np.ndarray
+) -> np.ndarray:
+    """The cheapest path's cell (row, col) at every frame."""
+    n = len(u)
+    acc = np.zeros(grid.shape, np.float32)
+    back = np.zeros((n, *grid.shape), np.int8)
+    shifts = np.zeros((n, 2), int)
+    frac = np.zeros(2)
+    restart: dict[int, tuple[int, int]] = {}
+    for k, uk in enumerate(u):
+        if np.isnan(uk):
+            # anywhere: the path restarts; before it, the cheapest cell of the frame before
+            y0, x0 = np.unravel_index(int(np.argmin(acc)), acc.shape)
+            restart[k] = (int(y0), int(x0))
+            acc[:] = acc.min()
+            back[k] = -1
+        else:
+            frac += (uk.real / grid.cell, uk.imag / grid.cell)
+            sx, sy = int(round(frac[0])), int(round(frac[1]))
+            frac -= (sx, sy)
+            shifts[k] = (sy, sx)
+            moved = _shift(acc, sy, sx)
+            stack = np.stack([_shift(moved, dy, dx) + steps[i] for i, (dy, dx) in enumerate(_OFFS)])
+            back[k] = np.argmin(stack, axis=0)
+            acc = np.take_along_axis(stack, back[k][None].astype(np.intp), 0)[0]
+        acc = acc + emissions[k]
+        acc -= acc.min()
+    cells = np.zeros((n, 2), int)
+    y0, x0 = np.unravel_index(int(np.argmin(acc)), acc.shape)
+    y, x = int(y0), int(x0)
+    for k in range(n - 1, -1, -1):
+        cells[k] = (y, x)
+        b = int(back[k, y, x])
+        if b < 0:
+            y, x = restart[k]
+            continue
+        dy, dx = _OFFS[b]
+        y = min(max(y - dy - int(shifts[k, 0]), 0), grid.shape[0] - 1)
+        x = min(max(x - dx - int(shifts[k, 1]), 0), grid.shape[1] - 1)
+    return cells
+
+
+def _yaw_search(
+    frame_t: np.ndarray,
+    points: Sequence[np.ndarray],
+    track: np.ndarray,
+    lag_s: float,
+    scale: float,
+    cfg: RetrackConfig,
+) -> np.ndarray | None:
+    """The walk's rotation per frame (complex, with ``scale``): yaws searched per window, then
+    chosen over windows by a Viterbi with continuity costs; None without a walk."""
+    n = len(frame_t)
+    yaws = np.radians(np.arange(0.0, 360.0, cfg.yaw_step_deg))
+    rot = np.exp(1j * yaws)
+    u = _displacements(frame_t, track, lag_s, np.full(n, scale + 0j))
+    if np.isnan(u).all():
+        return None
+    grid = _Grid(points, cfg.search_cell_m)
+    dt = float(np.median(np.diff(frame_t))) / 1e9 if n > 1 else 1.0
+    steps = _step_costs(grid.cell, dt, cfg)
+    emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
+    span = max(int(round(cfg.window_s / dt)), 2)
+    starts = list(range(0, max(n - span // 2, 1), span // 2))
+    costs = np.array(
+        [_forward_costs(grid, emissions[s : s + span], u[s : s + span], rot, steps) for s in starts]
+    )
+    # a Viterbi over the windows: staying is free, a step costs an eighth of a jump
+    n_y = len(yaws)
+    diff = np.abs((np.arange(n_y)[:, None] - np.arange(n_y)[None, :] + n_y // 2) % n_y - n_y // 2)
+    trans = np.where(diff == 0, 0.0, np.where(diff == 1, cfg.yaw_jump_cost / 8, cfg.yaw_jump_cost))
+    acc = costs[0] - costs[0].min()
+    back = np.zeros((len(starts), n_y), int)
+    for w in range(1, len(starts)):
+        tot = acc[:, None] + trans
+        back[w] = np.argmin(tot, axis=0)
+        acc = tot[back[w], np.arange(n_y)] + costs[w] - costs[w].min()
+    choice = np.zeros(len(starts), int)
+    choice[-1] = int(np.argmin(acc))
+    for w in range(len(starts) - 1, 0, -1):
+        choice[w - 1] = back[w, choice[w]]
+    centres = np.array([s + span / 2 for s in starts])
+    nearest = np.abs(np.arange(n)[:, None] - centres[None, :]).argmin(axis=1)
+    return scale * rot[choice[nearest]]
+
+
+def _refit(
+    frame_t: np.ndarray,
+    hits: dict[int, np.ndarray],
+    track: np.ndarray,
+    acfg: AlignConfig,
+    cfg: RetrackConfig,
+) -> tuple[float, np.ndarray] | None:
+    """Clock offset and ``a`` per frame refitted from the detections on the path (each frame's
+    centred ``align_window_s`` window; one offset, the one these fits explain best)."""
+    ks = np.array(sorted(hits))
+    if len(ks) < cfg.min_align_frames:
+        return None
+    n = len(frame_t)
+    dt = float(np.median(np.diff(frame_t))) / 1e9 if n > 1 else 1.0
+    half = max(int(round(cfg.align_window_s / 2 / dt)), 1)
+    det = np.array([[frame_t[k], *hits[k]] for k in ks], float)
+    at = frame_t[ks].astype(float)
+    zt = _visual_velocity(det, at, 3.5)
+    idx = np.arange(n)
+    lo, hi = np.maximum(idx - half, 0), np.minimum(idx + half + 1, n)
+    best: tuple[float, float, np.ndarray] | None = None
+    for lag in lag_grid(acfg):
+        zl = _visual_velocity(track, at + lag * 1e9, 3.5)
+        ok = ~(np.isnan(zl) | np.isnan(zt))
+        sums = [np.zeros(n, complex), np.zeros(n), np.zeros(n), np.zeros(n)]
+        sums[0][ks[ok]] = zt[ok] * np.conj(zl[ok])
+        sums[1][ks[ok]] = np.abs(zl[ok]) ** 2
+        sums[2][ks[ok]] = np.abs(zt[ok]) ** 2
+        sums[3][ks[ok]] = 1.0
+        cum = [np.r_[0, np.cumsum(s)] for s in sums]
+        sw, pw, tw, nw = (c[hi] - c[lo] for c in cum)
+        a, r = best_fit(sw, pw, tw, nw, acfg)
+        use = nw >= cfg.min_align_frames
+        if not use.any():
+            continue
+        resid = float((r * nw)[use].sum() / nw[use].sum())
+        if best is None or resid < best[0]:
+            good = np.flatnonzero(use)
+            fill = good[np.clip(np.searchsorted(good, idx), 0, len(good) - 1)]
+            best = (resid, float(lag), np.where(use, a, a[fill]))
+    return None if best is None else (best[1], best[2])
+
+
+def _publish(
+    frame_t: np.ndarray,
+    points: Sequence[np.ndarray],
+    grid: _Grid,
+    cells: np.ndarray,
+    u: np.ndarray,
+    cfg: RetrackConfig,
+) -> tuple[dict[int, tuple[float, float]], set[int], dict[int, np.ndarray]]:
+    """Positions to publish (frame index -> xy), the seen frames, and the detections on the
+    path (frame index -> xy)."""
+    path = grid.xy(cells)
+    hits: dict[int, np.ndarray] = {}
+    for k, p in enumerate(points):
+        if not len(p) or np.isnan(u[k]):
+            continue
+        d = np.hypot(p[:, 0] - path[k, 0], p[:, 1] - path[k, 1])
+        j = int(np.argmin(d))
+        if d[j] < cfg.gate_m:
+            hits[k] = p[j]
+    out: dict[int, tuple[float, float]] = {}
+    if not hits:
+        return out, set(), hits
+    ks = np.array(sorted(hits))
+    walk = np.cumsum(np.nan_to_num(u, nan=0.0))
+    seg = np.cumsum(np.isnan(u))  # the walk restarts where the phone has none
+    off = np.array([complex(*hits[k]) for k in ks]) - walk[ks]
+    t = frame_t / 1e9
+    dt = float(np.median(np.diff(frame_t))) / 1e9 if len(frame_t) > 1 else 1.0
+    fill = int(round(cfg.fill_s / dt))
+    frames = list(ks)
+    for a_, b_ in zip(ks[:-1], ks[1:], strict=True):
+        if 1 < b_ - a_ <= fill and seg[a_] == seg[b_]:
+            frames.extend(range(a_ + 1, b_))
+    for k in frames:
+        near = (np.abs(t[ks] - t[k]) <= 3 * cfg.smooth_s) & (seg[ks] == seg[k])
+        if not near.any():
+            continue
+        w = np.exp(-0.5 * ((t[ks][near] - t[k]) / cfg.smooth_s) ** 2)
+        p = walk[k] + (w * off[near]).sum() / w.sum()
+        out[int(k)] = (float(p.real), float(p.imag))
+    return out, set(int(k) for k in ks), hits
+
+
+def retrack(
+    frame_t: np.ndarray,
+    points: Sequence[np.ndarray],
+    phones: dict[str, PhoneMotion],
+    start: dict[str, tuple[float, np.ndarray]],
+    acfg: AlignConfig,
+    cfg: RetrackConfig,
+    aligned: bool = False,
+) -> dict[str, PhoneTrack]:
+    """Each phone's carrier re-tracked through the raw detections ``points`` (one (n, 2) array
+    per frame at ``frame_t``). ``start``: a first clock offset and ``a`` per frame per phone (the
+    chains' alignment; only the offset is used to start). Phones without a walk
+    are left out. ``aligned``: the phones' alignment is declared (heading = walk, one clock):
+    ``start`` is used as it is, neither searched nor refitted."""
+    out: dict[str, PhoneTrack] = {}
+    n = len(frame_t)
+    if n < 2:
+        return out
+    grid = _Grid(points, cfg.cell_m)
+    dt = float(np.median(np.diff(frame_t))) / 1e9
+    steps = _step_costs(grid.cell, dt, cfg)
+    emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
+    for mid in sorted(phones):
+        track = _dead_reckoned(phones[mid])
+        if len(track) < 2:
+            continue
+        lag, a0 = start.get(mid, (0.0, np.full(n, 1.0 + 0j)))
+        # the nominal step (scale 1) to start: in a crowd the chains' scale is another
+        # walker's as often as not, and the refit finds the phone's own
+        a = a0 if aligned else _yaw_search(frame_t, points, track, lag, 1.0, cfg)
+        if a is None:
+            continue
+        passes = 0 if aligned else cfg.refine_passes
+        for p in range(passes + 1):
+            u = _displacements(frame_t, track, lag, a)
+            cells = _viterbi_path(grid, emissions, u, steps)
+            xy, seen, hits = _publish(frame_t, points, grid, cells, u, cfg)
+            if p == passes:
+                break
+            fit = _refit(frame_t, hits, track, acfg, cfg)
+            if fit is None:
+                break
+            lag, a = fit
+        velocity = np.column_stack([u.real, u.imag]) / dt
+        out[mid] = PhoneTrack(xy, seen, velocity, lag, a)
+    return out
