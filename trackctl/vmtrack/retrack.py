@@ -76,12 +76,20 @@ class RetrackConfig:
     smooth_s: float = 1.5
     """Gaussian time constant of the offset between the phone's walk and its detections."""
     yaw_step_deg: float = 15.0
-    window_s: float = 40.0
-    """Yaw search windows (overlapping by half)."""
-    yaw_jump_cost: float = 80.0
-    """Cost of a yaw change by more than one step between two windows (an unnoticed carry
-    change: rare, and a window's cost in a crowd varies by tens); one step costs an eighth
-    of it (drift, magnetic disturbance)."""
+    search_scales: tuple[float, ...] = (0.8, 0.9, 1.0, 1.1, 1.2)
+    """Step-length scales searched (against the nominal 0.7 m step: 0.55-0.85 m steps)."""
+    search_lag_step_s: float = 0.5
+    """Clock offsets are searched on this grid over the range the alignment allows."""
+    search_walk_sigma_mps: float = 0.2
+    """The random walk of the search (it absorbs the yaw and scale grids' steps)."""
+    yaw_step_cost: float = 15.0
+    """Cost of the walk's yaw moving by one step between two frames (drift, magnetic
+    disturbance: 1 deg per sqrt(s), 10-20 deg over metres)."""
+    yaw_jump_cost: float = 150.0
+    """Cost of any other yaw change between two frames: a carry change the phone did not
+    notice. Not the -log of its chance (~10): a wrong yaw that may change cheaply hops from
+    walker to walker in a crowd; at 50 missed frames' cost, only a change the next minute
+    confirms is taken."""
     refine_passes: int = 2
     align_window_s: float = 30.0
     """Centred window of the alignment refitted from the path's detections."""
@@ -152,8 +160,11 @@ def _shift(a: np.ndarray, sy: int, sx: int) -> np.ndarray:
     return out
 
 
-def _step_costs(cell: float, dt: float, cfg: RetrackConfig) -> np.ndarray:
-    var = max(cfg.walk_sigma_mps**2 * dt, 1e-6)
+def _step_costs(
+    cell: float, dt: float, cfg: RetrackConfig, sigma_mps: float | None = None
+) -> np.ndarray:
+    sigma = cfg.walk_sigma_mps if sigma_mps is None else sigma_mps
+    var = max(sigma**2 * dt, 1e-6)
     return np.array([(dy * dy + dx * dx) * cell * cell / (2 * var) for dy, dx in _OFFS], np.float32)
 
 
@@ -176,38 +187,51 @@ def _displacements(
     return u
 
 
-def _forward_costs(
+def _layer_costs(
     grid: _Grid,
     emissions: Sequence[np.ndarray | float],
-    u: np.ndarray,
-    rot: np.ndarray,
+    walks: np.ndarray,
     steps: np.ndarray,
+    turn_cost: float | None = None,
+    jump_cost: float | None = None,
+    free: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Forward pass for several rotations of the walk at once (no back-pointers): the cheapest
-    path's total cost per rotation ``rot`` (complex, applied to ``u``)."""
-    n_r = len(rot)
+    """One pass of the Viterbi recursion over (layer, position) without back-pointers: at each
+    frame, the cheapest path's cost into each layer, relative to the cheapest of all. Layer
+    ``l`` moves by ``walks[k, l]`` (complex) into frame ``k`` (NaN: it restarts anywhere).
+    With ``turn_cost`` the layers are a ring of yaws: between frames a path may move to the
+    next one at that cost, or to any at ``jump_cost`` (nothing into a ``free`` frame: the
+    phone saw its carry change), keeping its position; without, they are independent and
+    the last row ranks them."""
+    n_r = walks.shape[1]
     acc = np.zeros((n_r, *grid.shape), np.float32)
-    total = np.zeros(n_r)
+    out = np.zeros(walks.shape)
     frac = np.zeros((n_r, 2))
     # grey erosion subtracts its structure: a negative step cost adds it
     structure = -steps.reshape(1, 3, 3)
-    for k, uk in enumerate(u):
-        if np.isnan(uk):
-            acc[:] = acc.min(axis=(1, 2), keepdims=True)
-        else:
-            moved = np.empty_like(acc)
-            for r in range(n_r):
-                v = rot[r] * uk
-                frac[r] += (v.real / grid.cell, v.imag / grid.cell)
-                sx, sy = int(round(frac[r, 0])), int(round(frac[r, 1]))
-                frac[r] -= (sx, sy)
-                moved[r] = _shift(acc[r], sy, sx)
-            acc = ndimage.grey_erosion(moved, structure=structure, mode="constant", cval=_BIG)
+    for k in range(len(walks)):
+        moved = np.empty_like(acc)
+        for r in range(n_r):
+            v = walks[k, r]
+            if np.isnan(v):
+                moved[r] = acc[r].min()
+                frac[r] = 0.0
+                continue
+            frac[r] += (v.real / grid.cell, v.imag / grid.cell)
+            sx, sy = int(round(frac[r, 0])), int(round(frac[r, 1]))
+            frac[r] -= (sx, sy)
+            moved[r] = _shift(acc[r], sy, sx)
+        acc = ndimage.grey_erosion(moved, structure=structure, mode="constant", cval=_BIG)
+        if turn_cost is not None:
+            turn = np.minimum(np.roll(acc, 1, axis=0), np.roll(acc, -1, axis=0))
+            np.minimum(acc, turn + np.float32(turn_cost), out=acc)
+            jump = 0.0 if free is not None and free[k] else (jump_cost or 0.0)
+            np.minimum(acc, acc.min(axis=0) + np.float32(jump), out=acc)
         acc += emissions[k]
         m = acc.min(axis=(1, 2))
-        total += m
-        acc -= m[:, None, None]
-    return total
+        acc -= m.min()
+        out[k] = m - m.min()
+    return out
 
 
 def _viterbi_path(
@@ -253,48 +277,75 @@ def _viterbi_path(
     return cells
 
 
-def _yaw_search(
+def _search(
     frame_t: np.ndarray,
     points: Sequence[np.ndarray],
     track: np.ndarray,
     lag_s: float,
+    acfg: AlignConfig,
+    cfg: RetrackConfig,
+    carry_changes: np.ndarray | None = None,
+) -> tuple[float, np.ndarray] | None:
+    """The phone's alignment found from the detections alone: its yaw per frame (at the
+    nominal step and clock offset ``lag_s``), then its clock offset and step scale under that
+    yaw, then the yaw again under those (:func:`_yaw_search`); None without a walk."""
+    n = len(frame_t)
+    grid = _Grid(points, cfg.search_cell_m)
+    dt = float(np.median(np.diff(frame_t))) / 1e9 if n > 1 else 1.0
+    steps = _step_costs(grid.cell, dt, cfg, cfg.search_walk_sigma_mps)
+    emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
+    yaw = _yaw_search(frame_t, grid, emissions, steps, track, lag_s, 1.0, cfg, carry_changes)
+    if yaw is None:
+        return None
+    lags = lag_grid(acfg)[:: max(int(round(cfg.search_lag_step_s / acfg.lag_step_s)), 1)]
+    scales = np.asarray(cfg.search_scales, float)
+    walks = np.column_stack(
+        [_displacements(frame_t, track, float(lag), yaw * sc) for lag in lags for sc in scales]
+    )
+    best = int(np.argmin(_layer_costs(grid, emissions, walks, steps)[-1]))
+    lag_s, scale = float(lags[best // len(scales)]), float(scales[best % len(scales)])
+    yaw = _yaw_search(frame_t, grid, emissions, steps, track, lag_s, scale, cfg, carry_changes)
+    return None if yaw is None else (lag_s, yaw)
+
+
+def _yaw_search(
+    frame_t: np.ndarray,
+    grid: _Grid,
+    emissions: Sequence[np.ndarray | float],
+    steps: np.ndarray,
+    track: np.ndarray,
+    lag_s: float,
     scale: float,
     cfg: RetrackConfig,
+    carry_changes: np.ndarray | None = None,
 ) -> np.ndarray | None:
-    """The walk's rotation per frame (complex, with ``scale``): yaws searched per window, then
-    chosen over windows by a Viterbi with continuity costs; None without a walk."""
+    """The walk's rotation per frame (complex, with ``scale``): the yaw through which the
+    cheapest path over (yaw, position) passes at that frame, from a forward and a backward
+    pass (each layer's best cost summed: the two passes' best cells may differ, a close
+    approximation of the max-marginal at O(frames x yaws) memory); None without a walk.
+    ``carry_changes``: phone-clock times at which the phone saw its carry change (any yaw
+    may follow, at no cost)."""
     n = len(frame_t)
     yaws = np.radians(np.arange(0.0, 360.0, cfg.yaw_step_deg))
     rot = np.exp(1j * yaws)
     u = _displacements(frame_t, track, lag_s, np.full(n, scale + 0j))
     if np.isnan(u).all():
         return None
-    grid = _Grid(points, cfg.search_cell_m)
-    dt = float(np.median(np.diff(frame_t))) / 1e9 if n > 1 else 1.0
-    steps = _step_costs(grid.cell, dt, cfg)
-    emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
-    span = max(int(round(cfg.window_s / dt)), 2)
-    starts = list(range(0, max(n - span // 2, 1), span // 2))
-    costs = np.array(
-        [_forward_costs(grid, emissions[s : s + span], u[s : s + span], rot, steps) for s in starts]
-    )
-    # a Viterbi over the windows: staying is free, a step costs an eighth of a jump
-    n_y = len(yaws)
-    diff = np.abs((np.arange(n_y)[:, None] - np.arange(n_y)[None, :] + n_y // 2) % n_y - n_y // 2)
-    trans = np.where(diff == 0, 0.0, np.where(diff == 1, cfg.yaw_jump_cost / 8, cfg.yaw_jump_cost))
-    acc = costs[0] - costs[0].min()
-    back = np.zeros((len(starts), n_y), int)
-    for w in range(1, len(starts)):
-        tot = acc[:, None] + trans
-        back[w] = np.argmin(tot, axis=0)
-        acc = tot[back[w], np.arange(n_y)] + costs[w] - costs[w].min()
-    choice = np.zeros(len(starts), int)
-    choice[-1] = int(np.argmin(acc))
-    for w in range(len(starts) - 1, 0, -1):
-        choice[w - 1] = back[w, choice[w]]
-    centres = np.array([s + span / 2 for s in starts])
-    nearest = np.abs(np.arange(n)[:, None] - centres[None, :]).argmin(axis=1)
-    return scale * rot[choice[nearest]]
+    free = np.zeros(n, bool)
+    if carry_changes is not None and len(carry_changes):
+        at = np.searchsorted(frame_t, np.asarray(carry_changes) - int(round(lag_s * 1e9)))
+        free[at[at < n]] = True
+    costs = (cfg.yaw_step_cost, cfg.yaw_jump_cost)
+    forward = _layer_costs(grid, emissions, u[:, None] * rot[None, :], steps, *costs, free)
+    # backward: frame k+1 -> k moves by -u[k+1] (a frame after a gap starts afresh), through
+    # the transition the forward pass takes into k+1
+    u_back = np.r_[0j, -u[:0:-1]]
+    free_back = np.r_[False, free[:0:-1]]
+    backward = _layer_costs(
+        grid, emissions[::-1], u_back[:, None] * rot[None, :], steps, *costs, free_back
+    )[::-1]
+    choice = np.argmin(forward + backward, axis=1)
+    return scale * rot[choice]
 
 
 def _refit(
@@ -412,9 +463,13 @@ def retrack(
         lag, a0 = start.get(mid, (0.0, np.full(n, 1.0 + 0j)))
         # the nominal step (scale 1) to start: in a crowd the chains' scale is another
         # walker's as often as not, and the refit finds the phone's own
-        a = a0 if aligned else _yaw_search(frame_t, points, track, lag, 1.0, cfg)
-        if a is None:
-            continue
+        if aligned:
+            a = a0
+        else:
+            found = _search(frame_t, points, track, lag, acfg, cfg, phones[mid].carry_changes)
+            if found is None:
+                continue
+            lag, a = found
         passes = 0 if aligned else cfg.refine_passes
         for p in range(passes + 1):
             u = _displacements(frame_t, track, lag, a)
