@@ -73,6 +73,13 @@ class RetrackConfig:
     """A frame counts as seen when a detection is this near the path."""
     fill_s: float = 2.0
     """Gaps up to this between seen frames are published on the phone's walk."""
+    unseen_s: float = 10.0
+    unseen_m: float = 1.0
+    """Gaps up to ``unseen_s`` between two stretches are published on the phone's walk when
+    it lands within ``unseen_m`` (+ 15 % of the walk) of the next stretch."""
+    min_stretch_s: float = 5.0
+    """A stretch (seen frames and the gaps filled between them) shorter than this is not
+    published: a path that passes a stranger picks up a few detections on the way."""
     smooth_s: float = 1.5
     """Gaussian time constant of the offset between the phone's walk and its detections."""
     yaw_step_deg: float = 15.0
@@ -400,7 +407,14 @@ def _publish(
     cfg: RetrackConfig,
 ) -> tuple[dict[int, tuple[float, float]], set[int], dict[int, np.ndarray]]:
     """Positions to publish (frame index -> xy), the seen frames, and the detections on the
-    path (frame index -> xy)."""
+    path (frame index -> xy).
+
+    Seen frames less than ``fill_s`` apart form a stretch; a stretch shorter than
+    ``min_stretch_s`` is dropped; two stretches at most ``unseen_s`` apart are joined when
+    the phone's walk across the gap lands within ``unseen_m`` (+ 15 % of the walk) of where
+    the next one starts (the carrier walked where no camera saw them). A published position
+    is the phone's walk plus the detections' offset from it: smoothed over ``smooth_s`` at
+    seen frames, linear between them."""
     path = grid.xy(cells)
     hits: dict[int, np.ndarray] = {}
     for k, p in enumerate(points):
@@ -410,28 +424,41 @@ def _publish(
         j = int(np.argmin(d))
         if d[j] < cfg.gate_m:
             hits[k] = p[j]
-    out: dict[int, tuple[float, float]] = {}
     if not hits:
-        return out, set(), hits
+        return {}, set(), hits
     ks = np.array(sorted(hits))
     walk = np.cumsum(np.nan_to_num(u, nan=0.0))
     seg = np.cumsum(np.isnan(u))  # the walk restarts where the phone has none
-    off = np.array([complex(*hits[k]) for k in ks]) - walk[ks]
     t = frame_t / 1e9
-    dt = float(np.median(np.diff(frame_t))) / 1e9 if len(frame_t) > 1 else 1.0
-    fill = int(round(cfg.fill_s / dt))
-    frames = list(ks)
-    for a_, b_ in zip(ks[:-1], ks[1:], strict=True):
-        if 1 < b_ - a_ <= fill and seg[a_] == seg[b_]:
-            frames.extend(range(a_ + 1, b_))
-    for k in frames:
-        near = (np.abs(t[ks] - t[k]) <= 3 * cfg.smooth_s) & (seg[ks] == seg[k])
-        if not near.any():
-            continue
-        w = np.exp(-0.5 * ((t[ks][near] - t[k]) / cfg.smooth_s) ** 2)
-        p = walk[k] + (w * off[near]).sum() / w.sum()
-        out[int(k)] = (float(p.real), float(p.imag))
-    return out, set(int(k) for k in ks), hits
+    # stretches of seen frames, the short ones dropped
+    cut = np.flatnonzero((np.diff(t[ks]) > cfg.fill_s) | (np.diff(seg[ks]) != 0)) + 1
+    kept = [r for r in np.split(ks, cut) if t[r[-1]] - t[r[0]] >= cfg.min_stretch_s]
+    if not kept:
+        return {}, set(), hits
+    seen = np.concatenate(kept)
+    off = np.array([complex(*hits[k]) for k in seen]) - walk[seen]
+    smooth = np.empty(len(seen), complex)
+    for i, k in enumerate(seen):
+        near = (np.abs(t[seen] - t[k]) <= 3 * cfg.smooth_s) & (seg[seen] == seg[k])
+        w = np.exp(-0.5 * ((t[seen][near] - t[k]) / cfg.smooth_s) ** 2)
+        smooth[i] = (w * off[near]).sum() / w.sum()
+    frames = [np.arange(r[0], r[-1] + 1) for r in kept]
+    pos = np.cumsum([0] + [len(r) for r in kept])
+    for j in range(len(kept) - 1):
+        a_, b_ = int(kept[j][-1]), int(kept[j + 1][0])
+        drift = abs(smooth[pos[j + 1]] - smooth[pos[j + 1] - 1])
+        walked = abs(walk[b_] - walk[a_])
+        if (
+            t[b_] - t[a_] <= cfg.unseen_s
+            and seg[a_] == seg[b_]
+            and drift <= cfg.unseen_m + 0.15 * walked
+        ):
+            frames.append(np.arange(a_ + 1, b_))
+    every = np.unique(np.concatenate(frames))
+    offsets = np.interp(every, seen, smooth.real) + 1j * np.interp(every, seen, smooth.imag)
+    xy = walk[every] + offsets
+    out = {int(k): (float(p.real), float(p.imag)) for k, p in zip(every, xy, strict=True)}
+    return out, set(int(k) for k in seen), hits
 
 
 def retrack(

@@ -1,0 +1,170 @@
+"""Phone-guided re-tracking (trackctl.vmtrack.retrack): each carrier found through the raw
+detections by their phone's walk, whatever the phone's yaw, clock and step."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from trackctl.vmtrack.align import AlignConfig
+from trackctl.vmtrack.identify import _dead_reckoned
+from trackctl.vmtrack.motion import PhoneMotion
+from trackctl.vmtrack.retrack import (
+    RetrackConfig,
+    _displacements,
+    _Grid,
+    _search,
+    _step_costs,
+    _viterbi_path,
+    retrack,
+)
+
+FPS = 3.0
+CFG = RetrackConfig()
+
+
+def _walker(rng: np.random.Generator, n: int, start: tuple[float, float]) -> np.ndarray:
+    """A walk at ~1.2 m/s that turns now and then, kept inside a 16 x 12 m room: (n, 2)."""
+    xy = np.zeros((n, 2))
+    xy[0] = start
+    heading = rng.uniform(-math.pi, math.pi)
+    for k in range(1, n):
+        if rng.random() < 0.03:
+            heading += rng.normal(0, 1.2)
+        nxt = xy[k - 1] + 1.2 / FPS * np.array([math.cos(heading), math.sin(heading)])
+        if not (0 < nxt[0] < 16 and 0 < nxt[1] < 12):
+            heading += math.pi / 2 + rng.uniform(0, 1)
+            nxt = xy[k - 1]
+        xy[k] = nxt
+    return xy
+
+
+def _scene(seed: int, n_people: int = 12, seconds: float = 90.0):
+    """People walking; frame times and noisy detections (0.3 m, 5 % missed) of them all."""
+    rng = np.random.default_rng(seed)
+    n = int(seconds * FPS)
+    frame_t = (np.arange(n) * 1e9 / FPS).astype(np.int64)
+    people = [_walker(rng, n, (rng.uniform(2, 14), rng.uniform(2, 10))) for _ in range(n_people)]
+    points = []
+    for k in range(n):
+        seen = [p[k] + rng.normal(0, 0.3, 2) for p in people if rng.random() > 0.05]
+        points.append(np.array(seen).reshape(-1, 2))
+    return frame_t, points, people
+
+
+def _phone(
+    walk: np.ndarray,
+    frame_t: np.ndarray,
+    yaw_deg: np.ndarray | float,
+    scale: float = 1.0,
+    lag_s: float = 0.0,
+) -> PhoneMotion:
+    """The phone of the person who walked ``walk``: its velocity in the device's heading
+    (rotated by -yaw), as a nominal-step PDR would over-read it by 1/scale, stamped by a
+    clock ``lag_s`` ahead of the cameras'."""
+    t = frame_t / 1e9
+    v = np.gradient(walk, t, axis=0)
+    yaw = np.broadcast_to(np.radians(yaw_deg), len(t))
+    z = (v[:, 0] + 1j * v[:, 1]) * np.exp(-1j * yaw) / scale
+    phone = PhoneMotion("m")
+    phone.t_ns = frame_t + int(round(lag_s * 1e9))
+    phone.v = np.column_stack([z.real, z.imag])
+    phone.carry_changes = np.empty(0, np.int64)
+    return phone
+
+
+def _share_on(xy: dict[int, tuple[float, float]], walk: np.ndarray, n: int) -> float:
+    """Share of all frames published within 1 m of ``walk``."""
+    return sum(math.dist(p, walk[k]) < 1.0 for k, p in xy.items()) / n
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.lists(st.tuples(st.floats(0, 10), st.floats(0, 8)), min_size=1, max_size=6),
+    st.tuples(st.floats(0, 10), st.floats(0, 8)),
+)
+def test_emission_is_the_distance_to_the_nearest_detection(pts, probe):
+    pts_a = np.array(pts)
+    grid = _Grid([pts_a, np.array([[0.0, 0.0], [10.0, 8.0]])], 0.2)
+    e = grid.emission(pts_a, 0.35, 1e9)
+    cell = np.round((np.array(probe) - grid.lo) / grid.cell).astype(int)
+    centre = grid.lo + cell * grid.cell
+    d = np.min(np.hypot(*(pts_a - centre).T))
+    got = math.sqrt(e[cell[1], cell[0]] * 2 * 0.35**2)
+    # detections are snapped to cells: half a cell's diagonal at most
+    assert abs(got - d) <= grid.cell * math.sqrt(2) / 2 + 1e-6
+
+
+def test_the_path_follows_the_phone_through_a_crowd():
+    frame_t, points, people = _scene(1)
+    carrier = people[0]
+    phone = _phone(carrier, frame_t, 0.0)
+    grid = _Grid(points, CFG.cell_m)
+    emissions = [grid.emission(p, CFG.det_sigma_m, CFG.miss_cost) for p in points]
+    u = _displacements(frame_t, _dead_reckoned(phone), 0.0, np.ones(len(frame_t), complex))
+    cells = _viterbi_path(grid, emissions, u, _step_costs(grid.cell, 1 / FPS, CFG))
+    err = np.hypot(*(grid.xy(cells) - carrier).T)
+    assert np.median(err) < 0.3
+    assert np.mean(err < 1.0) > 0.97
+
+
+@pytest.mark.parametrize("yaw", [0.0, 100.0, -150.0])
+def test_unknown_yaw_clock_and_step_are_found(yaw):
+    frame_t, points, people = _scene(2)
+    phone = _phone(people[3], frame_t, yaw, scale=0.85, lag_s=1.0)
+    lag, a = _search(
+        frame_t, points, _dead_reckoned(phone), 0.0, AlignConfig(), CFG, phone.carry_changes
+    )
+    assert abs(lag - 1.0) <= 0.5
+    err = np.degrees(np.angle(a * np.exp(-1j * math.radians(yaw))))
+    assert np.median(np.abs(err)) <= CFG.yaw_step_deg
+    assert abs(np.median(np.abs(a)) - 0.85) <= 0.1
+
+
+def test_a_carry_change_the_phone_missed_is_followed():
+    frame_t, points, people = _scene(3, seconds=150)
+    n = len(frame_t)
+    yaw = np.where(np.arange(n) < n // 2, 60.0, -110.0)
+    phone = _phone(people[1], frame_t, yaw)
+    out = retrack(frame_t, points, {"m": phone}, {}, AlignConfig(), CFG)
+    xy = out["m"].xy
+    first = {k: p for k, p in xy.items() if k < n // 2 - 30}
+    second = {k: p for k, p in xy.items() if k > n // 2 + 30}
+    assert _share_on(first, people[1], n // 2 - 30) > 0.9
+    assert _share_on(second, people[1], n - n // 2 - 31) > 0.9
+
+
+def test_each_phone_stays_on_its_carrier_where_they_cross():
+    # two carriers walk at each other on lines 0.6 m apart and pass; what tells their phones
+    # apart (their yaws unknown) is what each walk does: one stops for 6 s, the other turns
+    n = int(60 * FPS)
+    frame_t = (np.arange(n) * 1e9 / FPS).astype(np.int64)
+    t = np.arange(n) / FPS
+    step = np.full(n, 1.2 / FPS)
+    a = np.column_stack([2 + np.cumsum(step), np.full(n, 6.0)])
+    turn = t > 40
+    a[turn, 1] += np.cumsum(np.where(turn, step * 0.7, 0.0))[turn]
+    b_step = np.where((t > 10) & (t < 16), 0.0, step)
+    b = np.column_stack([2 + a[-1, 0] - np.cumsum(b_step), np.full(n, 6.6)])
+    rng = np.random.default_rng(4)
+    points = [np.array([a[k], b[k]]) + rng.normal(0, 0.3, (2, 2)) for k in range(n)]
+    phones = {"a": _phone(a, frame_t, 30.0), "b": _phone(b, frame_t, -70.0)}
+    phones["a"].mid, phones["b"].mid = "a", "b"
+    out = retrack(frame_t, points, phones, {}, AlignConfig(), CFG)
+    assert _share_on(out["a"].xy, a, n) > 0.9
+    assert _share_on(out["b"].xy, b, n) > 0.9
+
+
+def test_a_phone_whose_carrier_is_never_seen_is_not_put_on_a_stranger_at_rest():
+    # the carrier walks where no camera sees; the cameras see two people standing
+    n = int(40 * FPS)
+    frame_t = (np.arange(n) * 1e9 / FPS).astype(np.int64)
+    rng = np.random.default_rng(5)
+    points = [np.array([[3.0, 3.0], [8.0, 5.0]]) + rng.normal(0, 0.3, (2, 2)) for _ in range(n)]
+    walk = np.column_stack([20 + np.arange(n) / FPS * 1.2, np.full(n, 20.0)])
+    out = retrack(frame_t, points, {"m": _phone(walk, frame_t, 0.0)}, {}, AlignConfig(), CFG)
+    assert len(out["m"].xy) < 0.1 * n
