@@ -73,10 +73,12 @@ class RetrackConfig:
     """A frame counts as seen when a detection is this near the path."""
     fill_s: float = 2.0
     """Gaps up to this between seen frames are published on the phone's walk."""
-    unseen_s: float = 10.0
+    unseen_s: float = 20.0
     unseen_m: float = 1.0
     """Gaps up to ``unseen_s`` between two stretches are published on the phone's walk when
-    it lands within ``unseen_m`` (+ 15 % of the walk) of the next stretch."""
+    it lands within ``unseen_m`` (+ 15 % of the walk) of the next stretch: with its alignment
+    fitted, a phone's dead reckoning drifts by a few % of the distance (a 20 s gap at
+    1.3 m/s: ~1 m), and the misfit found at the far end is spread over the gap."""
     min_stretch_s: float = 5.0
     """A stretch (seen frames and the gaps filled between them) shorter than this is not
     published: a path that passes a stranger picks up a few detections on the way."""
