@@ -8,8 +8,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from typer.testing import CliRunner
 
 from tests.conftest import run_cli
+from trackctl.cli.main import app
 from trackctl.logs import LogReader, LogWriter
 from trackctl.processing import run_processors
 from trackctl.sim.vm import VmScenario, simulate_vm
@@ -219,3 +221,27 @@ def test_online_identity_publishes_the_papers_bindings(office_log: Path, tmp_pat
     assert rep.metrics["idf1"] > 0.85
     assert rep.metrics["bindings"] >= 3
     assert assert_one_track_per_phone(out) == rep.metrics["frames"]
+
+
+def test_tracks_do_not_depend_on_the_ground_truth(office_log: Path, tmp_path: Path) -> None:
+    """VM mode (re-tracking on): the same tracks with and without ``/ground_truth``."""
+    stripped = tmp_path / "notruth.mcap"
+    proc = run_cli("filter", str(office_log), "--out", str(stripped), "--exclude", "/ground_truth")
+    assert proc.returncode == 0, proc.stderr.decode()
+    tracks = []
+    for log in (office_log, stripped):
+        out = tmp_path / f"{log.stem}.out.mcap"
+        run_processors(log, out, [VmTrackProcessor(VmTrackConfig())])
+        tracks.append([m.message for m in LogReader(out).messages(["/vmtrack/tracks"])])
+    assert len(tracks[0]) > 10 and tracks[0] == tracks[1]
+
+
+def test_no_retrack_through_the_cli(office_log: Path, tmp_path: Path) -> None:
+    out = tmp_path / "o.mcap"
+    result = CliRunner().invoke(
+        app, ["vm-track", str(office_log), "--out", str(out), "--no-retrack", "--json", "-q"]
+    )
+    assert result.exit_code == 0, result.output
+    (report,) = [m.message for m in LogReader(out).messages(["/metrics/vm-track"])]
+    assert report.params["retrack"] is False
+    assert json.loads(result.stdout)["idf1"] > 0.85

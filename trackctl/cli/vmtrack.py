@@ -49,6 +49,14 @@ def vm_track(
             "default both are estimated per phone).",
         ),
     ] = False,
+    retrack: Annotated[
+        bool,
+        typer.Option(
+            "--retrack/--no-retrack",
+            help="Follow each phone's carrier through the raw detections by the phone's walk "
+            "(offline; ~10 s per phone and 5 min of log). Off: phones name the visual tracks.",
+        ),
+    ] = True,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     fail_if: Annotated[
         str | None,
@@ -59,6 +67,7 @@ def vm_track(
     """VM-Tracking: identify and track people by fusing detections with phone motion sensors."""
     from trackctl.errors import InputError
     from trackctl.vmtrack import FrameConfig, Mode, Source, VmTrackConfig, VmTrackProcessor
+    from trackctl.vmtrack.retrack import RetrackConfig
 
     mode_value = parse_choice(Mode, mode, "--mode")
     source_value = parse_choice(Source, source, "--source")
@@ -71,6 +80,7 @@ def vm_track(
             source=source_value,
             frames=FrameConfig(predicted=search == "predicted"),
             phones_aligned=phones_aligned,
+            retrack=RetrackConfig(enabled=retrack),
         )
     )
     draw = figures_from_output(out, plot, "vmtrack")

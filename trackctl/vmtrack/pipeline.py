@@ -275,6 +275,7 @@ def run(
         params={
             "mode": inputs.mode.value,
             "smooth": cfg.smooth,
+            "retrack": cfg.retrack.enabled,
             "merge_m": cfg.merge_m,
             "bind_frames": cfg.bind_frames,
             "reject_mps": cfg.reject_mps,
