@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from trackctl.vmtrack.align import AlignConfig, Alignment, PairEvidence, lag_grid
-from trackctl.vmtrack.identify import IdentifyConfig, _visual_velocity, _viterbi
+from trackctl.vmtrack.identify import IdentifyConfig, _viterbi, visual_velocity
 
 CFG = AlignConfig()
 LAGS = lag_grid(CFG)
@@ -64,7 +64,7 @@ def test_wrong_walk_does_not_fit() -> None:
 def test_visual_velocity_is_a_centred_least_squares_slope() -> None:
     t = np.arange(0, 10, 0.33)
     hits = np.column_stack([t * 1e9, 0.8 * t, -0.3 * t + 2])
-    v = _visual_velocity(hits, np.array([5e9, 1e12]), 1.5)
+    v = visual_velocity(hits, np.array([5e9, 1e12]), 1.5)
     assert abs(v[0] - (0.8 - 0.3j)) < 1e-9
     assert np.isnan(v[1])  # no detections around
 

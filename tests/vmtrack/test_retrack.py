@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from trackctl.vmtrack.align import AlignConfig
-from trackctl.vmtrack.identify import _dead_reckoned
+from trackctl.vmtrack.identify import dead_reckoned
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.retrack import (
     RetrackConfig,
@@ -105,7 +105,7 @@ def test_the_path_follows_the_phone_through_a_crowd():
     phone = _phone(carrier, frame_t, 0.0)
     grid = _Grid(points, CFG.cell_m)
     emissions = [grid.emission(p, CFG.det_sigma_m, CFG.miss_cost) for p in points]
-    u = _displacements(frame_t, _dead_reckoned(phone), 0.0, np.ones(len(frame_t), complex))
+    u = _displacements(frame_t, dead_reckoned(phone), 0.0, np.ones(len(frame_t), complex))
     cells = _viterbi_path(grid, emissions, u, _step_costs(grid.cell, 1 / FPS, CFG))
     err = np.hypot(*(grid.xy(cells) - carrier).T)
     assert np.median(err) < 0.3
@@ -117,7 +117,7 @@ def test_unknown_yaw_clock_and_step_are_found(yaw):
     frame_t, points, people = _scene(2)
     phone = _phone(people[3], frame_t, yaw, scale=0.85, lag_s=1.0)
     lag, a = _search(
-        frame_t, points, _dead_reckoned(phone), 0.0, AlignConfig(), CFG, phone.carry_changes
+        frame_t, points, dead_reckoned(phone), 0.0, AlignConfig(), CFG, phone.carry_changes
     )
     assert abs(lag - 1.0) <= 0.5
     err = np.degrees(np.angle(a * np.exp(-1j * math.radians(yaw))))

@@ -49,7 +49,7 @@ if TYPE_CHECKING:
     from trackctl.vmtrack.online import FrameOut
     from trackctl.vmtrack.stitch import Publication
 
-__all__ = ["IdentifyConfig", "Identities", "identify"]
+__all__ = ["IdentifyConfig", "Identities", "dead_reckoned", "identify", "visual_velocity"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -148,7 +148,7 @@ class _Chain:
         return float(np.interp(t_ns, h[:, 0], h[:, 1])), float(np.interp(t_ns, h[:, 0], h[:, 2]))
 
 
-def _visual_velocity(hits: np.ndarray, times: np.ndarray, half_s: float) -> np.ndarray:
+def visual_velocity(hits: np.ndarray, times: np.ndarray, half_s: float) -> np.ndarray:
     """Centred least-squares velocity (complex) of detections ``hits`` (t_ns, x, y) at
     ``times``; NaN where fewer than 3 detections span the window (cumulative sums: O(n))."""
     out = np.full(len(times), np.nan, complex)
@@ -172,7 +172,7 @@ def _visual_velocity(hits: np.ndarray, times: np.ndarray, half_s: float) -> np.n
     return out
 
 
-def _dead_reckoned(phone: PhoneMotion, rate_hz: float = 10.0) -> np.ndarray:
+def dead_reckoned(phone: PhoneMotion, rate_hz: float = 10.0) -> np.ndarray:
     """The phone's dead-reckoned path (t_ns, x, y) on a uniform grid: its velocity integrated
     (device heading; the alignment rotates it). Gaps longer than 2 s break the path."""
     if len(phone.t_ns) < 2:
@@ -213,7 +213,7 @@ def _chains(frames: Sequence[FrameOut], plan: Publication, velocity_half_s: floa
     for head, ts in times.items():
         t = np.array(sorted(set(ts)), np.int64)
         h = np.array(hits[head], float).reshape(-1, 3)
-        out.append(_Chain(head, t, _visual_velocity(h, t, velocity_half_s), h))
+        out.append(_Chain(head, t, visual_velocity(h, t, velocity_half_s), h))
     return out
 
 
@@ -302,7 +302,7 @@ def identify(
     paths: dict[str, np.ndarray] = {}
     costs: dict[str, np.ndarray] = {}
     half_v = cfg.velocity_window_s / 2
-    dead_reckoned = {mid: _dead_reckoned(phone) for mid, phone in phones.items()}
+    dead_reckoned = {mid: dead_reckoned(phone) for mid, phone in phones.items()}
     present = np.zeros((n_f, len(chains)), bool)
     for c, r in enumerate(rows):
         present[r, c] = True
@@ -452,7 +452,7 @@ def _phone_path(
     """One phone's path over the chains (chain index per frame, -1: none), its cost matrix and
     its alignment (lag index, ``a`` per frame; None when never fitted): the free fit first,
     then ``refine_passes`` under the alignment the last path implies.
-    ``path_pts``: the phone's dead-reckoned path (:func:`_dead_reckoned`); ``carry_changes``:
+    ``path_pts``: the phone's dead-reckoned path (:func:`dead_reckoned`); ``carry_changes``:
     phone-clock times at which its carry changed (its alignment is fitted between them);
     ``coast``: :func:`_coasting` of the chains (computed here when not given)."""
     n_f = len(frame_t)
@@ -464,7 +464,7 @@ def _phone_path(
         # the phone's velocity through the same centred least-squares slope as the track's
         # detections: both sides see the walk through one filter
         at = (chain.times[:, None] + lag_ns[None, :]).ravel()
-        zl = _visual_velocity(path_pts, at, cfg.velocity_window_s / 2)
+        zl = visual_velocity(path_pts, at, cfg.velocity_window_s / 2)
         zls.append(zl.reshape(len(chain.times), len(lags)))
         if np.isnan(zls[-1]).all():
             continue
@@ -802,7 +802,7 @@ def _alignments(
         t = np.array([p[0] for p in pairs], np.int64)
         z = np.array([p[1] for p in pairs])
         at = (t[:, None] + lag_ns[None, :]).ravel()
-        zl = _visual_velocity(dead_reckoned[mid], at, half_s).reshape(len(t), len(lags))
+        zl = visual_velocity(dead_reckoned[mid], at, half_s).reshape(len(t), len(lags))
         ev = PairEvidence(len(lags))
         for k in range(len(t)):
             ev.add(z[k], zl[k])

@@ -47,7 +47,7 @@ import numpy as np
 from scipy import ndimage
 
 from trackctl.vmtrack.align import AlignConfig, best_fit, lag_grid
-from trackctl.vmtrack.identify import _dead_reckoned, _visual_velocity
+from trackctl.vmtrack.identify import dead_reckoned, visual_velocity
 from trackctl.vmtrack.motion import PhoneMotion
 
 __all__ = ["RetrackConfig", "PhoneTrack", "retrack"]
@@ -103,6 +103,9 @@ class RetrackConfig:
     walker to walker in a crowd; at 50 missed frames' cost, only a change the next minute
     confirms is taken."""
     refine_passes: int = 2
+    velocity_window_s: float = 7.0
+    """Centred window of the least-squares velocity of the path's detections and of the phone's
+    walk, for the refit (the offline identity's: both sides through one filter)."""
     align_window_s: float = 30.0
     """Centred window of the alignment refitted from the path's detections."""
     min_align_frames: int = 10
@@ -377,12 +380,13 @@ def _refit(
     half = max(int(round(cfg.align_window_s / 2 / dt)), 1)
     det = np.array([[frame_t[k], *hits[k]] for k in ks], float)
     at = frame_t[ks].astype(float)
-    zt = _visual_velocity(det, at, 3.5)
+    half_v = cfg.velocity_window_s / 2
+    zt = visual_velocity(det, at, half_v)
     idx = np.arange(n)
     lo, hi = np.maximum(idx - half, 0), np.minimum(idx + half + 1, n)
     best: tuple[float, float, np.ndarray] | None = None
     for lag in lag_grid(acfg):
-        zl = _visual_velocity(track, at + lag * 1e9, 3.5)
+        zl = visual_velocity(track, at + lag * 1e9, half_v)
         ok = ~(np.isnan(zl) | np.isnan(zt))
         sums = [np.zeros(n, complex), np.zeros(n), np.zeros(n), np.zeros(n)]
         sums[0][ks[ok]] = zt[ok] * np.conj(zl[ok])
@@ -489,7 +493,7 @@ def retrack(
     steps = _step_costs(grid.cell, dt, cfg)
     emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
     for mid in sorted(phones):
-        track = _dead_reckoned(phones[mid])
+        track = dead_reckoned(phones[mid])
         if len(track) < 2:
             continue
         lag, a0 = start.get(mid, (0.0, np.full(n, 1.0 + 0j)))
