@@ -302,7 +302,7 @@ def identify(
     paths: dict[str, np.ndarray] = {}
     costs: dict[str, np.ndarray] = {}
     half_v = cfg.velocity_window_s / 2
-    dead_reckoned = {mid: dead_reckoned(phone) for mid, phone in phones.items()}
+    walks = {mid: dead_reckoned(phone) for mid, phone in phones.items()}
     present = np.zeros((n_f, len(chains)), bool)
     for c, r in enumerate(rows):
         present[r, c] = True
@@ -312,7 +312,7 @@ def identify(
     known: dict[str, tuple[int, np.ndarray] | None] = {}
     for mid in sorted(phones):
         paths[mid], costs[mid], known[mid] = _phone_path(
-            dead_reckoned[mid],
+            walks[mid],
             chains,
             rows,
             frame_t,
@@ -350,13 +350,13 @@ def identify(
         for c, (_, mid) in owner.items():
             out.mid_at[(keys[c], int(frame_t[fi]))] = mid
     out.ambiguous_frames = int(ambiguous.sum())
-    out.alignments = _alignments(out, chains, dead_reckoned, lags, lag_ns, acfg, half_v)
+    out.alignments = _alignments(out, chains, walks, lags, lag_ns, acfg, half_v)
     for mid in sorted(phones):
         al = known[mid]
         if al is not None:
             out.known[mid] = (float(lags[al[0]]), al[1])
         if al is not None and cfg.unseen_s > 0:
-            _carry_through_unseen(mid, out, chains, frame_t, dead_reckoned[mid], lags, al, cfg)
+            _carry_through_unseen(mid, out, chains, frame_t, walks[mid], lags, al, cfg)
     return out
 
 
@@ -783,7 +783,7 @@ def _drop_unanchored(
 def _alignments(
     out: Identities,
     chains: list[_Chain],
-    dead_reckoned: dict[str, np.ndarray],
+    walks: dict[str, np.ndarray],
     lags: np.ndarray,
     lag_ns: np.ndarray,
     acfg: AlignConfig,
@@ -802,7 +802,7 @@ def _alignments(
         t = np.array([p[0] for p in pairs], np.int64)
         z = np.array([p[1] for p in pairs])
         at = (t[:, None] + lag_ns[None, :]).ravel()
-        zl = visual_velocity(dead_reckoned[mid], at, half_s).reshape(len(t), len(lags))
+        zl = visual_velocity(walks[mid], at, half_s).reshape(len(t), len(lags))
         ev = PairEvidence(len(lags))
         for k in range(len(t)):
             ev.add(z[k], zl[k])
