@@ -168,3 +168,13 @@ def test_a_phone_whose_carrier_is_never_seen_is_not_put_on_a_stranger_at_rest():
     walk = np.column_stack([20 + np.arange(n) / FPS * 1.2, np.full(n, 20.0)])
     out = retrack(frame_t, points, {"m": _phone(walk, frame_t, 0.0)}, {}, AlignConfig(), CFG)
     assert len(out["m"].xy) < 0.1 * n
+
+
+def test_a_path_too_big_for_memory_is_skipped_with_a_warning():
+    frame_t, points, people = _scene(6, n_people=3, seconds=20)
+    small = RetrackConfig(max_path_bytes=1000)
+    with pytest.warns(UserWarning, match="re-tracking skipped.*--no-retrack"):
+        out = retrack(
+            frame_t, points, {"m": _phone(people[0], frame_t, 0.0)}, {}, AlignConfig(), small
+        )
+    assert out == {}

@@ -40,6 +40,7 @@ processed (a 30 x 20 m site at 0.2 m and 3 frames per second: 45 kB per frame).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -110,6 +111,10 @@ class RetrackConfig:
     """Centred window of the alignment refitted from the path's detections."""
     min_align_frames: int = 10
     """Detections a refit window needs."""
+    max_path_bytes: int = 2_000_000_000
+    """Memory the back-pointers of one phone's path may take (a byte per grid cell and frame;
+    it grows with the site's area and the log's length): above it the re-tracking is skipped
+    with a warning, and the phones name the visual tracks they fit."""
 
 
 @dataclass
@@ -489,6 +494,16 @@ def retrack(
     if n < 2:
         return out
     grid = _Grid(points, cfg.cell_m)
+    need = n * grid.shape[0] * grid.shape[1]
+    if need > cfg.max_path_bytes:
+        warnings.warn(
+            f"phone re-tracking skipped: {n} frames over a {grid.shape[1] * cfg.cell_m:.0f} x "
+            f"{grid.shape[0] * cfg.cell_m:.0f} m site need {need / 1e9:.1f} GB per phone "
+            f"(limit {cfg.max_path_bytes / 1e9:.1f} GB); cut the log, or use --no-retrack",
+            UserWarning,
+            stacklevel=3,
+        )
+        return out
     dt = float(np.median(np.diff(frame_t))) / 1e9
     steps = _step_costs(grid.cell, dt, cfg)
     emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
