@@ -172,7 +172,7 @@ def test_a_phone_whose_carrier_is_never_seen_is_not_put_on_a_stranger_at_rest():
 
 def test_a_path_too_big_for_memory_is_skipped_with_a_warning():
     frame_t, points, people = _scene(6, n_people=3, seconds=20)
-    small = RetrackConfig(max_path_bytes=1000)
+    small = RetrackConfig(max_bytes=1000)
     with pytest.warns(UserWarning, match="re-tracking skipped.*--no-retrack"):
         out = retrack(
             frame_t, points, {"m": _phone(people[0], frame_t, 0.0)}, {}, AlignConfig(), small

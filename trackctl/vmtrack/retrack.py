@@ -34,8 +34,10 @@ detections of every frame, not through the visual tracks:
   the detections' offset from it, smoothed over ``smooth_s`` (so the noise of one detection
   does not show, and the phone's walk fills the gaps).
 
-Memory is the grid's back-pointers: one byte per cell and frame per phone, while that phone is
-processed (a 30 x 20 m site at 0.2 m and 3 frames per second: 45 kB per frame).
+Memory grows with the site's area and the log's length: every frame's detection-distance grid
+(4 bytes per cell, and a coarser one for the search) and one phone's back-pointers (1 byte per
+cell), about 6 bytes per 0.2 m cell and frame in all: a 20 x 15 m lobby (with 2 m margins,
+11 400 cells) takes 70 kB per frame, 740 MB for an hour at 3 frames per second.
 """
 
 from __future__ import annotations
@@ -111,10 +113,10 @@ class RetrackConfig:
     """Centred window of the alignment refitted from the path's detections."""
     min_align_frames: int = 10
     """Detections a refit window needs."""
-    max_path_bytes: int = 2_000_000_000
-    """Memory the back-pointers of one phone's path may take (a byte per grid cell and frame;
-    it grows with the site's area and the log's length): above it the re-tracking is skipped
-    with a warning, and the phones name the visual tracks they fit."""
+    max_bytes: int = 2_000_000_000
+    """Memory the re-tracking may take (about 6 bytes per grid cell and frame: the frames'
+    distance grids and one phone's back-pointers); above it the re-tracking is skipped with a
+    warning, and the phones name the visual tracks they fit."""
 
 
 @dataclass
@@ -494,12 +496,14 @@ def retrack(
     if n < 2:
         return out
     grid = _Grid(points, cfg.cell_m)
-    need = n * grid.shape[0] * grid.shape[1]
-    if need > cfg.max_path_bytes:
+    # the frames' distance grids (float32), the search's coarser ones, one path's back-pointers
+    coarse = (cfg.cell_m / cfg.search_cell_m) ** 2
+    need = int(n * grid.shape[0] * grid.shape[1] * (4 + 4 * coarse + 1))
+    if need > cfg.max_bytes:
         warnings.warn(
             f"phone re-tracking skipped: {n} frames over a {grid.shape[1] * cfg.cell_m:.0f} x "
-            f"{grid.shape[0] * cfg.cell_m:.0f} m site need {need / 1e9:.1f} GB per phone "
-            f"(limit {cfg.max_path_bytes / 1e9:.1f} GB); cut the log, or use --no-retrack",
+            f"{grid.shape[0] * cfg.cell_m:.0f} m site need {need / 1e9:.1f} GB "
+            f"(limit {cfg.max_bytes / 1e9:.1f} GB); cut the log, or use --no-retrack",
             UserWarning,
             stacklevel=3,
         )
