@@ -182,6 +182,15 @@ def _shift(a: np.ndarray, sy: int, sx: int) -> np.ndarray:
     return out
 
 
+def _whole_cells(frac: np.ndarray, move: complex, cell: float) -> tuple[int, int]:
+    """The whole cells (x, y) of ``move`` plus the fraction carried in ``frac`` (updated in
+    place: what is left over is carried to the next frame)."""
+    frac += (move.real / cell, move.imag / cell)
+    sx, sy = int(round(frac[0])), int(round(frac[1]))
+    frac -= (sx, sy)
+    return sx, sy
+
+
 def _step_costs(
     cell: float, dt: float, cfg: RetrackConfig, sigma_mps: float | None = None
 ) -> np.ndarray:
@@ -239,9 +248,7 @@ def _layer_costs(
                 moved[r] = acc[r].min()
                 frac[r] = 0.0
                 continue
-            frac[r] += (v.real / grid.cell, v.imag / grid.cell)
-            sx, sy = int(round(frac[r, 0])), int(round(frac[r, 1]))
-            frac[r] -= (sx, sy)
+            sx, sy = _whole_cells(frac[r], v, grid.cell)
             moved[r] = _shift(acc[r], sy, sx)
         acc = ndimage.grey_erosion(moved, structure=structure, mode="constant", cval=_BIG)
         if turn_cost is not None:
@@ -274,9 +281,7 @@ def _viterbi_path(
             acc[:] = acc.min()
             back[k] = -1
         else:
-            frac += (uk.real / grid.cell, uk.imag / grid.cell)
-            sx, sy = int(round(frac[0])), int(round(frac[1]))
-            frac -= (sx, sy)
+            sx, sy = _whole_cells(frac, uk, grid.cell)
             shifts[k] = (sy, sx)
             moved = _shift(acc, sy, sx)
             stack = np.stack([_shift(moved, dy, dx) + steps[i] for i, (dy, dx) in enumerate(_OFFS)])
