@@ -304,6 +304,14 @@ def _viterbi_path(
     return cells
 
 
+def _search_field(
+    points: Sequence[np.ndarray], cfg: RetrackConfig
+) -> tuple[_Grid, list[np.ndarray | float]]:
+    """The search's coarser grid and every frame's emissions on it (the same for all phones)."""
+    grid = _Grid(points, cfg.search_cell_m)
+    return grid, [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
+
+
 def _search(
     frame_t: np.ndarray,
     points: Sequence[np.ndarray],
@@ -312,15 +320,16 @@ def _search(
     acfg: AlignConfig,
     cfg: RetrackConfig,
     carry_changes: np.ndarray | None = None,
+    field: tuple[_Grid, list[np.ndarray | float]] | None = None,
 ) -> tuple[float, np.ndarray] | None:
     """The phone's alignment found from the detections alone: its yaw per frame (at the
     nominal step and clock offset ``lag_s``), then its clock offset and step scale under that
-    yaw, then the yaw again under those (:func:`_yaw_search`); None without a walk."""
+    yaw, then the yaw again under those (:func:`_yaw_search`); None without a walk.
+    ``field``: the search grid and its emissions (:func:`_search_field`), shared by phones."""
     n = len(frame_t)
-    grid = _Grid(points, cfg.search_cell_m)
+    grid, emissions = field or _search_field(points, cfg)
     dt = float(np.median(np.diff(frame_t))) / 1e9 if n > 1 else 1.0
     steps = _step_costs(grid.cell, dt, cfg, cfg.search_walk_sigma_mps)
-    emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
     yaw = _yaw_search(frame_t, grid, emissions, steps, track, lag_s, 1.0, cfg, carry_changes)
     if yaw is None:
         return None
@@ -516,6 +525,7 @@ def retrack(
     dt = float(np.median(np.diff(frame_t))) / 1e9
     steps = _step_costs(grid.cell, dt, cfg)
     emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
+    field: tuple[_Grid, list[np.ndarray | float]] | None = None
     for mid in sorted(phones):
         track = dead_reckoned(phones[mid])
         if len(track) < 2:
@@ -526,7 +536,10 @@ def retrack(
         if aligned:
             a = a0
         else:
-            found = _search(frame_t, points, track, lag, acfg, cfg, phones[mid].carry_changes)
+            if field is None:
+                field = _search_field(points, cfg)
+            changes = phones[mid].carry_changes
+            found = _search(frame_t, points, track, lag, acfg, cfg, changes, field)
             if found is None:
                 continue
             lag, a = found
