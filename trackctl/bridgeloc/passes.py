@@ -61,6 +61,7 @@ __all__ = [
     "IcamFix",
     "IcamFixes",
     "ir_blobs",
+    "moved_together",
     "map_tags",
     "RobotPass",
     "Pose",
@@ -279,6 +280,24 @@ class IcamFix:
     systematic_m: float = 0.0
     """The part of the std that is the same for every fix of this camera there (calibration,
     the light's offset): repeated fixes do not average it out."""
+
+
+def moved_together(
+    first: tuple[np.ndarray, np.ndarray],
+    last: tuple[np.ndarray, np.ndarray],
+    min_move_m: float = 0.5,
+    tol_m: float = 0.3,
+    tol_frac: float = 0.2,
+) -> bool:
+    """Whether a light that keeps disagreeing with the filter is the robot's: between the first
+    and the last of its rejected fixes ((fix, state) positions) the filter's state moved at
+    least ``min_move_m`` and the light moved by the same displacement (within ``tol_m`` +
+    ``tol_frac`` of it). A lamp or a reflection stays put while the wheels turn; a robot that
+    stands still gives no evidence either way, and the state is kept."""
+    moved = last[1] - first[1]
+    seen = last[0] - first[0]
+    dist = float(np.hypot(*moved))
+    return dist >= min_move_m and float(np.hypot(*(seen - moved))) <= tol_m + tol_frac * dist
 
 
 class IcamFixes:
@@ -588,6 +607,8 @@ class RobotPass:
         )
         self._bad_frames = 0
         self._icam_rejects = 0
+        self._icam_run: tuple[np.ndarray, np.ndarray] | None = None
+        """(fix, state) positions at the first of the current run of rejected lone I-Cam fixes."""
         self.prev_odom: WheelOdometry | None = None
         self.odom_topic = topics.odom(setup.robot)
         self.frame_topic: str | None = topics.image(setup.rcam_name) if setup.needs_robot else None
@@ -643,11 +664,21 @@ class RobotPass:
             self.stats.icam_fused += ok
             self.stats.rejected_updates += not ok
             self._icam_rejects = 0 if ok else self._icam_rejects + 1
-            if self._icam_rejects >= self.cfg.ekf.max_rejects and len(cands) == 1:
-                # the one light the cameras see keeps disagreeing (a wrong start, slip): the
-                # position is the fix's, the heading kept but no longer trusted
+            if ok or len(cands) != 1:
+                self._icam_run = None
+                continue
+            state = np.asarray(ekf.pose[:2], float)
+            if self._icam_run is None:
+                self._icam_run = (np.asarray(best.xy, float), state)
+            if self._icam_rejects >= self.cfg.ekf.max_rejects and moved_together(
+                self._icam_run, (np.asarray(best.xy, float), state)
+            ):
+                # the one light the cameras see keeps disagreeing (a wrong start, slip), and it
+                # moved as the wheels say the robot did: the position is the fix's, the heading
+                # kept but no longer trusted
                 ekf.init((*best.xy, ekf.pose[2]), pose_cov(best.cov, 0.5**2))
                 self._icam_rejects = 0
+                self._icam_run = None
                 self.stats.restarts += 1
 
     def _on_truth(self, t_ns: int, gt: GroundTruth) -> None:
