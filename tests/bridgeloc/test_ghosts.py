@@ -13,7 +13,7 @@ import pytest
 from trackctl.bridgeloc import BridgeLocConfig, Mode
 from trackctl.bridgeloc.bridge import CameraGeometry, TagMap
 from trackctl.bridgeloc.detect import DetectorConfig, TagDetection, detect_tags
-from trackctl.bridgeloc.passes import IcamFix, IcamFixes, ir_blobs
+from trackctl.bridgeloc.passes import IcamFix, IcamFixes, ir_blobs, moved_together
 from trackctl.bridgeloc.pipeline import run
 from trackctl.bridgeloc.tags import Placement, tag_texture
 from trackctl.logs import topics
@@ -130,3 +130,21 @@ def test_no_icam_fix_from_a_lamp(lamp_log: Path, tmp_path: Path) -> None:
         nearest = min(truth, key=lambda k: abs(k - t))
         assert math.dist((x, y), truth[nearest]) < 0.6
     assert report.metrics["success_rate"] is not None
+
+
+def _run(fix0: tuple[float, float], state0: tuple[float, float], fix1, state1) -> bool:  # noqa: ANN001
+    return moved_together((np.array(fix0), np.array(state0)), (np.array(fix1), np.array(state1)))
+
+
+def test_a_lamp_that_keeps_disagreeing_does_not_restart_the_filter() -> None:
+    """A lone light the filter rejects restarts it only if the light moved as the wheels say
+    (a wrong start, slip); a lamp stays put while the robot drives (it once put the robot
+    7-11 m outside the lobby for 4 s in a 300 s run)."""
+    # the robot drove 2 m; the lamp 7 m away did not move: not the robot
+    assert not _run((10.9, 9.4), (11.0, 3.0), (10.9, 9.4), (11.0, 5.0))
+    # the light moved with the robot, 3 m off the state: the state is wrong, restart
+    assert _run((8.0, 3.0), (11.0, 3.0), (8.0, 5.1), (11.0, 5.0))
+    # the robot stands: no evidence either way, the state is kept
+    assert not _run((8.0, 3.0), (11.0, 3.0), (8.0, 3.0), (11.0, 3.1))
+    # the light moved, but not as the robot did
+    assert not _run((8.0, 3.0), (11.0, 3.0), (10.0, 3.0), (11.0, 5.0))
