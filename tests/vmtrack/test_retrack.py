@@ -178,3 +178,26 @@ def test_a_path_too_big_for_memory_is_skipped_with_a_warning():
             frame_t, points, {"m": _phone(people[0], frame_t, 0.0)}, {}, AlignConfig(), small
         )
     assert out == {}
+
+
+def test_a_stranger_who_walks_straight_is_not_taken_for_an_unseen_carrier():
+    # the carrier walks straight where no camera sees; a stranger walks straight in view at the
+    # same pace. With the phone's yaw unknown, the stranger fits the phone's walk as well as the
+    # carrier would: nothing but a turn, stop or start they share could say it is them.
+    n = int(40 * FPS)
+    frame_t = (np.arange(n) * 1e9 / FPS).astype(np.int64)
+    rng = np.random.default_rng(7)
+    t = np.arange(n) / FPS
+    stranger = np.column_stack([1.0 + 1.2 * t, 4.0 + 0.05 * t])
+    points = [stranger[k][None] + rng.normal(0, 0.3, (1, 2)) for k in range(n)]
+    walk = np.column_stack([60 + 0.05 * t, 60 + 1.2 * t])
+    out = retrack(frame_t, points, {"m": _phone(walk, frame_t, 0.0)}, {}, AlignConfig(), CFG)
+    assert len(out["m"].xy) < 0.1 * n
+    # a person who turns and stops as the phone does is published
+    turned = stranger.copy()
+    turned[n // 2 :] = stranger[n // 2] + (stranger[n // 2 :] - stranger[n // 2])[:, ::-1]
+    turned[n // 4 : n // 4 + 15] = turned[n // 4]
+    turned[n // 4 + 15 :] -= turned[n // 4 + 15] - turned[n // 4]
+    points = [turned[k][None] + rng.normal(0, 0.3, (1, 2)) for k in range(n)]
+    out = retrack(frame_t, points, {"m": _phone(turned, frame_t, 50.0)}, {}, AlignConfig(), CFG)
+    assert _share_on(out["m"].xy, turned, n) > 0.8

@@ -620,7 +620,7 @@ def _write_and_score(
         "det_recall": round(det_hits / det_people, 4) if det_people else None,
         "wrong_binding_s": round(wrong_s, 3) if mode is Mode.VM and people else None,
         **_no_truth_metrics(online, published, coasting, shown, plan),
-        **_identity_metrics(ids, stats, phones),
+        **_identity_metrics(ids, stats, phones, retracked),
     }
 
 
@@ -640,7 +640,10 @@ def _retrack_alignments(retracked: dict[str, PhoneTrack]) -> dict[str, Alignment
 
 
 def _identity_metrics(
-    ids: Identities | None, stats: BindingStats, phones: dict[str, PhoneMotion]
+    ids: Identities | None,
+    stats: BindingStats,
+    phones: dict[str, PhoneMotion],
+    retracked: dict[str, PhoneTrack] | None = None,
 ) -> dict[str, float | int | None]:
     """Identity figures a log without ground truth can give: ambiguity and each phone's
     estimated alignment (clock offset, device-to-walk yaw, step scale)."""
@@ -655,6 +658,8 @@ def _identity_metrics(
         out[f"clock_offset_s/{mid}"] = round(al.lag_s, 3) if al else None
         out[f"yaw_offset_deg/{mid}"] = round(al.yaw_deg, 1) if al else None
         out[f"step_scale/{mid}"] = round(al.scale, 3) if al else None
+        pt = retracked.get(mid) if retracked else None
+        out[f"withheld_s/{mid}"] = round(pt.withheld_s, 1) if pt else None
     return out
 
 

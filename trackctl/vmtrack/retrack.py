@@ -30,7 +30,9 @@ detections of every frame, not through the visual tracks:
   is found and the alignment refitted from the detections on it (a ``align_window_s`` window
   per frame, the clock offset from all of them).
 * **Publication.** A frame is published where the path has a detection within ``gate_m`` and
-  across gaps up to ``fill_s`` between two such frames; the position is the phone's walk plus
+  across gaps up to ``fill_s`` between two such frames, on stretches whose detections turn,
+  stop and start with the phone (``min_evidence``; a phone whose carrier is out of view fits
+  anyone who walks straight); the position is the phone's walk plus
   the detections' offset from it, smoothed over ``smooth_s`` (so the noise of one detection
   does not show, and the phone's walk fills the gaps).
 
@@ -75,6 +77,13 @@ class RetrackConfig:
     miss_cost: float = 3.0
     """Cost of a frame with no detection near the path (missed, hidden, out of view): what a
     detection 2.5 sigma away costs, so a farther one is no better than none."""
+    min_evidence: float | None = 5.0
+    evidence_lag_s: float = 2.0
+    evidence_sigma_mps: float = 0.3
+    """A stretch is published only when its detections share ``min_evidence`` of motion
+    changes with the phone (:func:`_evidence`: changes of velocity over ``evidence_lag_s``, in
+    units of ``evidence_sigma_mps``; 5 is a shared 35 deg turn at walking pace). None
+    publishes every stretch."""
     gate_m: float = 1.0
     """A frame counts as seen when a detection is this near the path."""
     fill_s: float = 2.0
@@ -97,9 +106,10 @@ class RetrackConfig:
     """Clock offsets are searched on this grid over the range the alignment allows."""
     search_walk_sigma_mps: float = 0.2
     """The random walk of the search (it absorbs the yaw and scale grids' steps)."""
-    yaw_step_cost: float = 15.0
+    yaw_step_cost: float = 40.0
     """Cost of the walk's yaw moving by one step between two frames (drift, magnetic
-    disturbance: 1 deg per sqrt(s), 10-20 deg over metres)."""
+    disturbance: 1 deg per sqrt(s), 10-20 deg over metres, which the random walk absorbs). At
+    15, a wrong yaw turned by steps onto any stranger's heading."""
     yaw_jump_cost: float = 150.0
     """Cost of any other yaw change between two frames: a carry change the phone did not
     notice. Not the -log of its chance (~10): a wrong yaw that may change cheaply hops from
@@ -132,6 +142,9 @@ class PhoneTrack:
     lag_s: float
     a: np.ndarray
     """Alignment per frame (complex: scale and yaw), NaN where unknown."""
+    withheld_s: float = 0.0
+    """Seconds of the path on detections not published: stretches whose motion shares too
+    few changes with the phone's to say it is the carrier (:func:`_evidence`)."""
 
 
 class _Grid:
@@ -435,12 +448,15 @@ def _publish(
     cells: np.ndarray,
     u: np.ndarray,
     cfg: RetrackConfig,
-) -> tuple[dict[int, tuple[float, float]], set[int], dict[int, np.ndarray]]:
-    """Positions to publish (frame index -> xy), the seen frames, and the detections on the
-    path (frame index -> xy).
+) -> tuple[dict[int, tuple[float, float]], set[int], dict[int, np.ndarray], float]:
+    """Positions to publish (frame index -> xy), the seen frames, the detections on the
+    path (frame index -> xy), and the seconds of stretches withheld for want of evidence.
 
     Seen frames less than ``fill_s`` apart form a stretch; a stretch shorter than
-    ``min_stretch_s`` is dropped; two stretches at most ``unseen_s`` apart are joined when
+    ``min_stretch_s`` is dropped, and so is one whose detections share less than
+    ``min_evidence`` of motion changes with the phone (:func:`_evidence`: a stranger who
+    walks straight fits a phone of unknown yaw as well as its carrier); two stretches at most
+    ``unseen_s`` apart are joined when
     the phone's walk across the gap lands within ``unseen_m`` (+ 15 % of the walk) of where
     the next one starts (the carrier walked where no camera saw them). A published position
     is the phone's walk plus the detections' offset from it: smoothed over ``smooth_s`` at
@@ -455,7 +471,7 @@ def _publish(
         if d[j] < cfg.gate_m:
             hits[k] = p[j]
     if not hits:
-        return {}, set(), hits
+        return {}, set(), hits, 0.0
     ks = np.array(sorted(hits))
     walk = np.cumsum(np.nan_to_num(u, nan=0.0))
     seg = np.cumsum(np.isnan(u))  # the walk restarts where the phone has none
@@ -463,8 +479,13 @@ def _publish(
     # stretches of seen frames, the short ones dropped
     cut = np.flatnonzero((np.diff(t[ks]) > cfg.fill_s) | (np.diff(seg[ks]) != 0)) + 1
     kept = [r for r in np.split(ks, cut) if t[r[-1]] - t[r[0]] >= cfg.min_stretch_s]
+    withheld = 0.0
+    if cfg.min_evidence is not None:
+        shown = [r for r in kept if _evidence(frame_t, r, hits, walk, cfg) >= cfg.min_evidence]
+        withheld = float(sum(t[r[-1]] - t[r[0]] for r in kept if not any(r is s for s in shown)))
+        kept = shown
     if not kept:
-        return {}, set(), hits
+        return {}, set(), hits, withheld
     seen = np.concatenate(kept)
     off = np.array([complex(*hits[k]) for k in seen]) - walk[seen]
     smooth = np.empty(len(seen), complex)
@@ -488,7 +509,36 @@ def _publish(
     offsets = np.interp(every, seen, smooth.real) + 1j * np.interp(every, seen, smooth.imag)
     xy = walk[every] + offsets
     out = {int(k): (float(p.real), float(p.imag)) for k, p in zip(every, xy, strict=True)}
-    return out, set(int(k) for k in seen), hits
+    return out, set(int(k) for k in seen), hits, withheld
+
+
+def _evidence(
+    frame_t: np.ndarray,
+    stretch: np.ndarray,
+    hits: dict[int, np.ndarray],
+    walk: np.ndarray,
+    cfg: RetrackConfig,
+) -> float:
+    """The motion changes a stretch's detections share with the phone: the integral over its
+    time of Re(dv conj(dp)) / 2 sigma_v^2 (per second: the same at any frame rate), dv the change of the detections' velocity over
+    ``evidence_lag_s`` (centred least squares over a third of ``velocity_window_s``), dp the
+    same of the phone's aligned walk. A person who walks straight or stands changes nothing,
+    whatever the phone does, and the detections' noise averages out: evidence comes only from
+    turns, stops and starts made together."""
+    ks = stretch
+    det = np.array([[frame_t[k], *hits[k]] for k in ks], float)
+    at = frame_t[ks].astype(float)
+    before = at - cfg.evidence_lag_s * 1e9
+    half = cfg.velocity_window_s / 6
+    track = np.column_stack([frame_t.astype(float), walk.real, walk.imag])
+    dv = visual_velocity(det, at, half) - visual_velocity(det, before, half)
+    dp = visual_velocity(track, at, half) - visual_velocity(track, before, half)
+    ok = ~(np.isnan(dv) | np.isnan(dp))
+    if not ok.any():
+        return 0.0
+    dt = float(np.median(np.diff(frame_t))) / 1e9 if len(frame_t) > 1 else 1.0
+    gain = (dv[ok] * np.conj(dp[ok])).real.sum() * dt
+    return float(gain / (2 * cfg.evidence_sigma_mps**2))
 
 
 def retrack(
@@ -547,7 +597,7 @@ def retrack(
         for p in range(passes + 1):
             u = _displacements(frame_t, track, lag, a)
             cells = _viterbi_path(grid, emissions, u, steps)
-            xy, seen, hits = _publish(frame_t, points, grid, cells, u, cfg)
+            xy, seen, hits, withheld = _publish(frame_t, points, grid, cells, u, cfg)
             if p == passes:
                 break
             fit = _refit(frame_t, hits, track, acfg, cfg)
@@ -555,5 +605,5 @@ def retrack(
                 break
             lag, a = fit
         velocity = np.column_stack([u.real, u.imag]) / dt
-        out[mid] = PhoneTrack(xy, seen, velocity, lag, a)
+        out[mid] = PhoneTrack(xy, seen, velocity, lag, a, withheld)
     return out
