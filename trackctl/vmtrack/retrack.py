@@ -520,11 +520,11 @@ def _evidence(
     cfg: RetrackConfig,
 ) -> float:
     """The motion changes a stretch's detections share with the phone: the integral over its
-    time of Re(dv conj(dp)) / 2 sigma_v^2 (per second: the same at any frame rate), dv the change of the detections' velocity over
-    ``evidence_lag_s`` (centred least squares over a third of ``velocity_window_s``), dp the
-    same of the phone's aligned walk. A person who walks straight or stands changes nothing,
-    whatever the phone does, and the detections' noise averages out: evidence comes only from
-    turns, stops and starts made together."""
+    time of Re(dv conj(dp)) / 2 sigma_v^2 (per second: the same at any frame rate), dv the
+    change of the detections' velocity over ``evidence_lag_s`` (centred least squares over a
+    third of ``velocity_window_s``), dp the same of the phone's aligned walk. A person who
+    walks straight or stands changes nothing, whatever the phone does, and the detections'
+    noise averages out: evidence comes only from turns, stops and starts made together."""
     ks = stretch
     det = np.array([[frame_t[k], *hits[k]] for k in ks], float)
     at = frame_t[ks].astype(float)
