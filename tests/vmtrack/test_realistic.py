@@ -62,6 +62,9 @@ def test_report_estimates_each_phones_clock_offset(lobby: tuple[dict[str, object
     for key in ("ambiguous_frames", "wrong_binding_s"):
         assert key in m
     assert all(f"yaw_offset_deg/{k.rpartition('/')[0]}" in m for k in truth)
+    # seconds of re-tracked path withheld for want of shared turns and stops, per phone
+    withheld = [m[f"withheld_s/{k.rpartition('/')[0]}"] for k in truth]
+    assert all(w is not None and 0.0 <= float(w) <= LOBBY.duration_s for w in withheld)
 
 
 def test_identity_does_not_depend_on_how_the_phone_is_carried(tmp_path: Path) -> None:
