@@ -82,7 +82,7 @@ class RetrackConfig:
     evidence_sigma_mps: float = 0.3
     """A stretch is published only when its detections share ``min_evidence`` of motion
     changes with the phone (:func:`_evidence`: changes of velocity over ``evidence_lag_s``, in
-    units of ``evidence_sigma_mps``; 5 is a shared 35 deg turn at walking pace). None
+    units of ``evidence_sigma_mps``; a shared 35 deg turn at walking pace gives about 6). None
     publishes every stretch."""
     gate_m: float = 1.0
     """A frame counts as seen when a detection is this near the path."""
@@ -481,9 +481,10 @@ def _publish(
     kept = [r for r in np.split(ks, cut) if t[r[-1]] - t[r[0]] >= cfg.min_stretch_s]
     withheld = 0.0
     if cfg.min_evidence is not None:
-        shown = [r for r in kept if _evidence(frame_t, r, hits, walk, cfg) >= cfg.min_evidence]
-        withheld = float(sum(t[r[-1]] - t[r[0]] for r in kept if not any(r is s for s in shown)))
-        kept = shown
+        track = np.column_stack([frame_t.astype(float), walk.real, walk.imag])
+        judged = [(r, _evidence(frame_t, r, hits, track, cfg) >= cfg.min_evidence) for r in kept]
+        withheld = float(sum(t[r[-1]] - t[r[0]] for r, ok in judged if not ok))
+        kept = [r for r, ok in judged if ok]
     if not kept:
         return {}, set(), hits, withheld
     seen = np.concatenate(kept)
@@ -516,7 +517,7 @@ def _evidence(
     frame_t: np.ndarray,
     stretch: np.ndarray,
     hits: dict[int, np.ndarray],
-    walk: np.ndarray,
+    track: np.ndarray,
     cfg: RetrackConfig,
 ) -> float:
     """The motion changes a stretch's detections share with the phone: the integral over its
@@ -524,19 +525,19 @@ def _evidence(
     change of the detections' velocity over ``evidence_lag_s`` (centred least squares over a
     third of ``velocity_window_s``), dp the same of the phone's aligned walk. A person who
     walks straight or stands changes nothing, whatever the phone does, and the detections'
-    noise averages out: evidence comes only from turns, stops and starts made together."""
+    noise averages out: evidence comes only from turns, stops and starts made together.
+    ``track``: the phone's aligned walk (t_ns, x, y) at every frame."""
     ks = stretch
     det = np.array([[frame_t[k], *hits[k]] for k in ks], float)
     at = frame_t[ks].astype(float)
     before = at - cfg.evidence_lag_s * 1e9
     half = cfg.velocity_window_s / 6
-    track = np.column_stack([frame_t.astype(float), walk.real, walk.imag])
     dv = visual_velocity(det, at, half) - visual_velocity(det, before, half)
     dp = visual_velocity(track, at, half) - visual_velocity(track, before, half)
     ok = ~(np.isnan(dv) | np.isnan(dp))
     if not ok.any():
         return 0.0
-    dt = float(np.median(np.diff(frame_t))) / 1e9 if len(frame_t) > 1 else 1.0
+    dt = float(np.median(np.diff(frame_t[ks[0] : ks[-1] + 1]))) / 1e9
     gain = (dv[ok] * np.conj(dp[ok])).real.sum() * dt
     return float(gain / (2 * cfg.evidence_sigma_mps**2))
 
