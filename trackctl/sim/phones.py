@@ -23,7 +23,10 @@ Every model, its parameter and its source (docs/vmtrack.md, "Simulator"):
   lengths, Grieve & Gear 1966), growing with speed (0.75 + 0.25 v / 1.3 of it: cadence and
   length both rise with speed).
 * **Always on**: phones report for the whole log. Outside the cameras' view their carriers
-  stand or walk elsewhere (alternating 5-30 s bouts, random headings).
+  stand or walk (alternating 5-30 s bouts) where no camera sees them: towards where they come
+  into view before, away from where they left after (headings within +-45 deg of the ones
+  they had there): a person out of view cannot walk back through the view unseen, as random
+  headings from the moment they left would have them do.
 * **Clock**: each phone's clock is off by uniform +-``clock_offset_s`` and drifts by
   +-``clock_drift_ppm`` (phones without NTP sync; quartz clocks drift 10-50 ppm).
 * **Sampling**: each phone reports at one of ``imu_rates_hz`` (Android's SENSOR_DELAY_NORMAL,
@@ -115,7 +118,10 @@ def _walk_velocity(
     """The carrier's true time grid, velocity and position (NaN out of view) over the log.
 
     Inside the trajectory, its velocity; outside (always-on phones), bouts of standing and of
-    walking elsewhere (5-30 s each, 0.8-1.4 m/s, a random heading turning slowly)."""
+    walking (5-30 s each, 0.8-1.4 m/s) where no camera sees them: before coming into view the
+    carrier walks towards where they enter, after leaving away from where they left (the
+    heading they had there, wandering within +-45 deg), so the walk never crosses the
+    cameras' view unseen; the bout next to the view is a walk (people walk in and out)."""
     t = np.arange(0.0, duration + dt, dt)
     xy = traj.at(t)
     inside = ~np.isnan(xy).any(axis=1)
@@ -126,24 +132,51 @@ def _walk_velocity(
         for j in range(2):
             filled[:, j] = np.interp(np.arange(len(t)), idx, xy[idx, j])
         vel = np.gradient(filled, dt, axis=0)
-    if always_on:
-        k = 0
-        heading = rng.uniform(-math.pi, math.pi)
-        while k < len(t):
-            n = int(rng.uniform(5.0, 30.0) / dt)
-            walking = rng.random() < 0.5
-            speed = rng.uniform(0.8, 1.4)
-            turn = np.cumsum(rng.normal(0, math.radians(4.0) * math.sqrt(dt), n)) + heading
-            seg = slice(k, min(k + n, len(t)))
-            m = seg.stop - seg.start
-            out = ~inside[seg]
-            v = np.column_stack([np.cos(turn[:m]), np.sin(turn[:m])]) * (speed if walking else 0)
-            vel[seg][out] = v[out]
-            heading = float(turn[m - 1])
-            k += n
-    else:
+    if not always_on:
         vel[~inside] = np.nan
+        return t, vel, xy
+    if not inside.any():
+        _outside_bouts(vel, np.arange(len(t)), rng.uniform(-math.pi, math.pi), dt, rng, 180.0)
+        return t, vel, xy
+    i0, i1 = int(idx[0]), int(idx[-1])
+    near = max(int(2.0 / dt), 1)
+    into = filled[min(i0 + near, i1)] - filled[i0]
+    away = filled[i1] - filled[max(i1 - near, i0)]
+    h_in = math.atan2(into[1], into[0]) if np.hypot(*into) > 0.1 else rng.uniform(-math.pi, math.pi)
+    h_out = (
+        math.atan2(away[1], away[0]) if np.hypot(*away) > 0.1 else rng.uniform(-math.pi, math.pi)
+    )
+    _outside_bouts(vel, np.arange(i0 - 1, -1, -1), h_in, dt, rng, 45.0)
+    _outside_bouts(vel, np.arange(i1 + 1, len(t)), h_out, dt, rng, 45.0)
     return t, vel, xy
+
+
+def _outside_bouts(
+    vel: np.ndarray,
+    order: np.ndarray,
+    heading: float,
+    dt: float,
+    rng: np.random.Generator,
+    spread_deg: float,
+) -> None:
+    """Fill ``vel`` at the samples ``order`` (walked away from the view: the first is next to
+    it) with alternating bouts of walking and standing; walking heads along ``heading``,
+    wandering slowly (4 deg per sqrt(s)) within +-``spread_deg``."""
+    k, walking, wander = 0, True, 0.0
+    lim = math.radians(spread_deg)
+    while k < len(order):
+        n = max(int(rng.uniform(5.0, 30.0) / dt), 1)
+        seg = order[k : k + n]
+        if walking:
+            steps = rng.normal(0, math.radians(4.0) * math.sqrt(dt), len(seg))
+            turn = np.clip(wander + np.cumsum(steps), -lim, lim)
+            wander = float(turn[-1])
+            speed = rng.uniform(0.8, 1.4)
+            vel[seg] = np.column_stack([np.cos(heading + turn), np.sin(heading + turn)]) * speed
+        else:
+            vel[seg] = 0.0
+        walking = not walking
+        k += n
 
 
 def _magnetic(xy: np.ndarray, rng: np.random.Generator, cfg: PhoneRealism) -> np.ndarray:
