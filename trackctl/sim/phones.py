@@ -140,15 +140,18 @@ def _walk_velocity(
         return t, vel, xy
     i0, i1 = int(idx[0]), int(idx[-1])
     near = max(int(2.0 / dt), 1)
-    into = filled[min(i0 + near, i1)] - filled[i0]
-    away = filled[i1] - filled[max(i1 - near, i0)]
-    h_in = math.atan2(into[1], into[0]) if np.hypot(*into) > 0.1 else rng.uniform(-math.pi, math.pi)
-    h_out = (
-        math.atan2(away[1], away[0]) if np.hypot(*away) > 0.1 else rng.uniform(-math.pi, math.pi)
-    )
+    h_in = _heading(filled[min(i0 + near, i1)] - filled[i0], rng)
+    h_out = _heading(filled[i1] - filled[max(i1 - near, i0)], rng)
     _outside_bouts(vel, np.arange(i0 - 1, -1, -1), h_in, dt, rng, 45.0)
     _outside_bouts(vel, np.arange(i1 + 1, len(t)), h_out, dt, rng, 45.0)
     return t, vel, xy
+
+
+def _heading(move: np.ndarray, rng: np.random.Generator) -> float:
+    """Direction of ``move`` (rad); a random one when it is under 0.1 m (standing)."""
+    if np.hypot(*move) > 0.1:
+        return math.atan2(move[1], move[0])
+    return float(rng.uniform(-math.pi, math.pi))
 
 
 def _outside_bouts(
