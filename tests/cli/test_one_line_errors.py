@@ -136,6 +136,9 @@ def test_fail_if_syntax_error_before_the_run(sample_log: Path, tmp_path: Path) -
     _one_line_error(
         ["vm-track", str(sample_log), "--fail-if", "idf1<<1"], "--fail-if: cannot parse"
     )
+    _one_line_error(
+        ["vm-track", str(sample_log), "--visits", "twice"], "--visits 'twice': expected one or many"
+    )
 
 
 def _foreign_log(path: Path) -> None:

@@ -221,3 +221,57 @@ def test_a_carrier_who_walks_out_of_view_is_still_found_in_it():
     out = retrack(frame_t, points, {"m": _phone(carrier, frame_t, 120.0)}, {}, AlignConfig(), CFG)
     seen_xy = {k: p for k, p in out["m"].xy.items() if k < inside}
     assert _share_on(seen_xy, carrier, inside) > 0.8
+
+
+def test_doors_are_at_the_edge_of_the_covered_area():
+    rng = np.random.default_rng(4)
+    points = [rng.uniform((0, 0), (12, 8), (40, 2)) for _ in range(30)]
+    grid = _Grid(points, CFG.cell_m)
+    doors = grid.doors(points, CFG)
+
+    def at(x: float, y: float) -> float:
+        j, i = np.round((np.array([x, y]) - grid.lo) / grid.cell).astype(int)
+        return float(doors[i, j])
+
+    assert at(6, 4) == CFG.wall_cost  # the middle of the room
+    assert at(0.3, 4) == CFG.door_cost  # by its edge
+    assert at(6, 7.6) == CFG.door_cost
+    assert at(-1.5, 4) == CFG.door_cost  # outside it, where nobody was seen
+
+
+def _polyline(points: list[tuple[int, int]], n: int, speed: float = 1.2) -> np.ndarray:
+    """(n, 2) positions walking ``points`` at ``speed`` and then standing at the last."""
+    out = [np.array(points[0], float)]
+    for a, b in zip(points, points[1:], strict=False):
+        a_, b_ = np.array(a, float), np.array(b, float)
+        k = max(int(np.hypot(*(b_ - a_)) / speed * FPS), 1)
+        out += [a_ + (b_ - a_) * (i + 1) / k for i in range(k)]
+    walk = np.array(out)
+    return np.vstack([walk, np.repeat(walk[-1:], max(n - len(walk), 0), axis=0)])[:n]
+
+
+def test_one_visit_the_carriers_and_not_a_strangers_who_walked_like_the_phone_before():
+    # the phone is on for 90 s; its carrier is in view from 45 s to 90 s, turning about the
+    # room. From 15 s to 35 s, while the carrier is still out of view, a stranger in the room
+    # walks exactly as the phone does then (the same turns): a path free to come and go
+    # publishes that stranger as the carrier. Only one of the two stretches is the carrier's
+    # visit, and the carrier's is the longer one that fits.
+    frame_t, _, people = _scene(11, n_people=6, seconds=90)
+    n, come = len(frame_t), int(45 * FPS)
+    inside = _polyline([(0, 6), (7, 6), (7, 2), (13, 2), (13, 9), (4, 9)], n - come)
+    outside = _polyline([(-30, 14), (-20, 14), (-20, 8), (-10, 8), (-10, 6)], come)
+    outside += inside[0] - outside[-1] - (inside[1] - inside[0])
+    carrier = np.vstack([outside, inside])
+    s0, s1 = int(15 * FPS), int(35 * FPS)
+    stranger = np.full((n, 2), np.nan)
+    stranger[s0:s1] = carrier[s0:s1] - carrier[s0] + (2.0, 9.0)
+    rng = np.random.default_rng(12)
+    points = []
+    for k in range(n):
+        who = [*people, carrier] if k >= come else [*people, stranger]
+        seen = [p[k] + rng.normal(0, 0.3, 2) for p in who if not np.isnan(p[k]).any()]
+        points.append(np.array(seen).reshape(-1, 2))
+    phone = {"m": _phone(carrier, frame_t, 70.0)}
+    out = retrack(frame_t, points, phone, {}, AlignConfig(), CFG)["m"]
+    assert not [k for k in out.xy if k < come]  # nothing before the carrier came in
+    assert _share_on(out.xy, carrier, n - come) > 0.9

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -57,6 +58,15 @@ def vm_track(
             "(offline; ~10 s per phone and 5 min of log). Off: phones name the visual tracks.",
         ),
     ] = True,
+    visits: Annotated[
+        str,
+        typer.Option(
+            help="Re-tracking: one (each phone's carrier comes into view once in the log, as "
+            "people who cross a scene; strangers who walk like the phone before or after are "
+            "not taken for them) or many (carriers come and go: the path stays in the site "
+            "and stretches are published on evidence of shared turns and stops).",
+        ),
+    ] = "one",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     fail_if: Annotated[
         str | None,
@@ -73,6 +83,11 @@ def vm_track(
     source_value = parse_choice(Source, source, "--source")
     if search not in ("predicted", "full"):
         raise InputError(f"--search {search!r}: expected predicted or full")
+    if visits not in ("one", "many"):
+        raise InputError(f"--visits {visits!r}: expected one or many")
+    retrack_cfg = RetrackConfig(enabled=retrack)
+    if visits == "many":
+        retrack_cfg = replace(retrack_cfg, away_cost=None)
     proc = VmTrackProcessor(
         VmTrackConfig(
             mode=mode_value,
@@ -80,7 +95,7 @@ def vm_track(
             source=source_value,
             frames=FrameConfig(predicted=search == "predicted"),
             phones_aligned=phones_aligned,
-            retrack=RetrackConfig(enabled=retrack),
+            retrack=retrack_cfg,
         )
     )
     draw = figures_from_output(out, plot, "vmtrack")

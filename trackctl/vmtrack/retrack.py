@@ -77,6 +77,21 @@ class RetrackConfig:
     miss_cost: float = 3.0
     """Cost of a frame with no detection near the path (missed, hidden, out of view): what a
     detection 2.5 sigma away costs, so a farther one is no better than none."""
+    away_cost: float | None = 2.0
+    """Cost of a frame with the carrier out of view (a phone is on for the whole log, its
+    carrier is not in view all of it). Between what the carrier's own detections cost (about
+    1.2: their noise, misses) and ``miss_cost``: a path in view must be on detections that fit
+    the phone to beat it. The path comes into view once: out of view, in view, out of view
+    (each part possibly empty). So every stretch of the log where some stranger walks like
+    the phone competes with the carrier's own stretch, and in a crowd the one that fits best
+    is the carrier's; a path free to come and go would collect every stranger who walked like
+    the phone for a while. None: the path is one walk over the whole log, in view throughout."""
+    door_cost: float = 2.0
+    wall_cost: float = 25.0
+    """Cost of coming into view or leaving it: ``door_cost`` within ``edge_m`` of the edge of
+    the area the cameras cover (where people walk in and out), ``wall_cost`` anywhere else (a
+    door inside the view, a long miss)."""
+    edge_m: float = 1.0
     min_evidence: float | None = 5.0
     evidence_lag_s: float = 2.0
     evidence_sigma_mps: float = 0.3
@@ -158,6 +173,14 @@ class _Grid:
         self.cell = cell_m
         size = ((hi - self.lo) / cell_m).astype(int) + 1
         self.shape = (int(size[1]), int(size[0]))
+        self.visit: tuple[np.ndarray, float] | None = None
+        """Door costs per cell and the cost per frame out of view (None: always in view)."""
+
+    def with_visits(self, points: Sequence[np.ndarray], cfg: RetrackConfig) -> _Grid:
+        """This grid, with the path's one visit to the view set up (``cfg.away_cost``)."""
+        if cfg.away_cost is not None:
+            self.visit = (self.doors(points, cfg), cfg.away_cost)
+        return self
 
     def emission(self, pts: np.ndarray, sigma: float, cap: float) -> np.ndarray | float:
         """Cost of each cell at one frame: min(d^2 / 2 sigma^2, cap), d the distance to the
@@ -174,7 +197,28 @@ class _Grid:
         return np.minimum(dist * dist / (2 * sigma * sigma), cap).astype(np.float32)
 
     def xy(self, cells: np.ndarray) -> np.ndarray:
-        return self.lo + cells[:, ::-1] * self.cell
+        """Positions of (row, col) cells; NaN where the path is out of view (row -1)."""
+        out = (self.lo + cells[:, ::-1] * self.cell).astype(float)
+        out[cells[:, 0] < 0] = np.nan
+        return out
+
+    def doors(self, points: Sequence[np.ndarray], cfg: RetrackConfig) -> np.ndarray:
+        """Cost of coming into view or leaving it at each cell: ``door_cost`` within ``edge_m``
+        of the edge of the covered area (every cell a detection fell in over the log, closed
+        over 1 m gaps and filled) or outside it, ``wall_cost`` inside."""
+        count = np.zeros(self.shape, bool)
+        for p in points:
+            if not len(p):
+                continue
+            ij = np.round((p - self.lo) / self.cell).astype(int)
+            ok = (ij >= 0).all(axis=1) & (ij[:, 0] < self.shape[1]) & (ij[:, 1] < self.shape[0])
+            count[ij[ok, 1], ij[ok, 0]] = True
+        r = max(int(round(1.0 / self.cell)), 1)
+        covered = ndimage.binary_closing(count, structure=np.ones((2 * r + 1, 2 * r + 1)))
+        covered = ndimage.binary_fill_holes(covered)
+        inside = ndimage.distance_transform_edt(np.pad(covered, 1), sampling=self.cell)
+        edge = inside[1:-1, 1:-1] <= cfg.edge_m
+        return np.where(edge, cfg.door_cost, cfg.wall_cost).astype(np.float32)
 
 
 _OFFS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
@@ -239,6 +283,7 @@ def _layer_costs(
     turn_cost: float | None = None,
     jump_cost: float | None = None,
     free: np.ndarray | None = None,
+    visit: tuple[np.ndarray, float] | None = None,
 ) -> np.ndarray:
     """One pass of the Viterbi recursion over (layer, position) without back-pointers: at each
     frame, the cheapest path's cost into each layer, relative to the cheapest of all. Layer
@@ -246,14 +291,23 @@ def _layer_costs(
     With ``turn_cost`` the layers are a ring of yaws: between frames a path may move to the
     next one at that cost, or to any at ``jump_cost`` (nothing into a ``free`` frame: the
     phone saw its carry change), keeping its position; without, they are independent and
-    the last row ranks them."""
+    the last row ranks them. ``visit``: (door costs per cell, cost per frame out of view):
+    each layer's path is out of view, then in view once, then out of view
+    (:attr:`RetrackConfig.away_cost`)."""
     n_r = walks.shape[1]
     acc = np.zeros((n_r, *grid.shape), np.float32)
     out = np.zeros(walks.shape)
     frac = np.zeros((n_r, 2))
+    if visit is not None:
+        doors, away = visit[0][None], np.float32(visit[1])
+        acc += doors  # in view at the first frame: as if just come in
+        before = np.zeros(n_r, np.float32)
+        after = np.full(n_r, _BIG, np.float32)
     # grey erosion subtracts its structure: a negative step cost adds it
     structure = -steps.reshape(1, 3, 3)
     for k in range(len(walks)):
+        if visit is not None:
+            after = np.minimum(after, (acc + doors).min(axis=(1, 2))) + away
         moved = np.empty_like(acc)
         for r in range(n_r):
             v = walks[k, r]
@@ -269,29 +323,59 @@ def _layer_costs(
             np.minimum(acc, turn + np.float32(turn_cost), out=acc)
             jump = 0.0 if free is not None and free[k] else (jump_cost or 0.0)
             np.minimum(acc, acc.min(axis=0) + np.float32(jump), out=acc)
+        if visit is not None:
+            np.minimum(acc, before[:, None, None] + doors, out=acc)
+            before = before + away
         acc += emissions[k]
         m = acc.min(axis=(1, 2))
-        acc -= m.min()
-        out[k] = m - m.min()
+        if visit is not None:
+            m = np.minimum(m, np.minimum(before, after))
+        low = np.float32(m.min())
+        acc -= low
+        out[k] = m - low
+        if visit is not None:
+            before -= low
+            after -= low
     return out
 
 
 def _viterbi_path(
-    grid: _Grid, emissions: Sequence[np.ndarray | float], u: np.ndarray, steps: np.ndarray
+    grid: _Grid,
+    emissions: Sequence[np.ndarray | float],
+    u: np.ndarray,
+    steps: np.ndarray,
+    visit: tuple[np.ndarray, float] | None = None,
 ) -> np.ndarray:
-    """The cheapest path's cell (row, col) at every frame."""
+    """The cheapest path's cell (row, col) at every frame; (-1, -1) where it is out of view.
+    ``visit``: (door costs per cell, cost per frame out of view): the path is out of view,
+    then in view once, then out of view (:attr:`RetrackConfig.away_cost`); None: in view
+    throughout."""
     n = len(u)
     acc = np.zeros(grid.shape, np.float32)
     back = np.zeros((n, *grid.shape), np.int8)
     shifts = np.zeros((n, 2), int)
     frac = np.zeros(2)
     restart: dict[int, tuple[int, int]] = {}
+    left = np.full(n, -1, np.int64)  # out of view after the visit from k: the cell left at k-1
+    before, after = np.float32(0.0 if visit is not None else _BIG), _BIG
+    doors, away = (np.zeros(grid.shape, np.float32), _BIG) if visit is None else visit
+    if visit is not None:
+        acc += doors  # in view at the first frame: as if just come in
     for k, uk in enumerate(u):
+        if visit is not None:
+            out_at = acc + doors
+            j = int(np.argmin(out_at))
+            if out_at.flat[j] < after:
+                after, left[k] = out_at.flat[j], j
+            after = np.float32(after + away)
         if np.isnan(uk):
             # anywhere: the path restarts; before it, the cheapest cell of the frame before
-            y0, x0 = np.unravel_index(int(np.argmin(acc)), acc.shape)
-            restart[k] = (int(y0), int(x0))
-            acc[:] = acc.min()
+            # (or out of view, not yet come in)
+            j = int(np.argmin(acc))
+            come = float(before + doors.min())
+            y0, x0 = np.unravel_index(j, acc.shape)
+            restart[k] = (int(y0), int(x0)) if acc.flat[j] <= come else (-1, -1)
+            acc[:] = min(float(acc.flat[j]), come)
             back[k] = -1
         else:
             sx, sy = _whole_cells(frac, uk, grid.cell)
@@ -300,20 +384,56 @@ def _viterbi_path(
             stack = np.stack([_shift(moved, dy, dx) + steps[i] for i, (dy, dx) in enumerate(_OFFS)])
             back[k] = np.argmin(stack, axis=0)
             acc = np.take_along_axis(stack, back[k][None].astype(np.intp), 0)[0]
+            if visit is not None:
+                come_in = before + doors
+                new = come_in < acc
+                back[k][new] = -2
+                acc = np.where(new, come_in, acc)
+        if visit is not None:
+            before = np.float32(before + away)
         acc = acc + emissions[k]
-        acc -= acc.min()
-    cells = np.zeros((n, 2), int)
+        low = np.float32(min(float(acc.min()), float(before), float(after)))
+        acc -= low
+        before, after = np.float32(before - low), np.float32(after - low)
     y0, x0 = np.unravel_index(int(np.argmin(acc)), acc.shape)
-    y, x = int(y0), int(x0)
+    state = "in"
+    if min(before, after) < acc[y0, x0]:
+        state = "before" if before <= after else "after"
+    return _backtrack(back, shifts, restart, left, (int(y0), int(x0)), state)
+
+
+def _backtrack(
+    back: np.ndarray,
+    shifts: np.ndarray,
+    restart: dict[int, tuple[int, int]],
+    left: np.ndarray,
+    cell: tuple[int, int],
+    state: str,
+) -> np.ndarray:
+    """The cells of :func:`_viterbi_path`'s path, from its last ``cell`` and ``state`` (in,
+    before or after the visit) back through its back-pointers."""
+    n, shape = len(back), back.shape[1:]
+    cells = np.full((n, 2), -1, int)
+    y, x = cell
     for k in range(n - 1, -1, -1):
+        if state == "before":
+            break
+        if state == "after":
+            if left[k] >= 0:
+                y, x = (int(v) for v in np.unravel_index(int(left[k]), shape))
+                state = "in"
+            continue
         cells[k] = (y, x)
         b = int(back[k, y, x])
-        if b < 0:
+        if b == -1:
             y, x = restart[k]
-            continue
-        dy, dx = _OFFS[b]
-        y = min(max(y - dy - int(shifts[k, 0]), 0), grid.shape[0] - 1)
-        x = min(max(x - dx - int(shifts[k, 1]), 0), grid.shape[1] - 1)
+            state = "before" if y < 0 else state
+        elif b == -2:
+            state = "before"
+        else:
+            dy, dx = _OFFS[b]
+            y = min(max(y - dy - int(shifts[k, 0]), 0), shape[0] - 1)
+            x = min(max(x - dx - int(shifts[k, 1]), 0), shape[1] - 1)
     return cells
 
 
@@ -321,7 +441,7 @@ def _search_field(
     points: Sequence[np.ndarray], cfg: RetrackConfig
 ) -> tuple[_Grid, list[np.ndarray | float]]:
     """The search's coarser grid and every frame's emissions on it (the same for all phones)."""
-    grid = _Grid(points, cfg.search_cell_m)
+    grid = _Grid(points, cfg.search_cell_m).with_visits(points, cfg)
     return grid, [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
 
 
@@ -351,7 +471,7 @@ def _search(
     walks = np.column_stack(
         [_displacements(frame_t, track, float(lag), yaw * sc) for lag in lags for sc in scales]
     )
-    best = int(np.argmin(_layer_costs(grid, emissions, walks, steps)[-1]))
+    best = int(np.argmin(_layer_costs(grid, emissions, walks, steps, visit=grid.visit)[-1]))
     lag_s, scale = float(lags[best // len(scales)]), float(scales[best % len(scales)])
     yaw = _yaw_search(frame_t, grid, emissions, steps, track, lag_s, scale, cfg, carry_changes)
     return None if yaw is None else (lag_s, yaw)
@@ -385,13 +505,15 @@ def _yaw_search(
         at = np.searchsorted(frame_t, np.asarray(carry_changes) - int(round(lag_s * 1e9)))
         free[at[at < n]] = True
     costs = (cfg.yaw_step_cost, cfg.yaw_jump_cost)
-    forward = _layer_costs(grid, emissions, u[:, None] * rot[None, :], steps, *costs, free)
+    forward = _layer_costs(
+        grid, emissions, u[:, None] * rot[None, :], steps, *costs, free, grid.visit
+    )
     # backward: frame k+1 -> k moves by -u[k+1] (a frame after a gap starts afresh), through
     # the transition the forward pass takes into k+1
     u_back = np.r_[0j, -u[:0:-1]]
     free_back = np.r_[False, free[:0:-1]]
     backward = _layer_costs(
-        grid, emissions[::-1], u_back[:, None] * rot[None, :], steps, *costs, free_back
+        grid, emissions[::-1], u_back[:, None] * rot[None, :], steps, *costs, free_back, grid.visit
     )[::-1]
     choice = np.argmin(forward + backward, axis=1)
     return scale * rot[choice]
@@ -560,7 +682,7 @@ def retrack(
     n = len(frame_t)
     if n < 2:
         return out
-    grid = _Grid(points, cfg.cell_m)
+    grid = _Grid(points, cfg.cell_m).with_visits(points, cfg)
     # the frames' distance grids (float32), the search's coarser ones, one path's back-pointers
     coarse = (cfg.cell_m / cfg.search_cell_m) ** 2
     need = int(n * grid.shape[0] * grid.shape[1] * (4 + 4 * coarse + 1))
@@ -597,7 +719,7 @@ def retrack(
         passes = 0 if aligned else cfg.refine_passes
         for p in range(passes + 1):
             u = _displacements(frame_t, track, lag, a)
-            cells = _viterbi_path(grid, emissions, u, steps)
+            cells = _viterbi_path(grid, emissions, u, steps, grid.visit)
             xy, seen, hits, withheld = _publish(frame_t, points, grid, cells, u, cfg)
             if p == passes:
                 break
