@@ -25,6 +25,7 @@ from trackctl.vmtrack.retrack import (
 
 FPS = 3.0
 CFG = RetrackConfig()
+LEARNT_DOORS = RetrackConfig(door_ratio=12.0)
 
 
 def _walker(rng: np.random.Generator, n: int, start: tuple[float, float]) -> np.ndarray:
@@ -223,20 +224,42 @@ def test_a_carrier_who_walks_out_of_view_is_still_found_in_it():
     assert _share_on(seen_xy, carrier, inside) > 0.8
 
 
-def test_doors_are_at_the_edge_of_the_covered_area():
-    rng = np.random.default_rng(4)
-    points = [rng.uniform((0, 0), (12, 8), (40, 2)) for _ in range(30)]
-    grid = _Grid(points, CFG.cell_m)
-    doors = grid.doors(points, CFG)
+def _door_costs(points: list[np.ndarray], cfg: RetrackConfig = CFG):
+    grid = _Grid(points, cfg.cell_m)
+    doors = grid.doors(points, cfg)
 
     def at(x: float, y: float) -> float:
         j, i = np.round((np.array([x, y]) - grid.lo) / grid.cell).astype(int)
         return float(doors[i, j])
 
-    assert at(6, 4) == CFG.wall_cost  # the middle of the room
-    assert at(0.3, 4) == CFG.door_cost  # by its edge
-    assert at(6, 7.6) == CFG.door_cost
-    assert at(-1.5, 4) == CFG.door_cost  # outside it, where nobody was seen
+    return at
+
+
+def test_doors_learnt_are_where_people_come_and_go():
+    # a corridor 12 x 8 m: every second somebody walks in on the left and out on the right
+    rng = np.random.default_rng(4)
+    n = int(60 * FPS)
+    starts = [(k, rng.uniform(1, 7)) for k in range(0, n, int(FPS))]
+    points = []
+    for k in range(n):
+        xs = [(1.2 * (k - k0) / FPS, y) for k0, y in starts if 0 <= k - k0 < 10 * FPS]
+        points.append(np.array(xs).reshape(-1, 2) + rng.normal(0, 0.2, (len(xs), 2)))
+    at = _door_costs(points, LEARNT_DOORS)
+    assert at(0.3, 4) == at(11.7, 4) == CFG.door_cost  # the ends people walk through
+    assert at(-1.5, 4) == CFG.door_cost  # outside, by a door
+    assert at(6, 4) == CFG.wall_cost  # the middle
+    assert at(6, 7.9) == at(6, 0.1) == CFG.wall_cost  # the sides nobody crosses
+    # by default the whole edge is a door
+    at = _door_costs(points)
+    assert at(0.3, 4) == at(6, 7.9) == at(6, 0.1) == CFG.door_cost
+    assert at(6, 4) == CFG.wall_cost
+
+
+def test_with_doors_learnt_a_room_nobody_enters_or_leaves_has_none():
+    _, points, _ = _scene(5, n_people=10, seconds=90)
+    at = _door_costs(points, LEARNT_DOORS)
+    assert at(8, 6) == CFG.wall_cost
+    assert at(8, 0.2) == at(0.2, 6) == at(15.8, 6) == at(8, 11.8) == CFG.wall_cost
 
 
 def _polyline(points: list[tuple[int, int]], n: int, speed: float = 1.2) -> np.ndarray:
