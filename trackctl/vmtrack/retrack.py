@@ -201,13 +201,18 @@ class _Grid:
         if not len(pts):
             return cap
         mask = np.ones(self.shape, bool)
-        ij = np.round((pts - self.lo) / self.cell).astype(int)
-        ok = (ij >= 0).all(axis=1) & (ij[:, 0] < self.shape[1]) & (ij[:, 1] < self.shape[0])
-        mask[ij[ok, 1], ij[ok, 0]] = False
+        mask[self.cells_of(pts)[0]] = False
         if mask.all():
             return cap
         dist = ndimage.distance_transform_edt(mask, sampling=self.cell)
         return np.minimum(dist * dist / (2 * sigma * sigma), cap).astype(np.float32)
+
+    def cells_of(self, pts: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+        """The (rows, cols) index of the cells ``pts`` (n, 2) snap to, for those on the grid,
+        and which those are (n,)."""
+        ij = np.round((pts - self.lo) / self.cell).astype(int)
+        ok = (ij >= 0).all(axis=1) & (ij[:, 0] < self.shape[1]) & (ij[:, 1] < self.shape[0])
+        return (ij[ok, 1], ij[ok, 0]), ok
 
     def xy(self, cells: np.ndarray) -> np.ndarray:
         """Positions of (row, col) cells; NaN where the path is out of view (row -1)."""
@@ -253,9 +258,7 @@ class _Grid:
         for k, p in enumerate(points):
             if not len(p):
                 continue
-            ij = np.round((p - self.lo) / self.cell).astype(int)
-            ok = (ij >= 0).all(axis=1) & (ij[:, 0] < self.shape[1]) & (ij[:, 1] < self.shape[0])
-            at = (ij[ok, 1], ij[ok, 0])
+            at, ok = self.cells_of(p)
             if ends is None:
                 np.add.at(out, at, 1.0)
                 continue
