@@ -231,3 +231,70 @@ def test_diamond_seen_obliquely_is_read_as_a_diamond(view_deg: float, code) -> N
     assert corners is not None
     got = read_oriented(img, det, corners, geo.R.T @ np.array([0.0, 0.0, 1.0]), DetectorConfig())
     assert got is not None and got.placement is Placement.DIAMOND and got.code == code
+
+
+def _corner_updates(r_of: object, start: tuple[float, float, float]) -> float:
+    """Position error after 10 corner updates of one tag 3 m away, from ``start``;
+    ``r_of(pose, world, geo)`` gives the corners' covariance."""
+    from functools import partial
+
+    from trackctl.bridgeloc.bridge import corner_jacobian
+
+    truth = (2.0, 1.0, 0.3)
+    geo, world, det = _seen_tag(truth)
+    z = det.corners.reshape(-1)
+    ekf = RobotEkf()
+    ekf.init(start, np.diag([0.4**2, 0.4**2, 0.15**2]))
+    for _ in range(10):
+        jac = corner_jacobian(ekf.pose, world, geo)
+        hx = partial(lambda p, w: project_corners(p, w, geo).reshape(-1), w=world)
+        assert ekf.update_measurement(z, hx, jac, r_of(ekf.pose, world, geo))  # type: ignore[operator]
+    return math.dist(ekf.pose[:2], truth[:2])
+
+
+def test_a_tags_shape_corrects_a_position_its_bearing_cannot() -> None:
+    """A state 0.4 m to the side, turned so that the tag sits at the same bearing: the corners'
+    shape (range, view angle) must pull it back. The map's error of the tag's pose enters
+    through how it moves the corners (together for its position, turning the shape for its
+    yaw); as independent noise per corner (what Full mode did) it leaves only the bearing, and
+    the state stays off."""
+    from trackctl.bridgeloc.bridge import map_jacobian
+    from trackctl.bridgeloc.ekf import EkfConfig, corner_covariance
+
+    truth = np.array([2.0, 1.0, 0.3])
+    tag = np.array([5.0, 2.0])
+    to_tag = tag - truth[:2]
+    side = np.array([-to_tag[1], to_tag[0]]) / np.linalg.norm(to_tag)
+    xy = truth[:2] + 0.4 * side
+    turn = math.atan2(*(tag - xy)[::-1]) - math.atan2(*to_tag[::-1])
+    start = (float(xy[0]), float(xy[1]), float(truth[2] + turn))
+    e = EkfConfig()
+    map_m, f = 0.09, 185.0  # a map good to 9 cm; the robot camera's focal length, px
+
+    def mapped(pose, world, geo):  # noqa: ANN001, ANN202
+        cov = np.diag([map_m**2] * 3 + [e.map_yaw_rad**2])
+        return corner_covariance(4, 1.0, f * 0.01, map_jacobian(pose, world, geo), cov)
+
+    def apart(pose, world, geo):  # noqa: ANN001, ANN202
+        rng_m = math.dist(pose[:2], tag)
+        return corner_covariance(4, math.hypot(1.0, f * map_m / rng_m), f * 0.01)
+
+    err_mapped = _corner_updates(mapped, start)
+    err_apart = _corner_updates(apart, start)
+    print(f"error after 10 updates: map via its Jacobian {err_mapped:.3f}, apart {err_apart:.3f} m")
+    assert err_mapped < 0.2
+    assert err_apart > 1.5 * err_mapped
+
+
+def test_corner_covariance_keeps_the_shape_of_a_common_shift() -> None:
+    from trackctl.bridgeloc.ekf import corner_covariance
+
+    r = corner_covariance(4, 1.0, 3.0)
+    diff = np.zeros(8)
+    diff[0], diff[2] = 1.0, -1.0  # u0 - u1: one side of the tag's width
+    assert diff @ r @ diff == pytest.approx(2.0)  # the corners' own noise only
+    assert np.full(4, 0.25) @ r[0::2, 0::2] @ np.full(4, 0.25) == pytest.approx(0.25 + 9.0)
+    jac = np.zeros((8, 1))
+    jac[0::2, 0] = [1.0, -1.0, -1.0, 1.0]  # a change of the tag's width
+    widened = corner_covariance(4, 1.0, 3.0, jac, np.array([[4.0]]))
+    assert diff @ widened @ diff == pytest.approx(2.0 + 4.0 * 4)

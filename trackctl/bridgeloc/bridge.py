@@ -21,6 +21,7 @@ __all__ = [
     "bridge_branches",
     "bridge_pose",
     "corner_jacobian",
+    "map_jacobian",
     "project_corners",
     "CameraGeometry",
     "MapTag",
@@ -340,6 +341,32 @@ def project_corners(
     rvec, _ = cv2.Rodrigues(r_cw)
     px, _ = cv2.projectPoints(np.asarray(world, np.float64), rvec, -r_cw @ p_c, cam.K, cam.dist)
     return px.reshape(-1, 2)
+
+
+def map_jacobian(
+    pose: tuple[float, float, float] | np.ndarray, world: np.ndarray, cam: CameraGeometry
+) -> np.ndarray:
+    """d pixels / d (the mapped tag's x, y, z, yaw), (2M, 4): the tag moved as a whole, and
+    turned about the vertical through its centre (central differences, as
+    :func:`corner_jacobian`)."""
+    w = np.asarray(world, float)
+    ctr = w.mean(axis=0)
+    cols = []
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = 1e-4
+        cols.append(
+            (project_corners(pose, w + d, cam) - project_corners(pose, w - d, cam)).reshape(-1)
+            / 2e-4
+        )
+    eps = 1e-5
+    turned = []
+    for a in (eps, -eps):
+        c, s = math.cos(a), math.sin(a)
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        turned.append(project_corners(pose, (w - ctr) @ rot.T + ctr, cam).reshape(-1))
+    cols.append((turned[0] - turned[1]) / (2 * eps))
+    return np.column_stack(cols)
 
 
 def corner_jacobian(

@@ -30,6 +30,7 @@ from trackctl.bridgeloc.bridge import (
     bridge_pnp,
     bridge_pose,
     corner_jacobian,
+    map_jacobian,
     project_corners,
     tag_corners_in_camera,
 )
@@ -41,7 +42,7 @@ from trackctl.bridgeloc.config import (
     annotations_topic,
 )
 from trackctl.bridgeloc.detect import DetectorConfig, TagDetection, detect_tags, read_oriented
-from trackctl.bridgeloc.ekf import RobotEkf, pose_cov
+from trackctl.bridgeloc.ekf import RobotEkf, corner_covariance, pose_cov
 from trackctl.bridgeloc.smooth import RtsSmoother, position_sigma
 from trackctl.bridgeloc.tags import check_family
 from trackctl.errors import InputError, MissingTopicError
@@ -860,15 +861,17 @@ class RobotPass:
         for tag in mapped:
             if not _in_front(ekf.pose, tag.corners, rgeo):
                 continue  # a tag sharing the pattern behind the robot cannot be this one
-            # pixel noise and the map's corner error seen from here
-            rng_m = max(0.3, float(np.linalg.norm(tag.center[:2] - np.array(ekf.pose[:2]))))
+            # each corner's pixel noise, the camera's pitch, roll and mount error (all corners
+            # together), and the map's error of the tag's position and yaw seen from here
             f = float(rgeo.K[0, 0])
-            var = cfg.ekf.corner_sigma_px**2 + (f * tag.sigma_m / rng_m) ** 2
-            r = np.eye(len(z)) * var
-            # the camera's pitch, roll and mount error shift all corners of the frame together
-            common = (f * cfg.ekf.camera_tilt_rad) ** 2
-            r[0::2, 0::2] += common
-            r[1::2, 1::2] += common
+            map_cov = np.diag([tag.sigma_m**2] * 3 + [cfg.ekf.map_yaw_rad**2])
+            r = corner_covariance(
+                len(z) // 2,
+                cfg.ekf.corner_sigma_px,
+                f * cfg.ekf.camera_tilt_rad,
+                map_jacobian(ekf.pose, tag.corners, rgeo),
+                map_cov,
+            )
             jac = corner_jacobian(ekf.pose, tag.corners, rgeo)
             hx = partial(_reproject, world=tag.corners, cam=rgeo)
             scored.append((ekf.measurement_nis(z, hx, jac, r), tag, hx, jac, r))

@@ -194,6 +194,13 @@ def simulate_bridgeloc(
     family: Annotated[
         str, typer.Option(help="Tag family: plain, or parity (N >= 3, two check cells).")
     ] = "plain",
+    patterns: Annotated[
+        int,
+        typer.Option(
+            help="Distinct tag patterns: 0, every tag its own; K, the tags cycle through K "
+            "(far apart tags share one, Eq. 4.11)."
+        ),
+    ] = 0,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
@@ -212,6 +219,7 @@ def simulate_bridgeloc(
         preset=preset,
         n=n,
         family=family,
+        patterns=patterns,
     )
     counts = simulate(str(out), cfg)
     if json_out:

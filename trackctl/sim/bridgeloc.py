@@ -4,8 +4,8 @@ wide-angle camera among infrastructure cameras and N x N wall tags.
 * ``office`` — one infrastructure camera (50° AoV), one tag about 1.5 m from it; the robot visits
   test spots at 1-4 m and -60..60° from the tag (Fig. 4.20), facing the tag's wall.
 * ``lobby`` — 14 x 8 m, three infrastructure cameras (one with an occluded corner), 2-10 tags on
-  the walls above/below the robot camera, some rotated by 45°, tags of a pattern reused far apart;
-  the robot drives random waypoints (or a CSV path).
+  the walls above/below the robot camera, some rotated by 45°, each of its own pattern (or a
+  pool of ``patterns`` reused far apart); the robot drives random waypoints (or a CSV path).
 
 Images of every camera are rendered: tags are warped onto the projected quads
 (``cv2.warpPerspective``) over a simple background, the robot and its IR light are drawn in the
@@ -172,6 +172,12 @@ class BridgeLocScenario:
     """``realistic`` (default) or ``paper``: see :class:`Realism` and :data:`PRESETS`."""
     family: str = "plain"
     """Tag family: ``plain`` or ``parity`` (N >= 3, two check cells)."""
+    patterns: int = 0
+    """Distinct patterns deployed. 0 (the default): every tag its own while the family has
+    them, as a deployer hangs them (N = 2 has 56 with placement and mount; the dissertation's
+    lobby had 2-10). A number: the tags cycle through that many, so tags far apart share a
+    pattern and a sighting names several candidates, which only a robot that knows roughly
+    where it is can resolve (the nearest, Eq. 4.11)."""
 
     @property
     def realism(self) -> Realism:
@@ -185,6 +191,8 @@ class BridgeLocScenario:
             raise InputError(f"--field {self.field!r}: expected office or lobby")
         if not 1 <= self.tags <= 56:
             raise InputError(f"--tags {self.tags}: expected 1..56")
+        if self.patterns < 0:
+            raise InputError(f"--patterns {self.patterns}: expected 0 (all distinct) or more")
         if self.duration_s <= 0 or self.robot_fps <= 0 or self.infra_fps <= 0:
             raise InputError("duration and frame rates must be positive")
 
@@ -328,13 +336,16 @@ def lobby_layout(cfg: BridgeLocScenario) -> Layout:
         chosen.append(int(np.argmax(d)))
     symbols = _symbols(cfg.n, cfg.family)
     order = rng.permutation(len(symbols))
+    # distinct patterns while the family has them, or a pool of cfg.patterns (tags far apart
+    # then share one; the EKF picks the nearest candidate, Eq. 4.11); mounts alternate
+    # above/below, and flip on the family's second round, so that up to twice its size no two
+    # tags are alike
+    pool = cfg.patterns or len(symbols)
     tags = []
     for k, idx in enumerate(chosen):
         x, y, nx, ny = ok[idx]
-        # tags are drawn from a small pool of patterns, so some share a pattern far apart
-        # (the EKF picks the nearest candidate, Eq. 4.11); mounts alternate above/below
-        code, placement = symbols[int(order[k % max(2, cfg.tags // 2 + 1)])]
-        mount = Mount.ABOVE if k % 2 == 0 else Mount.BELOW
+        code, placement = symbols[int(order[k % pool])]
+        mount = Mount.ABOVE if (k + k // len(symbols)) % 2 == 0 else Mount.BELOW
         z = round(cfg.camera_height_m + (0.40 if mount is Mount.ABOVE else -0.28), 3)
         tags.append(WallTag(f"t{k}", code, placement, mount, (x, y, z), (nx, ny), cfg.tag_size_m))
     return Layout((w, h), cams, occluded, tags)
