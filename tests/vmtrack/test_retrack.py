@@ -17,6 +17,7 @@ from trackctl.vmtrack.retrack import (
     RetrackConfig,
     _displacements,
     _Grid,
+    _layer_costs,
     _search,
     _step_costs,
     _viterbi_path,
@@ -298,3 +299,22 @@ def test_one_visit_the_carriers_and_not_a_strangers_who_walked_like_the_phone_be
     out = retrack(frame_t, points, phone, {}, AlignConfig(), CFG)["m"]
     assert not [k for k in out.xy if k < come]  # nothing before the carrier came in
     assert _share_on(out.xy, carrier, n - come) > 0.9
+
+
+def test_absolute_layer_costs_compare_across_passes() -> None:
+    """The search compares the paths found from different clock-offset starts by their whole
+    cost: one detection per frame, a path that stays on it costs nothing, one that walks away
+    from it pays for every frame it is off (up to the miss cost), whatever pass it was in."""
+    n = 30
+    points = [np.array([[5.0, 5.0]]) for _ in range(n)]
+    grid = _Grid(points, CFG.cell_m)
+    emissions = [grid.emission(p, CFG.det_sigma_m, CFG.miss_cost) for p in points]
+    steps = _step_costs(grid.cell, 1 / 3, CFG)
+    still = np.zeros((n, 1), complex)
+    away = np.full((n, 1), 0.5 + 0j)  # 1.5 m/s east: off the detection after a frame or two
+    a = _layer_costs(grid, emissions, still, steps, absolute=True)[-1, 0]
+    b = _layer_costs(grid, emissions, away, steps, absolute=True)[-1, 0]
+    assert a == pytest.approx(0.0, abs=1e-6)
+    assert b > 0.5 * (n - 4) * CFG.miss_cost
+    # relative costs lose that: each pass is its own zero
+    assert _layer_costs(grid, emissions, away, steps)[-1, 0] == pytest.approx(0.0, abs=1e-6)
