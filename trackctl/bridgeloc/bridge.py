@@ -343,6 +343,18 @@ def project_corners(
     return px.reshape(-1, 2)
 
 
+def _central_differences(
+    fn: Callable[[np.ndarray], np.ndarray], steps: tuple[float, ...]
+) -> np.ndarray:
+    """d fn / d v at v = 0, one column per entry of ``v`` (its step in ``steps``)."""
+    cols = []
+    for i, eps in enumerate(steps):
+        d = np.zeros(len(steps))
+        d[i] = eps
+        cols.append((fn(d) - fn(-d)).reshape(-1) / (2 * eps))
+    return np.column_stack(cols)
+
+
 def map_jacobian(
     pose: tuple[float, float, float] | np.ndarray, world: np.ndarray, cam: CameraGeometry
 ) -> np.ndarray:
@@ -351,22 +363,13 @@ def map_jacobian(
     :func:`corner_jacobian`)."""
     w = np.asarray(world, float)
     ctr = w.mean(axis=0)
-    cols = []
-    for i in range(3):
-        d = np.zeros(3)
-        d[i] = 1e-4
-        cols.append(
-            (project_corners(pose, w + d, cam) - project_corners(pose, w - d, cam)).reshape(-1)
-            / 2e-4
-        )
-    eps = 1e-5
-    turned = []
-    for a in (eps, -eps):
-        c, s = math.cos(a), math.sin(a)
+
+    def moved(v: np.ndarray) -> np.ndarray:
+        c, s = math.cos(v[3]), math.sin(v[3])
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        turned.append(project_corners(pose, (w - ctr) @ rot.T + ctr, cam).reshape(-1))
-    cols.append((turned[0] - turned[1]) / (2 * eps))
-    return np.column_stack(cols)
+        return project_corners(pose, (w - ctr) @ rot.T + ctr + v[:3], cam)
+
+    return _central_differences(moved, (1e-4, 1e-4, 1e-4, 1e-5))
 
 
 def corner_jacobian(
@@ -375,14 +378,7 @@ def corner_jacobian(
     """d pixels / d (x, y, yaw), (2M, 3), by central differences (projectPoints has no
     derivative with respect to our planar pose parametrisation)."""
     p = np.asarray(pose, float)
-    cols = []
-    for i, eps in enumerate((1e-4, 1e-4, 1e-5)):
-        d = np.zeros(3)
-        d[i] = eps
-        hi = project_corners(p + d, world, cam).reshape(-1)
-        lo = project_corners(p - d, world, cam).reshape(-1)
-        cols.append((hi - lo) / (2 * eps))
-    return np.column_stack(cols)
+    return _central_differences(lambda d: project_corners(p + d, world, cam), (1e-4, 1e-4, 1e-5))
 
 
 def bridge_branches(
