@@ -10,9 +10,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from trackctl.logs.messages import RssiReading, RssiScan, Vec3
 from trackctl.vmtrack.align import AlignConfig
 from trackctl.vmtrack.identify import dead_reckoned
 from trackctl.vmtrack.motion import PhoneMotion
+from trackctl.vmtrack.radio import RadioEvidence
 from trackctl.vmtrack.retrack import (
     RetrackConfig,
     _displacements,
@@ -318,3 +320,66 @@ def test_absolute_layer_costs_compare_across_passes() -> None:
     assert b > 0.5 * (n - 4) * CFG.miss_cost
     # relative costs lose that: each pass is its own zero
     assert _layer_costs(grid, emissions, away, steps)[-1, 0] == pytest.approx(0.0, abs=1e-6)
+
+
+def _scans(frame_t: np.ndarray, walk: np.ndarray, heard: np.ndarray, seed: int):
+    """An AP at (0, 6) scans once a second; it hears the phone where ``heard``, at the level
+    of the carrier's distance (the processor's model, 3 dB shadowing, a 4 dB calibration
+    error)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(0, len(frame_t), int(FPS)):
+        readings = ()
+        if heard[k]:
+            d = max(0.3, float(np.hypot(walk[k, 0] - 0.0, walk[k, 1] - 6.0)))
+            level = -36.0 - 25 * math.log10(d) + rng.normal(0, 3.0)
+            readings = (RssiReading("m", round(level, 1)),)
+        out.append(RssiScan(int(frame_t[k]), "ap-0", readings, Vec3(0.0, 6.0, 2.0)))
+    return out
+
+
+def test_a_stranger_in_view_while_no_ap_hears_the_phone_is_not_its_carrier():
+    # the phone is on for 90 s; its carrier is in view for the last 30 s only. From 10 s to
+    # 50 s a stranger in the room walks as the phone does then (the same turns and stops):
+    # a longer stretch that fits than the carrier's own, so motion alone takes the stranger.
+    # The AP hears the phone only once its carrier is in the room.
+    frame_t, _, people = _scene(13, n_people=6, seconds=90)
+    n, come = len(frame_t), int(60 * FPS)
+    inside = _polyline([(0, 6), (7, 6), (7, 2), (13, 2), (13, 9)], n - come)
+    outside = _polyline(
+        [(-40, 14), (-30, 14), (-30, 8), (-22, 8), (-22, 12), (-12, 12), (-12, 6)], come
+    )
+    outside += inside[0] - outside[-1] - (inside[1] - inside[0])
+    carrier = np.vstack([outside, inside])
+    s0, s1 = int(10 * FPS), int(50 * FPS)
+    stranger = np.full((n, 2), np.nan)
+    stranger[s0:s1] = carrier[s0:s1] - carrier[s0] + (3.0, 10.0)
+    rng = np.random.default_rng(14)
+    points = []
+    for k in range(n):
+        who = [*people, carrier] if k >= come else [*people, stranger]
+        seen = [p[k] + rng.normal(0, 0.3, 2) for p in who if not np.isnan(p[k]).any()]
+        points.append(np.array(seen).reshape(-1, 2))
+    phone = {"m": _phone(carrier, frame_t, 70.0)}
+    blind = retrack(frame_t, points, phone, {}, AlignConfig(), CFG)["m"]
+    assert _share_on(blind.xy, stranger, n) > 0.2  # motion alone: the stranger
+    scans = _scans(frame_t, carrier, np.arange(n) >= come, 15)
+    radio = RadioEvidence(frame_t, scans, (-40.0, 2.5), CFG.radio)
+    out = retrack(frame_t, points, phone, {}, AlignConfig(), CFG, radio=radio)["m"]
+    assert not [k for k in out.xy if k < come]
+    assert _share_on(out.xy, carrier, n - come) > 0.9
+
+
+def test_a_carry_change_the_phone_saw_is_searched_as_two_steady_yaws():
+    frame_t, points, people = _scene(16, seconds=120)
+    n = len(frame_t)
+    yaw = np.where(np.arange(n) < n // 2, 40.0, -130.0)
+    phone = _phone(people[2], frame_t, yaw, lag_s=-1.0)
+    phone.carry_changes = np.array([phone.t_ns[n // 2]])
+    lag, a = _search(
+        frame_t, points, dead_reckoned(phone), 0.0, AlignConfig(), CFG, phone.carry_changes
+    )
+    assert abs(lag + 1.0) <= 0.5
+    err = np.degrees(np.angle(a * np.exp(-1j * np.radians(yaw))))
+    for half in (slice(0, n // 2 - 5), slice(n // 2 + 5, n)):
+        assert np.median(np.abs(err[half])) <= CFG.yaw_step_deg

@@ -219,8 +219,9 @@ def realistic_imu(
     rng: np.random.Generator,
     cfg: PhoneRealism,
     site_yaw: float,
-) -> tuple[list[Imu], PhoneTruth]:
-    """The IMU samples (phone clock stamps) of the phone carried along ``traj``, and its truth."""
+) -> tuple[list[Imu], PhoneTruth, np.ndarray]:
+    """The IMU samples (phone clock stamps) of the phone carried along ``traj``, its truth,
+    and its carrier's whereabouts in view and out of it (:func:`_whereabouts`)."""
     dt = 0.02
     names = [c for c, _ in cfg.carries]
     probs = np.array([p for _, p in cfg.carries], float)
@@ -310,4 +311,22 @@ def realistic_imu(
         step_length_m=round(step_len, 3),
         imu_hz=hz,
     )
-    return out, truth
+    return out, truth, _whereabouts(t, vel, xy)
+
+
+def _whereabouts(t: np.ndarray, vel: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """(n, 3) time (s), x, y of the carrier over the log: in view where they are seen, out of
+    view walked from where they came in or left by their out-of-view walk (the APs hear the
+    phone there); NaN for a carrier never in view (somewhere else in the building)."""
+    inside = ~np.isnan(xy).any(axis=1)
+    out = np.column_stack([t, xy])
+    if not inside.any():
+        return out
+    dt = float(t[1] - t[0]) if len(t) > 1 else 1.0
+    step = np.nan_to_num(vel) * dt
+    i0, i1 = (int(i) for i in np.flatnonzero(inside)[[0, -1]])
+    if i0 > 0:  # walked back from where they came in: k < i0 is there less the steps since
+        out[i0 - 1 :: -1, 1:] = xy[i0] - np.cumsum(step[i0:0:-1], axis=0)
+    after = np.cumsum(step[i1 + 1 :], axis=0)
+    out[i1 + 1 :, 1:] = xy[i1] + after
+    return out

@@ -99,6 +99,9 @@ class VmRealism:
     * ``rssi_at_1m_dbm``, ``path_loss_exponent``, ``shadowing_db``: each AP's path loss drawn
       from these ranges (indoor 2.0-3.5, Rappaport; per-device offsets of +-7 dB at 1 m), so
       the pipeline's default model is not the simulator's.
+    * ``outside_wall_db``: an always-on phone whose carrier is out of view is still heard, from
+      where their out-of-view walk took them, through the site's walls at this loss (COST 231
+      multi-wall model: 3.4 dB a light wall, 6.9 dB a heavy one; 10 dB: two to three walls).
     """
 
     phones: PhoneRealism | None = None
@@ -112,6 +115,7 @@ class VmRealism:
     rssi_at_1m_dbm: tuple[float, float] = (-40.0, -40.0)
     path_loss_exponent: tuple[float, float] = (2.5, 2.5)
     shadowing_db: float = 3.0
+    outside_wall_db: float = 0.0
 
 
 PRESETS: dict[str, VmRealism] = {
@@ -128,6 +132,7 @@ PRESETS: dict[str, VmRealism] = {
         rssi_at_1m_dbm=(-47.0, -33.0),
         path_loss_exponent=(2.0, 3.5),
         shadowing_db=5.0,
+        outside_wall_db=10.0,
     ),
 }
 """``paper``: the dissertation's idealised setting, kept for its tables; ``realistic`` (the
@@ -592,9 +597,12 @@ def _camera_events(site: _Site, cfg: VmScenario, rng: np.random.Generator) -> li
 
 def _imu_events(
     site: _Site, cfg: VmScenario, rng: np.random.Generator
-) -> tuple[list[Event], dict[str, PhoneTruth]]:
+) -> tuple[list[Event], dict[str, PhoneTruth], dict[str, np.ndarray]]:
+    """Every phone's IMU samples, its truth, and (realistic phones) its carrier's whereabouts
+    over the whole log, in view or not (t_s, x, y)."""
     events: list[Event] = []
     truths: dict[str, PhoneTruth] = {}
+    where: dict[str, np.ndarray] = {}
     phones = cfg.realism.phones
     real_rng = np.random.default_rng([cfg.seed, 4])
     site_yaw = 0.0
@@ -610,7 +618,9 @@ def _imu_events(
             continue
         topic = topics.imu(mac.replace(":", ""))
         if phones is not None:
-            samples, truths[mac] = realistic_imu(tr, mac, site.duration, real_rng, phones, site_yaw)
+            samples, truths[mac], where[mac] = realistic_imu(
+                tr, mac, site.duration, real_rng, phones, site_yaw
+            )
             events.extend((imu.t_ns, 1, topic, imu) for imu in samples)
             continue
         t0 = max(tr.t0_s, 0.0)
@@ -618,12 +628,16 @@ def _imu_events(
         grid_t = np.arange(math.ceil(t0 * cfg.imu_hz) / cfg.imu_hz, t1, 1.0 / cfg.imu_hz)
         for imu in _imu_samples(tr, mac, grid_t, rng, cfg):
             events.append((imu.t_ns, 1, topic, imu))
-    return events, truths
+    return events, truths, where
 
 
-def _rssi_events(site: _Site, rng: np.random.Generator, cfg: VmScenario) -> list[Event]:
+def _rssi_events(
+    site: _Site, rng: np.random.Generator, cfg: VmScenario, where: dict[str, np.ndarray]
+) -> list[Event]:
     """Each AP's scan once a second: log-distance path loss + shadowing (paper: -40 dBm at 1 m,
-    exponent 2.5, 3 dB; realistic: per-AP draws from :class:`VmRealism`'s ranges)."""
+    exponent 2.5, 3 dB; realistic: per-AP draws from :class:`VmRealism`'s ranges). A phone is
+    heard where its carrier is: in view, and (always-on phones, ``where``) out of view too,
+    behind the walls of the site (``outside_wall_db``), until it falls below -90 dBm."""
     events: list[Event] = []
     real = cfg.realism
     model = {ap: (-40.0, 2.5, 3.0) for ap, _ in site.aps}
@@ -643,12 +657,18 @@ def _rssi_events(site: _Site, rng: np.random.Generator, cfg: VmScenario) -> list
             readings = []
             for tr in site.trajs:
                 mac = site.phones.get(tr.person)
-                xy = tr.at(t)[0]
-                if mac is None or np.isnan(xy).any():
+                if mac is None:
+                    continue
+                xy, wall = tr.at(t)[0], 0.0
+                path = where.get(mac)
+                if np.isnan(xy).any() and path is not None and len(path):
+                    k = min(int(np.searchsorted(path[:, 0], t)), len(path) - 1)
+                    xy, wall = path[k, 1:], real.outside_wall_db
+                if np.isnan(xy).any():
                     continue
                 d = max(0.3, float(np.hypot(*(xy - ap_xy))))
                 at1, exponent, shadow = model[ap]
-                rssi = at1 - 10 * exponent * math.log10(d) + rng.normal(0, shadow)
+                rssi = at1 - 10 * exponent * math.log10(d) - wall + rng.normal(0, shadow)
                 if rssi > -90:
                     readings.append(RssiReading(mac, round(rssi, 1)))
             observer_m = Vec3(float(ap_xy[0]), float(ap_xy[1]), 2.0)
@@ -695,9 +715,9 @@ def simulate_vm(out: str, cfg: VmScenario) -> dict[str, int]:
     rng = np.random.default_rng(cfg.seed)
     site = _site(cfg, rng)
     events = _camera_events(site, cfg, rng)
-    imu_events, truths = _imu_events(site, cfg, rng)
+    imu_events, truths, where = _imu_events(site, cfg, rng)
     events += imu_events
-    events += _rssi_events(site, rng, cfg)
+    events += _rssi_events(site, rng, cfg, where)
     events.sort(key=lambda e: (e[0], e[1], e[2]))
     render = _Renderer(site, cfg)
     counts: dict[str, int] = {}

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from trackctl.logs.messages import TrackState
+from trackctl.logs.messages import RssiScan, TrackState
 from trackctl.vmtrack.config import Mode, VmTrackConfig
 from trackctl.vmtrack.identity import IdentityBinder
 from trackctl.vmtrack.tracker import (
@@ -60,6 +60,8 @@ class OnlineTracker:
         self.tracks: list[GroundTrack] = []
         self.frames: list[FrameOut] = []
         self.raw_points: dict[int, np.ndarray] = {}
+        self.rssi_log: list[RssiScan] = []
+        """Every RSSI scan of the log, for the offline re-tracking."""
         self.frame_count = 0
         self.frame_index = 0
         self.seconds = 0.0

@@ -48,6 +48,7 @@ from trackctl.vmtrack.identify import Identities, identify
 from trackctl.vmtrack.identity import BindingStats, IdentityBinder
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.online import FrameOut, OnlineTracker
+from trackctl.vmtrack.radio import RadioEvidence
 from trackctl.vmtrack.retrack import PhoneTrack, retrack
 from trackctl.vmtrack.scene import scene_update
 from trackctl.vmtrack.stitch import Publication, plan_publication
@@ -209,6 +210,7 @@ def _track_log(
             continue
         if msg.topic == topics.RSSI:
             online.identity.pending_rssi.append(msg.message)
+            online.rssi_log.append(msg.message)
             continue
         if frame_t is not None and msg.log_time_ns != frame_t:
             online.process_frame(frame_t, points, covs)
@@ -523,8 +525,10 @@ def _write_and_score(
     if ids is not None and cfg.retrack.enabled:
         frame_t = np.array([fr.t_ns for fr in frames], np.int64)
         points = [raw_points.get(int(t), np.empty((0, 2))) for t in frame_t]
+        model = (cfg.rssi_at_1m_dbm, cfg.path_loss_exponent)
+        radio = RadioEvidence(frame_t, online.rssi_log, model, cfg.retrack.radio)
         retracked = retrack(
-            frame_t, points, phones, ids.known, cfg.align, cfg.retrack, cfg.phones_aligned
+            frame_t, points, phones, ids.known, cfg.align, cfg.retrack, cfg.phones_aligned, radio
         )
         ids.alignments.update(_retrack_alignments(retracked))
     published: dict[str, int] = {}

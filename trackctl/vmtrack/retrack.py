@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
@@ -55,6 +55,7 @@ from scipy.spatial import cKDTree
 from trackctl.vmtrack.align import AlignConfig, best_fit, lag_grid
 from trackctl.vmtrack.identify import dead_reckoned, visual_velocity
 from trackctl.vmtrack.motion import PhoneMotion
+from trackctl.vmtrack.radio import RadioConfig, RadioEvidence
 
 __all__ = ["RetrackConfig", "PhoneTrack", "retrack"]
 
@@ -132,6 +133,11 @@ class RetrackConfig:
     """Step-length scales searched (against the nominal 0.7 m step: 0.55-0.85 m steps)."""
     search_lag_step_s: float = 0.5
     """Clock offsets are searched on this grid over the range the alignment allows."""
+    search_const_lag_step_s: float = 1.0
+    """The one-yaw search tries every yaw at clock offsets this far apart."""
+    search_candidates: int = 3
+    """The one-yaw search refines this many of its best yaws (each more than a step from the
+    others): the offset and scale under each, the cheapest kept."""
     search_starts_s: tuple[float, ...] = (-1.5, 0.0, 1.5)
     """Where the yaw search starts again when the clock offset it led to is at the edge of the
     range (the search failed there): the one whose path costs least is kept. On the real shop
@@ -157,6 +163,8 @@ class RetrackConfig:
     """Centred window of the alignment refitted from the path's detections."""
     min_align_frames: int = 10
     """Detections a refit window needs."""
+    radio: RadioConfig = field(default_factory=RadioConfig)
+    """How the phones' RSSI at the site's APs weighs in (:mod:`~trackctl.vmtrack.radio`)."""
     max_bytes: int = 2_000_000_000
     """Memory the re-tracking may take (about 6 bytes per grid cell and frame: the frames'
     distance grids and one phone's back-pointers); above it the re-tracking is skipped with a
@@ -181,6 +189,10 @@ class PhoneTrack:
     few changes with the phone's to say it is the carrier (:func:`_evidence`)."""
 
 
+_Visit = tuple[np.ndarray, "float | np.ndarray"]
+"""Door costs per cell, and the cost of a frame out of view (one for all, or per frame)."""
+
+
 class _Grid:
     """A site-sized position grid with the frames' detection-distance emissions."""
 
@@ -192,7 +204,7 @@ class _Grid:
         self.cell = cell_m
         size = ((hi - self.lo) / cell_m).astype(int) + 1
         self.shape = (int(size[1]), int(size[0]))
-        self.visit: tuple[np.ndarray, float] | None = None
+        self.visit: _Visit | None = None
         """Door costs per cell and the cost per frame out of view (None: always in view)."""
 
     def with_visits(self, points: Sequence[np.ndarray], cfg: RetrackConfig) -> _Grid:
@@ -281,6 +293,13 @@ class _Grid:
         return out
 
 
+def _reversed(away: float | np.ndarray) -> float | np.ndarray:
+    return away[::-1] if isinstance(away, np.ndarray) else away
+
+
+_STEADY = 1e6
+"""A change of yaw that a steady search does not make (the carry did not change)."""
+
 _OFFS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
 _BIG = np.float32(1e9)
 
@@ -343,7 +362,7 @@ def _layer_costs(
     turn_cost: float | None = None,
     jump_cost: float | None = None,
     free: np.ndarray | None = None,
-    visit: tuple[np.ndarray, float] | None = None,
+    visit: _Visit | None = None,
     absolute: bool = False,
 ) -> np.ndarray:
     """One pass of the Viterbi recursion over (layer, position) without back-pointers: at each
@@ -362,7 +381,8 @@ def _layer_costs(
     frac = np.zeros((n_r, 2))
     total = 0.0
     if visit is not None:
-        doors, away = visit[0][None], np.float32(visit[1])
+        doors = visit[0][None]
+        aways = np.broadcast_to(np.asarray(visit[1], np.float32), (len(walks),))
         acc += doors  # in view at the first frame: as if just come in
         before = np.zeros(n_r, np.float32)
         after = np.full(n_r, _BIG, np.float32)
@@ -370,6 +390,7 @@ def _layer_costs(
     structure = -steps.reshape(1, 3, 3)
     for k in range(len(walks)):
         if visit is not None:
+            away = aways[k]
             after = np.minimum(after, (acc + doors).min(axis=(1, 2))) + away
         moved = np.empty_like(acc)
         for r in range(n_r):
@@ -410,7 +431,7 @@ def _viterbi_path(
     emissions: Sequence[np.ndarray | float],
     u: np.ndarray,
     steps: np.ndarray,
-    visit: tuple[np.ndarray, float] | None = None,
+    visit: _Visit | None = None,
 ) -> np.ndarray:
     """The cheapest path's cell (row, col) at every frame; (-1, -1) where it is out of view.
     ``visit``: (door costs per cell, cost per frame out of view): the path is out of view,
@@ -424,10 +445,12 @@ def _viterbi_path(
     restart: dict[int, tuple[int, int]] = {}
     left = np.full(n, -1, np.int64)  # out of view after the visit from k: the cell left at k-1
     before, after = np.float32(0.0 if visit is not None else _BIG), _BIG
-    doors, away = (np.zeros(grid.shape, np.float32), _BIG) if visit is None else visit
+    doors, aways = (np.zeros(grid.shape, np.float32), _BIG) if visit is None else visit
+    aways = np.broadcast_to(np.asarray(aways, np.float32), (n,))
     if visit is not None:
         acc += doors  # in view at the first frame: as if just come in
     for k, uk in enumerate(u):
+        away = aways[k]
         if visit is not None:
             out_at = acc + doors
             j = int(np.argmin(out_at))
@@ -511,6 +534,118 @@ def _search_field(
     return grid, [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
 
 
+@dataclass
+class _Searcher:
+    """One phone's alignment search over the coarse grid (:func:`_search`)."""
+
+    frame_t: np.ndarray
+    grid: _Grid
+    emissions: Sequence[np.ndarray | float]
+    steps: np.ndarray
+    track: np.ndarray
+    cfg: RetrackConfig
+    carry_changes: np.ndarray | None
+    visit: _Visit | None
+    lags: np.ndarray
+    """Clock offsets of the offset and scale pass."""
+
+    def costs(self, walks: np.ndarray) -> np.ndarray:
+        """The whole cost of each layer's best path (``walks``: frames x layers)."""
+        return _layer_costs(
+            self.grid, self.emissions, walks, self.steps, visit=self.visit, absolute=True
+        )[-1]
+
+    def walks(self, aligned: Sequence[tuple[float, np.ndarray | complex]]) -> np.ndarray:
+        """The displacements of each (clock offset, rotation) as a layer."""
+        n = len(self.frame_t)
+        return np.column_stack(
+            [
+                _displacements(self.frame_t, self.track, lag, np.broadcast_to(a, n))
+                for lag, a in aligned
+            ]
+        )
+
+    def offset_and_scale(self, a: np.ndarray) -> tuple[float, float, float]:
+        """(cost, clock offset, scale) of the best offset and scale under rotation ``a``."""
+        scales = self.cfg.search_scales
+        costs = self.costs(self.walks([(float(lg), a * sc) for lg in self.lags for sc in scales]))
+        i = int(np.argmin(costs))
+        return float(costs[i]), float(self.lags[i // len(scales)]), float(scales[i % len(scales)])
+
+    def yaw(self, lag_s: float, scale: float, steady: bool = False) -> np.ndarray | None:
+        return _yaw_search(
+            self.frame_t,
+            self.grid,
+            self.emissions,
+            self.steps,
+            self.track,
+            lag_s,
+            scale,
+            self.cfg,
+            self.carry_changes,
+            self.visit,
+            steady,
+        )
+
+    def changes(self, lag_s: float) -> bool:
+        """Whether the phone saw its carry change within the log (at clock offset ``lag_s``)."""
+        return bool(_carry_frames(self.frame_t, self.carry_changes, lag_s)[1:].any())
+
+    def steady(self, coarse: np.ndarray) -> tuple[float, np.ndarray] | None:
+        """The one-yaw search: (clock offset, rotation per frame) or None without a walk."""
+        cfg, n = self.cfg, len(self.frame_t)
+        rot = np.exp(1j * np.radians(np.arange(0.0, 360.0, cfg.yaw_step_deg)))
+        if np.isnan(self.walks([(float(lg), 1.0 + 0j) for lg in coarse])).all():
+            return None
+        changed = any(self.changes(float(lg)) for lg in coarse)
+        found: list[tuple[float, np.ndarray]] = []
+        if not changed:
+            # every (offset, yaw) at once; the few best yaws refined
+            costs = self.costs(self.walks([(float(lg), r) for lg in coarse for r in rot]))
+            for i in _distinct_best(costs.reshape(len(coarse), len(rot)), cfg.search_candidates):
+                found.append((float(coarse[i // len(rot)]), np.full(n, rot[i % len(rot)])))
+        else:
+            # a yaw per stretch between the carry changes the phone saw, at every offset
+            for lg in coarse:
+                yaw = self.yaw(float(lg), 1.0, steady=True)
+                if yaw is not None:
+                    found.append((float(lg), yaw))
+            if not found:
+                return None
+            order = np.argsort(self.costs(self.walks(found)))
+            found = [found[i] for i in order[: cfg.search_candidates]]
+        refined = [(*self.offset_and_scale(a), a) for _, a in found]
+        _, lag, scale, a = min(refined, key=lambda c: c[0])
+        if changed:
+            yaw = self.yaw(lag, scale, steady=True)
+            if yaw is not None:
+                return lag, yaw
+        return lag, a * scale
+
+    def yaw_path(self, lag_s: float) -> tuple[float, np.ndarray] | None:
+        """The yaw-per-frame search started at clock offset ``lag_s``, started again elsewhere
+        when its offset ends at the edge of the range: (clock offset, rotation per frame)."""
+
+        def from_start(start: float) -> tuple[float, float, float] | None:
+            yaw = self.yaw(start, 1.0)
+            return None if yaw is None else self.offset_and_scale(yaw)
+
+        best = from_start(lag_s)
+        if best is None:
+            return None
+        if abs(best[1]) >= self.lags[-1] - 1e-9:
+            # an offset at the edge of the range: the yaw search from this start went wrong (a
+            # wrong yaw fits no offset, and the pass runs to the edge); start it again elsewhere
+            for start in self.cfg.search_starts_s:
+                if abs(start - lag_s) > self.cfg.search_lag_step_s:
+                    found = from_start(start)
+                    if found is not None and found[0] < best[0]:
+                        best = found
+        _, lag, scale = best
+        yaw = self.yaw(lag, scale)
+        return None if yaw is None else (lag, yaw)
+
+
 def _search(
     frame_t: np.ndarray,
     points: Sequence[np.ndarray],
@@ -519,45 +654,82 @@ def _search(
     acfg: AlignConfig,
     cfg: RetrackConfig,
     carry_changes: np.ndarray | None = None,
-    field: tuple[_Grid, list[np.ndarray | float]] | None = None,
+    space: tuple[_Grid, Sequence[np.ndarray | float]] | None = None,
+    visit: _Visit | None = None,
 ) -> tuple[float, np.ndarray] | None:
-    """The phone's alignment found from the detections alone: its yaw per frame (at the
-    nominal step and clock offset ``lag_s``), then its clock offset and step scale under that
-    yaw, then the yaw again under those (:func:`_yaw_search`); None without a walk.
-    ``field``: the search grid and its emissions (:func:`_search_field`), shared by phones."""
+    """The phone's alignment found from the detections alone (None without a walk), the
+    cheaper of two searches:
+
+    * **one yaw** (a yaw per stretch between the carry changes the phone saw): every yaw at
+      every ``search_const_lag_step_s`` clock offset at the nominal step, then the clock
+      offset and step scale under the ``search_candidates`` best yaws;
+    * **a yaw per frame** (:func:`_yaw_search`, for carry changes the phone missed): at clock
+      offset ``lag_s``, then the clock offset and step scale under that yaw, then the yaw
+      again under those; started again elsewhere when the offset ends at the edge of its
+      range.
+
+    Each is judged by the cost of its best path, the yaw path's changes of yaw included.
+    ``space``: the search grid and its emissions (:func:`_search_field`); ``visit``: the
+    phone's costs of coming into view and of being out of it (default: the grid's)."""
     n = len(frame_t)
-    grid, emissions = field or _search_field(points, cfg)
+    grid, emissions = space or _search_field(points, cfg)
     dt = float(np.median(np.diff(frame_t))) / 1e9 if n > 1 else 1.0
-    steps = _step_costs(grid.cell, dt, cfg, cfg.search_walk_sigma_mps)
-    lags = lag_grid(acfg)[:: max(int(round(cfg.search_lag_step_s / acfg.lag_step_s)), 1)]
-    scales = np.asarray(cfg.search_scales, float)
+    every = lag_grid(acfg)
+    lags = every[:: max(int(round(cfg.search_lag_step_s / acfg.lag_step_s)), 1)]
+    coarse = every[:: max(int(round(cfg.search_const_lag_step_s / acfg.lag_step_s)), 1)]
+    searcher = _Searcher(
+        frame_t,
+        grid,
+        emissions,
+        _step_costs(grid.cell, dt, cfg, cfg.search_walk_sigma_mps),
+        track,
+        cfg,
+        carry_changes,
+        grid.visit if visit is None else visit,
+        lags,
+    )
+    one = searcher.steady(coarse)
+    path = searcher.yaw_path(lag_s)
+    if one is None or path is None:
+        return one or path
+    costs = searcher.costs(searcher.walks([path, one]))
+    costs[0] += _yaw_changes_cost(path[1], cfg)
+    return (path, one)[int(np.argmin(costs))]
 
-    def from_start(start: float) -> tuple[float, float, float] | None:
-        """(cost, clock offset, scale) found from a yaw search at clock offset ``start``."""
-        yaw = _yaw_search(frame_t, grid, emissions, steps, track, start, 1.0, cfg, carry_changes)
-        if yaw is None:
-            return None
-        walks = np.column_stack(
-            [_displacements(frame_t, track, float(lag), yaw * sc) for lag in lags for sc in scales]
-        )
-        costs = _layer_costs(grid, emissions, walks, steps, visit=grid.visit, absolute=True)[-1]
-        i = int(np.argmin(costs))
-        return float(costs[i]), float(lags[i // len(scales)]), float(scales[i % len(scales)])
 
-    best = from_start(lag_s)
-    if best is None:
-        return None
-    if abs(best[1]) >= lags[-1] - 1e-9:
-        # an offset at the edge of the range: the yaw search from this start went wrong (a
-        # wrong yaw fits no offset, and the pass runs to the edge); start it again elsewhere
-        for start in cfg.search_starts_s:
-            if abs(start - lag_s) > cfg.search_lag_step_s:
-                found = from_start(start)
-                if found is not None and found[0] < best[0]:
-                    best = found
-    _, lag_s, scale = best
-    yaw = _yaw_search(frame_t, grid, emissions, steps, track, lag_s, scale, cfg, carry_changes)
-    return None if yaw is None else (lag_s, yaw)
+def _distinct_best(costs: np.ndarray, k: int) -> list[int]:
+    """The flat indices of the ``k`` cheapest (offset, yaw) cells of ``costs`` (offsets x yaws)
+    whose yaws are more than one step apart from each other's (a ring)."""
+    n_yaw = costs.shape[1]
+    best_per_yaw = costs.min(axis=0)
+    chosen: list[int] = []
+    for j in np.argsort(best_per_yaw, kind="stable"):
+        gaps = [min(abs(int(j) - c), n_yaw - abs(int(j) - c)) for c in chosen]
+        if all(g > 0 for g in gaps):
+            chosen.append(int(j))
+        if len(chosen) == k:
+            break
+    return [int(np.argmin(costs[:, j])) * n_yaw + j for j in chosen]
+
+
+def _carry_frames(
+    frame_t: np.ndarray, carry_changes: np.ndarray | None, lag_s: float
+) -> np.ndarray:
+    """Which frames follow a carry change the phone saw (phone-clock times, offset ``lag_s``)."""
+    free = np.zeros(len(frame_t), bool)
+    if carry_changes is not None and len(carry_changes):
+        at = np.searchsorted(frame_t, np.asarray(carry_changes) - int(round(lag_s * 1e9)))
+        free[at[at < len(frame_t)]] = True
+    return free
+
+
+def _yaw_changes_cost(a: np.ndarray, cfg: RetrackConfig) -> float:
+    """What :func:`_yaw_search` charges for the changes of a yaw path ``a`` (complex per frame):
+    ``yaw_step_cost`` a step, ``yaw_jump_cost`` a larger change."""
+    step = np.radians(cfg.yaw_step_deg)
+    turns = np.abs(np.angle(a[1:] * np.conj(a[:-1]))) / step
+    turns = np.round(turns[~np.isnan(turns)])
+    return float(cfg.yaw_step_cost * (turns == 1).sum() + cfg.yaw_jump_cost * (turns > 1).sum())
 
 
 def _yaw_search(
@@ -570,35 +742,43 @@ def _yaw_search(
     scale: float,
     cfg: RetrackConfig,
     carry_changes: np.ndarray | None = None,
+    visit: _Visit | None = None,
+    steady: bool = False,
 ) -> np.ndarray | None:
     """The walk's rotation per frame (complex, with ``scale``): the yaw through which the
     cheapest path over (yaw, position) passes at that frame, from a forward and a backward
     pass (each layer's best cost summed: the two passes' best cells may differ, a close
     approximation of the max-marginal at O(frames x yaws) memory); None without a walk.
     ``carry_changes``: phone-clock times at which the phone saw its carry change (any yaw
-    may follow, at no cost)."""
+    may follow, at no cost). ``steady``: the yaw changes only there."""
     n = len(frame_t)
     yaws = np.radians(np.arange(0.0, 360.0, cfg.yaw_step_deg))
     rot = np.exp(1j * yaws)
     u = _displacements(frame_t, track, lag_s, np.full(n, scale + 0j))
     if np.isnan(u).all():
         return None
-    free = np.zeros(n, bool)
-    if carry_changes is not None and len(carry_changes):
-        at = np.searchsorted(frame_t, np.asarray(carry_changes) - int(round(lag_s * 1e9)))
-        free[at[at < n]] = True
-    costs = (cfg.yaw_step_cost, cfg.yaw_jump_cost)
-    forward = _layer_costs(
-        grid, emissions, u[:, None] * rot[None, :], steps, *costs, free, grid.visit
-    )
+    free = _carry_frames(frame_t, carry_changes, lag_s)
+    costs = (_STEADY, _STEADY) if steady else (cfg.yaw_step_cost, cfg.yaw_jump_cost)
+    visit = grid.visit if visit is None else visit
+    forward = _layer_costs(grid, emissions, u[:, None] * rot[None, :], steps, *costs, free, visit)
     # backward: frame k+1 -> k moves by -u[k+1] (a frame after a gap starts afresh), through
     # the transition the forward pass takes into k+1
     u_back = np.r_[0j, -u[:0:-1]]
     free_back = np.r_[False, free[:0:-1]]
+    visit_back = None if visit is None else (visit[0], _reversed(visit[1]))
     backward = _layer_costs(
-        grid, emissions[::-1], u_back[:, None] * rot[None, :], steps, *costs, free_back, grid.visit
+        grid, emissions[::-1], u_back[:, None] * rot[None, :], steps, *costs, free_back, visit_back
     )[::-1]
-    choice = np.argmin(forward + backward, axis=1)
+    both = forward + backward
+    if steady:
+        # one yaw per stretch between carry changes: the layer whose paths cost least over it
+        # (frame by frame, ties where the path is out of view would pick at random)
+        seg = np.cumsum(free)
+        sums = np.zeros((int(seg[-1]) + 1, len(rot)))
+        np.add.at(sums, seg, both)
+        choice = np.argmin(sums, axis=1)[seg]
+    else:
+        choice = np.argmin(both, axis=1)
     return scale * rot[choice]
 
 
@@ -747,6 +927,21 @@ def _evidence(
     return float(gain / (2 * cfg.evidence_sigma_mps**2))
 
 
+def _with_radio(
+    radio: RadioEvidence | None,
+    mid: str,
+    grid: _Grid,
+    emissions: Sequence[np.ndarray | float],
+) -> tuple[Sequence[np.ndarray | float], _Visit | None]:
+    """The frames' emissions and the visit's costs of one phone: with its RSSI when there is."""
+    if not radio or not radio.cfg.enabled:
+        return emissions, grid.visit
+    visit = grid.visit
+    if visit is not None:
+        visit = (visit[0], radio.away(mid, float(np.mean(visit[1]))))
+    return radio.emissions(mid, grid, emissions), visit
+
+
 def retrack(
     frame_t: np.ndarray,
     points: Sequence[np.ndarray],
@@ -755,12 +950,14 @@ def retrack(
     acfg: AlignConfig,
     cfg: RetrackConfig,
     aligned: bool = False,
+    radio: RadioEvidence | None = None,
 ) -> dict[str, PhoneTrack]:
     """Each phone's carrier re-tracked through the raw detections ``points`` (one (n, 2) array
     per frame at ``frame_t``). ``start``: a first clock offset and ``a`` per frame per phone (the
     chains' alignment; only the offset is used to start). Phones without a walk
     are left out. ``aligned``: the phones' alignment is declared (heading = walk, one clock):
-    ``start`` is used as it is, neither searched nor refitted."""
+    ``start`` is used as it is, neither searched nor refitted. ``radio``: the phones' RSSI at
+    the site's APs (:mod:`~trackctl.vmtrack.radio`), weighed with the detections."""
     out: dict[str, PhoneTrack] = {}
     n = len(frame_t)
     if n < 2:
@@ -781,28 +978,32 @@ def retrack(
     dt = float(np.median(np.diff(frame_t))) / 1e9
     steps = _step_costs(grid.cell, dt, cfg)
     emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
-    field: tuple[_Grid, list[np.ndarray | float]] | None = None
+    space: tuple[_Grid, list[np.ndarray | float]] | None = None
     for mid in sorted(phones):
         track = dead_reckoned(phones[mid])
         if len(track) < 2:
             continue
         lag, a0 = start.get(mid, (0.0, np.full(n, 1.0 + 0j)))
+        phone_em, visit = _with_radio(radio, mid, grid, emissions)
         # the nominal step (scale 1) to start: in a crowd the chains' scale is another
         # walker's as often as not, and the refit finds the phone's own
         if aligned:
             a = a0
         else:
-            if field is None:
-                field = _search_field(points, cfg)
+            if space is None:
+                space = _search_field(points, cfg)
             changes = phones[mid].carry_changes
-            found = _search(frame_t, points, track, lag, acfg, cfg, changes, field)
+            coarse_em, coarse_visit = _with_radio(radio, mid, *space)
+            found = _search(
+                frame_t, points, track, lag, acfg, cfg, changes, (space[0], coarse_em), coarse_visit
+            )
             if found is None:
                 continue
             lag, a = found
         passes = 0 if aligned else cfg.refine_passes
         for p in range(passes + 1):
             u = _displacements(frame_t, track, lag, a)
-            cells = _viterbi_path(grid, emissions, u, steps, grid.visit)
+            cells = _viterbi_path(grid, phone_em, u, steps, visit)
             xy, seen, hits, withheld = _publish(frame_t, points, grid, cells, u, cfg)
             if p == passes:
                 break
