@@ -108,3 +108,31 @@ def test_preset_checks_through_the_cli(tmp_path: Path) -> None:
     truth = LogReader(out).metadata()["phone_truth"]
     offset = float(truth["02:00:00:00:00:01/clock_offset_s"])
     assert abs(offset) <= 0.5
+
+
+def test_always_on_phones_are_heard_out_of_view_and_fainter(tmp_path: Path) -> None:
+    # a person crosses a corridor from 20 s to 40 s of a 60 s log (somebody else stands there
+    # all along); their phone is on all along
+    rows = ["t_s,id,x_m,y_m"] + [f"{20 + k / 2},p,{k * 0.6},3.0" for k in range(41)]
+    rows += [f"{k},q,12.0,1.0" for k in range(61)]
+    csv = tmp_path / "walk.csv"
+    csv.write_text("\n".join(rows) + "\n")
+    log = tmp_path / "vm.mcap"
+    simulate_vm(str(log), VmScenario(trajectories=str(csv), phones=("p",), duration_s=60, seed=1))
+    heard: dict[str, list[tuple[float, float]]] = {"in": [], "out": []}
+    for m in LogReader(log).messages(["/rssi"]):
+        t = m.log_time_ns / 1e9
+        for r in m.message.readings:
+            heard["in" if 20 <= t <= 40 else "out"].append((t, r.rssi_dbm))
+    assert heard["in"] and heard["out"]
+    # heard before and after the visit, fainter (behind walls, walking away)
+    assert min(t for t, _ in heard["out"]) < 15 and max(t for t, _ in heard["out"]) > 45
+    assert np.median([v for _, v in heard["out"]]) < np.median([v for _, v in heard["in"]]) - 5
+    # the paper's phones report only in view
+    paper = tmp_path / "paper.mcap"
+    sc = VmScenario(trajectories=str(csv), phones=("p",), duration_s=60, seed=1, preset="paper")
+    simulate_vm(str(paper), sc)
+    times = [
+        m.log_time_ns / 1e9 for m in LogReader(paper).messages(["/rssi"]) if m.message.readings
+    ]
+    assert times and min(times) >= 19 and max(times) <= 41

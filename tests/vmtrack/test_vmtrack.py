@@ -245,3 +245,14 @@ def test_no_retrack_through_the_cli(office_log: Path, tmp_path: Path) -> None:
     (report,) = [m.message for m in LogReader(out).messages(["/metrics/vm-track"])]
     assert report.params["retrack"] is False
     assert json.loads(result.stdout)["idf1"] > 0.85
+
+
+def test_no_rssi_through_the_cli(office_log: Path, tmp_path: Path) -> None:
+    out = tmp_path / "o.mcap"
+    result = CliRunner().invoke(
+        app, ["vm-track", str(office_log), "--out", str(out), "--no-rssi", "--json", "-q"]
+    )
+    assert result.exit_code == 0, result.output
+    (report,) = [m.message for m in LogReader(out).messages(["/metrics/vm-track"])]
+    assert report.params["rssi"] is False and report.params["retrack"] is True
+    assert json.loads(result.stdout)["idf1"] > 0.85

@@ -67,6 +67,14 @@ def vm_track(
             "and stretches are published on evidence of shared turns and stops).",
         ),
     ] = "one",
+    rssi: Annotated[
+        bool,
+        typer.Option(
+            "--rssi/--no-rssi",
+            help="Re-tracking weighs the phones' RSSI at the APs (the scans' AP positions): a "
+            "phone no AP hears is out of view, its level says roughly how far from the AP.",
+        ),
+    ] = True,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     fail_if: Annotated[
         str | None,
@@ -77,6 +85,7 @@ def vm_track(
     """VM-Tracking: identify and track people by fusing detections with phone motion sensors."""
     from trackctl.errors import InputError
     from trackctl.vmtrack import FrameConfig, Mode, Source, VmTrackConfig, VmTrackProcessor
+    from trackctl.vmtrack.radio import RadioConfig
     from trackctl.vmtrack.retrack import RetrackConfig
 
     mode_value = parse_choice(Mode, mode, "--mode")
@@ -85,7 +94,7 @@ def vm_track(
         raise InputError(f"--search {search!r}: expected predicted or full")
     if visits not in ("one", "many"):
         raise InputError(f"--visits {visits!r}: expected one or many")
-    retrack_cfg = RetrackConfig(enabled=retrack)
+    retrack_cfg = RetrackConfig(enabled=retrack, radio=RadioConfig(enabled=rssi))
     if visits == "many":
         retrack_cfg = replace(retrack_cfg, away_cost=None)
     proc = VmTrackProcessor(

@@ -278,6 +278,7 @@ def run(
             "mode": inputs.mode.value,
             "smooth": cfg.smooth,
             "retrack": cfg.retrack.enabled,
+            "rssi": cfg.retrack.radio.enabled,
             "merge_m": cfg.merge_m,
             "bind_frames": cfg.bind_frames,
             "reject_mps": cfg.reject_mps,
