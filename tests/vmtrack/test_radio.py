@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from trackctl.logs.messages import RssiReading, RssiScan, Vec3
-from trackctl.vmtrack.radio import RadioConfig, RadioEvidence
+from trackctl.vmtrack.radio import PathLoss, RadioConfig, RadioEvidence, fit_path_loss
 from trackctl.vmtrack.retrack import _Grid
 
 MODEL = (-40.0, 2.5)
@@ -82,3 +82,81 @@ def test_emissions_with_radio_add_the_scans_to_their_frames_and_reverse():
     back = em[::-1]
     assert back[0] is base[2] and back[2] is base[0]
     np.testing.assert_allclose(back[1], em[1])
+
+
+def _walk_past_aps(
+    aps: dict[str, tuple[float, float, float, float]],
+    wrong_share: float = 0.0,
+    seed: int = 0,
+) -> tuple[list[RssiScan], dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """Three carriers walking a 16 x 12 m room for 200 s, heard once a second by each AP
+    (id -> x, y, level at 1 m, exponent; 4 dB shadowing); ``wrong_share`` of the placements
+    are the next walker's position (a wrong identity)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(200) * 1_000_000_000
+    walks = {}
+    for i in range(3):
+        phase = rng.uniform(0, 2 * np.pi)
+        s = np.arange(200) / 15.0 + phase
+        walks[f"m{i}"] = np.column_stack([8 + 7 * np.cos(s + i), 6 + 5 * np.sin(1.3 * s)])
+    scans = []
+    for k, tk in enumerate(t):
+        for ap, (x, y, at1, n) in aps.items():
+            heard = {}
+            for mid, xy in walks.items():
+                d = max(0.3, math.hypot(xy[k, 0] - x, xy[k, 1] - y))
+                heard[mid] = at1 - 10 * n * math.log10(d) + rng.normal(0, 4.0)
+            readings = tuple(RssiReading(m, r) for m, r in heard.items())
+            scans.append(RssiScan(int(tk), ap, readings, Vec3(x, y, 2.0)))
+    placed = {}
+    for i, (mid, xy) in enumerate(walks.items()):
+        xy = xy.copy()
+        wrong = rng.random(len(xy)) < wrong_share
+        xy[wrong] = walks[f"m{(i + 1) % 3}"][wrong]
+        placed[mid] = (t, xy)
+    return scans, placed
+
+
+def test_each_aps_path_loss_is_fitted_from_where_the_carriers_were():
+    aps = {"a": (0.0, 6.0, -47.0, 3.2), "b": (16.0, 0.0, -33.0, 2.1)}
+    scans, placed = _walk_past_aps(aps)
+    fit = fit_path_loss(scans, placed, MODEL, RadioConfig())
+    for ap, (_, _, at1, n) in aps.items():
+        assert fit[ap].at1_dbm == pytest.approx(at1, abs=1.5)
+        assert fit[ap].exponent == pytest.approx(n, abs=0.15)
+        assert 3.0 <= fit[ap].sigma_db < 5.0  # the shadowing, shrunk a little towards 6 dB
+        assert fit[ap].readings == 600
+
+
+def test_a_fit_survives_a_tenth_of_the_carriers_placed_on_somebody_else():
+    # a wrong placement's distance is another walker's: it dilutes the slope (an error in the
+    # variable, not an outlier of the reading); a tenth of them, by a little
+    aps = {"a": (0.0, 6.0, -47.0, 3.2)}
+    for seed in (1, 2):
+        scans, placed = _walk_past_aps(aps, wrong_share=0.1, seed=seed)
+        fit = fit_path_loss(scans, placed, MODEL, RadioConfig())["a"]
+        assert fit.at1_dbm == pytest.approx(-47.0, abs=1.5)
+        assert fit.exponent == pytest.approx(3.2, abs=0.15)
+
+
+def test_an_ap_without_placed_readings_keeps_the_prior():
+    scans, _ = _walk_past_aps({"a": (0.0, 6.0, -47.0, 3.2)})
+    fit = fit_path_loss(scans, {}, MODEL, RadioConfig())
+    assert fit == {"a": PathLoss(MODEL[0], MODEL[1], RadioConfig().sigma_db, 0)}
+    # a placement far in time from every scan does not count
+    far = {"m0": (np.array([10**15]), np.array([[1.0, 1.0]]))}
+    assert fit_path_loss(scans, far, MODEL, RadioConfig())["a"].readings == 0
+
+
+def test_fitted_evidence_weighs_each_ap_by_its_own_model():
+    frame_t = np.arange(3) * 1_000_000_000
+    loud = PathLoss(-30.0, 2.0, 3.0, 100)
+    level = loud.at1_dbm - 20 * math.log10(5.0)  # 5 m from the loud AP
+    scans = [_scan(1_000_000_000, {"m": level})]
+    grid = _room()
+    fitted = RadioEvidence(frame_t, scans, {"ap-0": loud}, RadioConfig()).cost("m", grid, 1)
+    default = RadioEvidence(frame_t, scans, MODEL, RadioConfig()).cost("m", grid, 1)
+    assert fitted is not None and default is not None
+    assert _at(grid, fitted, 5.0, 6.0) < _at(grid, fitted, 2.0, 6.0) - 1.0
+    # the default model puts the same level much nearer the AP
+    assert _at(grid, default, 2.0, 6.0) < _at(grid, default, 5.0, 6.0)

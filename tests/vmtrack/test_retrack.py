@@ -23,6 +23,8 @@ from trackctl.vmtrack.retrack import (
     _search,
     _step_costs,
     _viterbi_path,
+    _yaw_changes_cost,
+    _yaw_choice,
     retrack,
 )
 
@@ -383,3 +385,53 @@ def test_a_carry_change_the_phone_saw_is_searched_as_two_steady_yaws():
     err = np.degrees(np.angle(a * np.exp(-1j * np.radians(yaw))))
     for half in (slice(0, n // 2 - 5), slice(n // 2 + 5, n)):
         assert np.median(np.abs(err[half])) <= CFG.yaw_step_deg
+
+
+def test_a_yaw_path_changes_once_where_two_yaws_tie():
+    # forward+backward costs of 4 yaws over 40 frames: yaw 1 before frame 15, yaw 3 after 25;
+    # between, the two tie to within noise, and each frame's best would flicker
+    rng = np.random.default_rng(3)
+    k = np.arange(40)
+    both = np.full((40, 4), 500.0)
+    both[:, 1] = 100 + np.clip(k - 25, 0, None) * 10 + rng.uniform(0, 2, 40)
+    both[:, 3] = 100 + np.clip(15 - k, 0, None) * 10 + rng.uniform(0, 2, 40)
+    flicker = np.argmin(both, axis=1)
+    assert np.count_nonzero(np.diff(flicker)) > 1  # the frame-by-frame choice flickers
+    choice = _yaw_choice(both, (CFG.yaw_step_cost, CFG.yaw_jump_cost), np.zeros(40, bool))
+    assert np.count_nonzero(np.diff(choice)) == 1
+    assert choice[0] == 1 and choice[-1] == 3 and 15 <= int(np.argmax(choice == 3)) <= 26
+
+
+def test_a_yaw_change_the_phone_saw_is_not_charged():
+    a = np.exp(1j * np.radians(np.r_[np.full(10, 30.0), np.full(10, -120.0)]))
+    free = np.zeros(20, bool)
+    assert _yaw_changes_cost(a, CFG, free) == CFG.yaw_jump_cost
+    free[10] = True  # the phone saw its carry change into frame 10
+    assert _yaw_changes_cost(a, CFG, free) == 0.0
+
+
+def test_each_aps_calibration_is_fitted_where_the_paths_put_the_carriers():
+    # the site's AP is 10 dB louder at 1 m than the processor's default model, with a steeper
+    # exponent; the re-tracking learns both from the carriers it followed
+    frame_t, points, people = _scene(21, n_people=6, seconds=90)
+    rng = np.random.default_rng(22)
+    phones, scans = {}, []
+    for i in (0, 1, 2):
+        phone = _phone(people[i], frame_t, 60.0 * i)
+        phone.mid = f"m{i}"
+        phones[f"m{i}"] = phone
+    for k in range(0, len(frame_t), int(FPS)):
+        readings = []
+        for i in (0, 1, 2):
+            d = max(0.3, float(np.hypot(*(people[i][k] - (0.0, 6.0)))))
+            level = -30.0 - 32 * math.log10(d) + rng.normal(0, 3.0)
+            readings.append(RssiReading(f"m{i}", round(level, 1)))
+        scans.append(RssiScan(int(frame_t[k]), "ap-0", tuple(readings), Vec3(0.0, 6.0, 2.0)))
+    radio = RadioEvidence(frame_t, scans, (-40.0, 2.5), CFG.radio)
+    out = retrack(frame_t, points, phones, {}, AlignConfig(), CFG, radio=radio)
+    fit = out.calibration["ap-0"]
+    assert fit.at1_dbm == pytest.approx(-30.0, abs=2.0)
+    assert fit.exponent == pytest.approx(3.2, abs=0.25)
+    assert fit.readings > 200
+    for i in (0, 1, 2):
+        assert _share_on(out[f"m{i}"].xy, people[i], len(frame_t)) > 0.8

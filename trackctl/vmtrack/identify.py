@@ -128,6 +128,8 @@ class Identities:
     known: dict[str, tuple[float, np.ndarray]] = field(default_factory=dict)
     """MID -> (clock offset s, ``a`` per frame: device-to-walk rotation and step scale, NaN
     where not fitted): each phone's alignment over time, as its path implies."""
+    placed: dict[str, list[tuple[int, float, float]]] = field(default_factory=dict)
+    """MID -> (frame ns, x, y) where the identity put its carrier, in time order."""
 
 
 @dataclass
@@ -348,7 +350,9 @@ def identify(
             if c not in owner or score < owner[c][0]:
                 owner[c] = (score, mid)
         for c, (_, mid) in owner.items():
-            out.mid_at[(keys[c], int(frame_t[fi]))] = mid
+            t_ns = int(frame_t[fi])
+            out.mid_at[(keys[c], t_ns)] = mid
+            out.placed.setdefault(mid, []).append((t_ns, *chains[c].xy_at(t_ns)))
     out.ambiguous_frames = int(ambiguous.sum())
     out.alignments = _alignments(out, chains, walks, lags, lag_ns, acfg, half_v)
     for mid in sorted(phones):

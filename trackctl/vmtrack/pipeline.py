@@ -49,7 +49,7 @@ from trackctl.vmtrack.identity import BindingStats, IdentityBinder
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.online import FrameOut, OnlineTracker
 from trackctl.vmtrack.radio import RadioEvidence
-from trackctl.vmtrack.retrack import PhoneTrack, retrack
+from trackctl.vmtrack.retrack import PhoneTrack, Retracked, retrack
 from trackctl.vmtrack.scene import scene_update
 from trackctl.vmtrack.stitch import Publication, plan_publication
 from trackctl.vmtrack.tracker import GroundTrack, TrackerConfig
@@ -522,7 +522,7 @@ def _write_and_score(
         if offline
         else None
     )
-    retracked: dict[str, PhoneTrack] = {}
+    retracked = Retracked()
     if ids is not None and cfg.retrack.enabled:
         frame_t = np.array([fr.t_ns for fr in frames], np.int64)
         points = [raw_points.get(int(t), np.empty((0, 2))) for t in frame_t]
@@ -626,7 +626,21 @@ def _write_and_score(
         "wrong_binding_s": round(wrong_s, 3) if mode is Mode.VM and people else None,
         **_no_truth_metrics(online, published, coasting, shown, plan),
         **_identity_metrics(ids, stats, phones, retracked),
+        **_radio_metrics(retracked),
     }
+
+
+def _radio_metrics(retracked: Retracked) -> dict[str, float | int | None]:
+    """Each AP's path loss as the re-tracking fitted it (a site's calibration, from the log)."""
+    out: dict[str, float | int | None] = {}
+    for ap, model in sorted(retracked.calibration.items()):
+        out[f"rssi_at_1m_dbm/{ap}"] = round(model.at1_dbm, 1)
+        out[f"path_loss_exponent/{ap}"] = round(model.exponent, 2)
+        out[f"rssi_sigma_db/{ap}"] = round(model.sigma_db, 1)
+        out[f"rssi_readings/{ap}"] = model.readings
+    if retracked.calibration:
+        out["searched_again"] = len(retracked.searched_again)
+    return out
 
 
 def _retrack_alignments(retracked: dict[str, PhoneTrack]) -> dict[str, Alignment]:

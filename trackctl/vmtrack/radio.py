@@ -19,15 +19,23 @@ out-of-view state (negative log-likelihoods, robust: a Huber loss on the level):
   ``-log p_hear(d)``; out of view: ``away_heard_cost``;
 * not heard, in view at ``d``: ``-log(1 - p_hear(d))``; out of view: nothing,
 
-with ``p_hear(d) = hear_prob * Phi((mu(d) - floor_dbm) / sigma_db)``. ``sigma_db`` covers the
-shadowing (the paper's 3 dB) and each AP's calibration, which the processor does not know (a
-site calibrates its APs to within a few dB: :class:`~trackctl.sim.vm.VmRealism` draws them
-7 dB either side of the default).
+with ``p_hear(d) = hear_prob * Phi((mu(d) - floor_dbm) / sigma_db)``.
+
+**Each AP's calibration is fitted from the log** (:func:`fit_path_loss`). A site's APs differ
+from any default model: antenna gain, height, walls and furniture move the level at 1 m by
+5-10 dB and the exponent between 1.8 and 4 indoors (Rappaport, *Wireless Communications*,
+table 4.2; :class:`~trackctl.sim.vm.VmRealism` draws -47..-33 dBm and 2.0-3.5). A 7 dB error at
+10 m pulls a path 5 m off in a closed room where every phone is always heard. Where the
+offline identity placed a carrier, the readings of its phone against its distance to each AP
+give that AP's level at 1 m and exponent (a robust regression with the check-points' model as
+the prior, so an AP heard little keeps about the default), and the spread of the residuals
+replaces ``sigma_db`` (shrunk towards it by the readings' number).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+import math
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, overload
 
@@ -39,7 +47,7 @@ from trackctl.logs.messages import RssiScan
 if TYPE_CHECKING:
     from trackctl.vmtrack.retrack import _Grid
 
-__all__ = ["RadioConfig", "RadioEvidence"]
+__all__ = ["PathLoss", "RadioConfig", "RadioEvidence", "fit_path_loss"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,6 +69,117 @@ class RadioConfig:
     away_heard_cost: float = 1.5
     """Cost of a reading while the carrier is out of view: -log(0.2), an AP hears a phone whose
     carrier is out of view a fifth of the time (they are just outside, by a door)."""
+    fit: bool = True
+    """Fit each AP's path loss from the log (:func:`fit_path_loss`); off, every AP has the
+    check-points' model and ``sigma_db``."""
+    fit_prior_db: float = 8.0
+    """Prior std of an AP's level at 1 m about the check-points' model."""
+    fit_prior_exponent: float = 0.7
+    """Prior std of an AP's exponent about the check-points' model."""
+    fit_prior_readings: float = 30.0
+    """A fitted AP's ``sigma_db`` is its residuals' spread shrunk towards ``sigma_db`` as if
+    from this many readings."""
+    fit_min_db: float = 3.0
+    """The fitted ``sigma_db`` is kept at least this (the paper's shadowing): the placed
+    positions fit their own readings."""
+    fit_gap_s: float = 0.3
+    """A reading counts for the fit when its carrier was placed within this time of it."""
+
+
+@dataclass(frozen=True, slots=True)
+class PathLoss:
+    """One AP's log-distance path loss: ``at1_dbm - 10 exponent log10(d)``, spread ``sigma_db``."""
+
+    at1_dbm: float
+    exponent: float
+    sigma_db: float
+    readings: int = 0
+    """Readings it was fitted from (0: the default)."""
+
+    def mean(self, d: np.ndarray) -> np.ndarray:
+        """Expected level (dBm) at distances ``d`` (m)."""
+        return self.at1_dbm - 10 * self.exponent * np.log10(d)
+
+
+def fit_path_loss(
+    scans: Sequence[RssiScan],
+    placed: Mapping[str, tuple[np.ndarray, np.ndarray]],
+    prior: tuple[float, float],
+    cfg: RadioConfig,
+) -> dict[str, PathLoss]:
+    """Each AP's path loss, fitted from the readings of phones whose carrier was placed.
+
+    Args:
+        scans: The log's scans (those without an AP position are left out).
+        placed: MID -> (times ns, sorted; positions (n, 2), m) where its carrier was placed.
+        prior: The check-points' model (RSSI at 1 m, exponent), the fit's prior mean.
+        cfg: The prior's spread and the fit's limits.
+
+    Returns:
+        AP id -> its model; every AP with a position has one (the prior's when nothing was
+        heard from a placed carrier).
+
+    A maximum a-posteriori fit, robust: Huber-weighted least squares (iteratively reweighted,
+    the weights from a MAD scale), Gaussian priors on both parameters. Readings whose expected
+    level is within ``2 sigma_db`` of ``floor_dbm`` are left out: only the loud ones of those
+    would be heard (censored), biasing the fit upwards.
+    """
+    rows: dict[str, list[tuple[float, float]]] = {}
+    pos: dict[str, tuple[float, float]] = {}
+    for scan in scans:
+        p = scan.observer_position_m
+        if p is None:
+            continue
+        pos[scan.observer] = (float(p.x), float(p.y))
+        for r in scan.readings:
+            got = placed.get(r.eid)
+            if got is None or not len(got[0]):
+                continue
+            times, xy = got
+            k = int(np.searchsorted(times, scan.t_ns))
+            best = min(
+                (j for j in (k - 1, k) if 0 <= j < len(times)),
+                key=lambda j: abs(int(times[j]) - scan.t_ns),
+            )
+            if abs(int(times[best]) - scan.t_ns) > cfg.fit_gap_s * 1e9:
+                continue
+            d = max(0.3, math.hypot(xy[best, 0] - p.x, xy[best, 1] - p.y))
+            rows.setdefault(scan.observer, []).append((-10 * math.log10(d), float(r.rssi_dbm)))
+    out: dict[str, PathLoss] = {}
+    for ap in pos:
+        data = np.array(rows.get(ap, []), float).reshape(-1, 2)
+        out[ap] = _fit_one(data, prior, cfg)
+    return out
+
+
+def _fit_one(data: np.ndarray, prior: tuple[float, float], cfg: RadioConfig) -> PathLoss:
+    """One AP's MAP fit of ``r = at1 + exponent * x`` (``x = -10 log10 d``); see
+    :func:`fit_path_loss`. A 2-parameter IRLS: written out, not worth a dependency."""
+    theta0 = np.array(prior, float)
+    keep = theta0[0] + theta0[1] * data[:, 0] > cfg.floor_dbm + 2 * cfg.sigma_db
+    data = data[keep]
+    if not len(data):
+        return PathLoss(prior[0], prior[1], cfg.sigma_db)
+    design = np.column_stack([np.ones(len(data)), data[:, 0]])
+    prec0 = np.diag([cfg.fit_prior_db**-2, cfg.fit_prior_exponent**-2])
+    theta, scale = theta0, cfg.sigma_db
+    w = np.ones(len(data))
+    for _ in range(30):
+        # weights are per reading; the prior is in units of the current scale
+        a = design.T @ (design * w[:, None]) / scale**2 + prec0
+        b = design.T @ (data[:, 1] * w) / scale**2 + prec0 @ theta0
+        new = np.linalg.solve(a, b)
+        res = data[:, 1] - design @ new
+        scale = max(1.4826 * float(np.median(np.abs(res - np.median(res)))), 1.0)
+        z = np.abs(res) / scale
+        w = np.where(z <= cfg.huber, 1.0, cfg.huber / np.maximum(z, 1e-9))
+        done = bool(np.allclose(new, theta, atol=1e-4))
+        theta = new
+        if done:
+            break
+    n0, n = cfg.fit_prior_readings, len(data)
+    sigma = math.sqrt((n * scale**2 + n0 * cfg.sigma_db**2) / (n + n0))
+    return PathLoss(float(theta[0]), float(theta[1]), max(sigma, cfg.fit_min_db), n)
 
 
 class RadioEvidence:
@@ -69,7 +188,9 @@ class RadioEvidence:
     Args:
         frame_t: The frames' times, ns (a scan counts at its nearest frame).
         scans: The log's scans; those without an AP position are left out.
-        model: The APs' path loss: RSSI at 1 m (dBm) and exponent.
+        model: The APs' path loss: RSSI at 1 m (dBm) and exponent for all, with ``sigma_db``;
+            or one :class:`PathLoss` per AP id (:func:`fit_path_loss`; an AP left out has the
+            first form's default, the check-points' model).
         cfg: Its weights.
     """
 
@@ -77,13 +198,18 @@ class RadioEvidence:
         self,
         frame_t: np.ndarray,
         scans: Sequence[RssiScan],
-        model: tuple[float, float],
+        model: tuple[float, float] | Mapping[str, PathLoss],
         cfg: RadioConfig,
     ) -> None:
         self.cfg = cfg
-        self.model = model
+        self._frame_t, self._scans = frame_t, scans
+        default = PathLoss(-40.0, 2.5, cfg.sigma_db)
+        if isinstance(model, tuple):
+            default, model = PathLoss(model[0], model[1], cfg.sigma_db), {}
+        self.default = default
+        self.model: dict[str, PathLoss] = dict(model)
         self.n = len(frame_t)
-        self.by_frame: dict[int, list[tuple[tuple[float, float], dict[str, float]]]] = {}
+        self.by_frame: dict[int, list[tuple[PathLoss, tuple[float, float], dict[str, float]]]] = {}
         if not len(frame_t):
             return
         for scan in scans:
@@ -94,18 +220,26 @@ class RadioEvidence:
             if k > 0 and (k == len(frame_t) or scan.t_ns - frame_t[k - 1] < frame_t[k] - scan.t_ns):
                 k -= 1
             heard = {r.eid: float(r.rssi_dbm) for r in scan.readings}
-            self.by_frame.setdefault(k, []).append(((float(pos.x), float(pos.y)), heard))
+            ap = self.model.get(scan.observer, default)
+            self.by_frame.setdefault(k, []).append((ap, (float(pos.x), float(pos.y)), heard))
         self._dist: dict[tuple[int, tuple[float, float]], np.ndarray] = {}
 
     def __bool__(self) -> bool:
         return bool(self.by_frame)
+
+    def calibrated(self, placed: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> RadioEvidence:
+        """The same scans under each AP's path loss fitted where the carriers were ``placed``
+        (:func:`fit_path_loss`, with this evidence's default model as the prior)."""
+        prior = (self.default.at1_dbm, self.default.exponent)
+        fitted = fit_path_loss(self._scans, placed, prior, self.cfg)
+        return RadioEvidence(self._frame_t, self._scans, fitted, self.cfg)
 
     def away(self, mid: str, base: float) -> np.ndarray:
         """The cost of each frame out of view: ``base`` plus ``away_heard_cost`` per AP that
         heard the phone."""
         out = np.full(self.n, base, np.float32)
         for k, seen in self.by_frame.items():
-            out[k] += self.cfg.away_heard_cost * sum(mid in heard for _, heard in seen)
+            out[k] += self.cfg.away_heard_cost * sum(mid in heard for _, _, heard in seen)
         return out
 
     def emissions(
@@ -121,16 +255,15 @@ class RadioEvidence:
         if not seen:
             return None
         cfg = self.cfg
-        at1, exponent = self.model
         total = np.zeros(grid.shape, np.float32)
-        for ap, heard in seen:
-            mu = at1 - 10 * exponent * np.log10(self._distance(grid, ap))
-            p = cfg.hear_prob * ndtr((mu - cfg.floor_dbm) / cfg.sigma_db)
+        for model, ap, heard in seen:
+            mu = model.mean(self._distance(grid, ap))
+            p = cfg.hear_prob * ndtr((mu - cfg.floor_dbm) / model.sigma_db)
             r = heard.get(mid)
             if r is None:
                 total += -np.log1p(-p)
                 continue
-            z = np.abs(r - mu) / cfg.sigma_db
+            z = np.abs(r - mu) / model.sigma_db
             h = cfg.huber
             total += np.where(z < h, 0.5 * z * z, h * z - 0.5 * h * h) - np.log(p)
         return total

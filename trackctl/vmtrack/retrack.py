@@ -55,9 +55,9 @@ from scipy.spatial import cKDTree
 from trackctl.vmtrack.align import AlignConfig, best_fit, lag_grid
 from trackctl.vmtrack.identify import dead_reckoned, visual_velocity
 from trackctl.vmtrack.motion import PhoneMotion
-from trackctl.vmtrack.radio import RadioConfig, RadioEvidence
+from trackctl.vmtrack.radio import PathLoss, RadioConfig, RadioEvidence
 
-__all__ = ["RetrackConfig", "PhoneTrack", "retrack"]
+__all__ = ["RetrackConfig", "PhoneTrack", "Retracked", "retrack"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,6 +165,9 @@ class RetrackConfig:
     """Detections a refit window needs."""
     radio: RadioConfig = field(default_factory=RadioConfig)
     """How the phones' RSSI at the site's APs weighs in (:mod:`~trackctl.vmtrack.radio`)."""
+    research_share: float = 0.1
+    """With the APs' calibration fitted after the first pass, a phone whose path it moves on
+    this share of the frames is searched again (its alignment was found under a wrong model)."""
     max_bytes: int = 2_000_000_000
     """Memory the re-tracking may take (about 6 bytes per grid cell and frame: the frames'
     distance grids and one phone's back-pointers); above it the re-tracking is skipped with a
@@ -187,6 +190,17 @@ class PhoneTrack:
     withheld_s: float = 0.0
     """Seconds of the path on detections not published: stretches whose motion shares too
     few changes with the phone's to say it is the carrier (:func:`_evidence`)."""
+
+
+class Retracked(dict[str, PhoneTrack]):
+    """Each phone's re-tracked carrier (MID -> track), with what the re-tracking fitted of the
+    site: each AP's path loss (empty without RSSI or its fit), and the phones searched again
+    under it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.calibration: dict[str, PathLoss] = {}
+        self.searched_again: list[str] = []
 
 
 _Visit = tuple[np.ndarray, "float | np.ndarray"]
@@ -693,7 +707,7 @@ def _search(
     if one is None or path is None:
         return one or path
     costs = searcher.costs(searcher.walks([path, one]))
-    costs[0] += _yaw_changes_cost(path[1], cfg)
+    costs[0] += _yaw_changes_cost(path[1], cfg, _carry_frames(frame_t, carry_changes, path[0]))
     return (path, one)[int(np.argmin(costs))]
 
 
@@ -723,12 +737,14 @@ def _carry_frames(
     return free
 
 
-def _yaw_changes_cost(a: np.ndarray, cfg: RetrackConfig) -> float:
+def _yaw_changes_cost(a: np.ndarray, cfg: RetrackConfig, free: np.ndarray | None = None) -> float:
     """What :func:`_yaw_search` charges for the changes of a yaw path ``a`` (complex per frame):
-    ``yaw_step_cost`` a step, ``yaw_jump_cost`` a larger change."""
+    ``yaw_step_cost`` a step, ``yaw_jump_cost`` a larger change; nothing into a ``free`` frame
+    (after a carry change the phone saw)."""
     step = np.radians(cfg.yaw_step_deg)
     turns = np.abs(np.angle(a[1:] * np.conj(a[:-1]))) / step
-    turns = np.round(turns[~np.isnan(turns)])
+    keep = ~np.isnan(turns) if free is None else ~np.isnan(turns) & ~free[1:]
+    turns = np.round(turns[keep])
     return float(cfg.yaw_step_cost * (turns == 1).sum() + cfg.yaw_jump_cost * (turns > 1).sum())
 
 
@@ -778,8 +794,34 @@ def _yaw_search(
         np.add.at(sums, seg, both)
         choice = np.argmin(sums, axis=1)[seg]
     else:
-        choice = np.argmin(both, axis=1)
+        choice = _yaw_choice(both, costs, free)
     return scale * rot[choice]
+
+
+def _yaw_choice(both: np.ndarray, costs: tuple[float, float], free: np.ndarray) -> np.ndarray:
+    """The yaw layer of each frame from the forward+backward costs ``both`` (frames x yaws, a
+    ring): a Viterbi over each frame's excess over its best layer, with the search's costs of
+    a step and a jump (nothing into a ``free`` frame). Each frame's own best layer would
+    flicker where two yaws tie (about a carry change: the excess of either is small), and each
+    flicker would be charged as two jumps when the search is compared with the one-yaw search.
+    Written out: 24 states, no library's HMM takes a cost matrix this simply."""
+    n, m = both.shape
+    excess = both - both.min(axis=1, keepdims=True)
+    ring = np.abs(np.arange(m)[:, None] - np.arange(m)[None, :])
+    ring = np.minimum(ring, m - ring)
+    trans = np.where(ring == 0, 0.0, np.where(ring == 1, costs[0], costs[1]))
+    anyway = np.zeros_like(trans)
+    back = np.zeros((n, m), np.int64)
+    acc = excess[0].copy()
+    for k in range(1, n):
+        cand = acc[:, None] + (anyway if free[k] else trans)
+        back[k] = np.argmin(cand, axis=0)
+        acc = cand[back[k], np.arange(m)] + excess[k]
+    choice = np.empty(n, np.int64)
+    choice[-1] = int(np.argmin(acc))
+    for k in range(n - 1, 0, -1):
+        choice[k - 1] = back[k, choice[k]]
+    return choice
 
 
 def _refit(
@@ -951,14 +993,16 @@ def retrack(
     cfg: RetrackConfig,
     aligned: bool = False,
     radio: RadioEvidence | None = None,
-) -> dict[str, PhoneTrack]:
+) -> Retracked:
     """Each phone's carrier re-tracked through the raw detections ``points`` (one (n, 2) array
     per frame at ``frame_t``). ``start``: a first clock offset and ``a`` per frame per phone (the
     chains' alignment; only the offset is used to start). Phones without a walk
     are left out. ``aligned``: the phones' alignment is declared (heading = walk, one clock):
     ``start`` is used as it is, neither searched nor refitted. ``radio``: the phones' RSSI at
-    the site's APs (:mod:`~trackctl.vmtrack.radio`), weighed with the detections."""
-    out: dict[str, PhoneTrack] = {}
+    the site's APs (:mod:`~trackctl.vmtrack.radio`), weighed with the detections; with its
+    ``fit``, each AP's path loss is fitted where the paths put the carriers and the paths are
+    found again under it (:func:`_calibrated_pass`)."""
+    out = Retracked()
     n = len(frame_t)
     if n < 2:
         return out
@@ -975,42 +1019,116 @@ def retrack(
             stacklevel=3,
         )
         return out
-    dt = float(np.median(np.diff(frame_t))) / 1e9
-    steps = _step_costs(grid.cell, dt, cfg)
-    emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
-    space: tuple[_Grid, list[np.ndarray | float]] | None = None
-    for mid in sorted(phones):
-        track = dead_reckoned(phones[mid])
+    follow = _Follower(frame_t, points, phones, grid, acfg, cfg, aligned)
+    for mid, track in follow.walks.items():
         if len(track) < 2:
             continue
-        lag, a0 = start.get(mid, (0.0, np.full(n, 1.0 + 0j)))
-        phone_em, visit = _with_radio(radio, mid, grid, emissions)
         # the nominal step (scale 1) to start: in a crowd the chains' scale is another
         # walker's as often as not, and the refit finds the phone's own
-        if aligned:
-            a = a0
-        else:
-            if space is None:
-                space = _search_field(points, cfg)
-            changes = phones[mid].carry_changes
-            coarse_em, coarse_visit = _with_radio(radio, mid, *space)
+        lag, a0 = start.get(mid, (0.0, np.full(n, 1.0 + 0j)))
+        got = follow(mid, lag, a0, not aligned, radio)
+        if got is not None:
+            out[mid] = got
+    if radio and radio.cfg.enabled and radio.cfg.fit and out:
+        _calibrated_pass(follow, out, radio, frame_t, cfg)
+    return out
+
+
+def _calibrated_pass(
+    follow: _Follower,
+    out: Retracked,
+    radio: RadioEvidence,
+    frame_t: np.ndarray,
+    cfg: RetrackConfig,
+) -> None:
+    """The APs' calibration from where the first pass put the carriers (on detections), then
+    each path again under it, from the first pass's alignment (refitted, not searched). A path
+    that the calibration moves (``research_share`` of its frames) had its alignment searched
+    under a wrong model: it is searched again."""
+    on = {mid: sorted(tr.seen) for mid, tr in out.items()}
+    calibrated = radio.calibrated(
+        {mid: (frame_t[ks], np.array([out[mid].xy[k] for k in ks])) for mid, ks in on.items()}
+    )
+    out.calibration = calibrated.model
+    for mid, first in list(out.items()):
+        again = follow(mid, first.lag_s, first.a, False, calibrated)
+        if again is not None and _moved(first, again, cfg.gate_m) > cfg.research_share:
+            out.searched_again.append(mid)
+            again = follow(mid, first.lag_s, first.a, not follow.aligned, calibrated)
+        if again is not None:
+            out[mid] = again
+
+
+def _moved(a: PhoneTrack, b: PhoneTrack, within_m: float) -> float:
+    """The share of the frames either path publishes where the other is absent or further
+    than ``within_m``."""
+    frames = a.xy.keys() | b.xy.keys()
+    if not frames:
+        return 0.0
+    same = sum(
+        k in a.xy and k in b.xy and np.hypot(*np.subtract(a.xy[k], b.xy[k])) <= within_m
+        for k in frames
+    )
+    return 1.0 - same / len(frames)
+
+
+class _Follower:
+    """Follows one phone's carrier through the detections: the search (or a given alignment),
+    then the path and the alignment refitted from it, ``refine_passes`` times."""
+
+    def __init__(
+        self,
+        frame_t: np.ndarray,
+        points: Sequence[np.ndarray],
+        phones: dict[str, PhoneMotion],
+        grid: _Grid,
+        acfg: AlignConfig,
+        cfg: RetrackConfig,
+        aligned: bool,
+    ) -> None:
+        self.frame_t, self.points, self.phones, self.grid = frame_t, points, phones, grid
+        self.acfg, self.cfg, self.aligned = acfg, cfg, aligned
+        self.dt = float(np.median(np.diff(frame_t))) / 1e9
+        self.steps = _step_costs(grid.cell, self.dt, cfg)
+        self.emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
+        self.space: tuple[_Grid, list[np.ndarray | float]] | None = None
+        self.walks = {mid: dead_reckoned(phones[mid]) for mid in sorted(phones)}
+
+    def __call__(
+        self, mid: str, lag: float, a: np.ndarray, search: bool, radio: RadioEvidence | None
+    ) -> PhoneTrack | None:
+        frame_t, points, grid, cfg = self.frame_t, self.points, self.grid, self.cfg
+        track = self.walks[mid]
+        phone_em, visit = _with_radio(radio, mid, grid, self.emissions)
+        if search:
+            if self.space is None:
+                self.space = _search_field(points, cfg)
+            changes = self.phones[mid].carry_changes
+            coarse_em, coarse_visit = _with_radio(radio, mid, *self.space)
             found = _search(
-                frame_t, points, track, lag, acfg, cfg, changes, (space[0], coarse_em), coarse_visit
+                frame_t,
+                points,
+                track,
+                lag,
+                self.acfg,
+                cfg,
+                changes,
+                (self.space[0], coarse_em),
+                coarse_visit,
             )
             if found is None:
-                continue
+                return None
             lag, a = found
-        passes = 0 if aligned else cfg.refine_passes
+        passes = 0 if self.aligned else cfg.refine_passes
         for p in range(passes + 1):
             u = _displacements(frame_t, track, lag, a)
-            cells = _viterbi_path(grid, phone_em, u, steps, visit)
+            cells = _viterbi_path(grid, phone_em, u, self.steps, visit)
             xy, seen, hits, withheld = _publish(frame_t, points, grid, cells, u, cfg)
             if p == passes:
                 break
-            fit = _refit(frame_t, hits, track, acfg, cfg)
+            fit = _refit(frame_t, hits, track, self.acfg, cfg)
             if fit is None:
                 break
             lag, a = fit
-        velocity = np.column_stack([u.real, u.imag]) / dt
-        out[mid] = PhoneTrack(xy, seen, velocity, lag, a, withheld)
-    return out
+        velocity = np.column_stack([u.real, u.imag]) / self.dt
+        return PhoneTrack(xy, seen, velocity, lag, a, withheld)
