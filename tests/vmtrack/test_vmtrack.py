@@ -256,3 +256,19 @@ def test_no_rssi_through_the_cli(office_log: Path, tmp_path: Path) -> None:
     (report,) = [m.message for m in LogReader(out).messages(["/metrics/vm-track"])]
     assert report.params["rssi"] is False and report.params["retrack"] is True
     assert json.loads(result.stdout)["idf1"] > 0.85
+    assert not [k for k in report.metrics if k.startswith("rssi_at_1m_dbm/")]
+
+
+def test_each_aps_path_loss_is_fitted_and_reported(office_log: Path, tmp_path: Path) -> None:
+    # the paper preset's APs are the check-points' model: -40 dBm at 1 m, exponent 2.5, 3 dB
+    out = tmp_path / "o.mcap"
+    result = CliRunner().invoke(app, ["vm-track", str(office_log), "--out", str(out), "--json"])
+    assert result.exit_code == 0, result.output
+    m = json.loads(result.stdout)
+    aps = [k.partition("/")[2] for k in m if k.startswith("rssi_at_1m_dbm/")]
+    assert aps
+    for ap in aps:
+        assert m[f"rssi_readings/{ap}"] > 20
+        assert m[f"rssi_at_1m_dbm/{ap}"] == pytest.approx(-40.0, abs=3.0)
+        assert m[f"path_loss_exponent/{ap}"] == pytest.approx(2.5, abs=0.4)
+        assert 3.0 <= m[f"rssi_sigma_db/{ap}"] <= 6.0
