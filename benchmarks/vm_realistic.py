@@ -1,6 +1,7 @@
 """VM-Tracking on realistic phones: the figures issue 13 asks for, in one table.
 
     python benchmarks/vm_realistic.py [--duration 300] [--seeds 1,2,3] [--quick]
+                                      [--only students001] [--jobs 2]
 
 Scenarios (all ``trackctl simulate vm``, realistic preset unless said): lobby 5 carriers + 3
 people without phones; the same with 35 without (~40 in view); the paper preset; every phone
@@ -9,7 +10,9 @@ the real ETH/UCY scenes ``students001``, ``crowds_zara01`` and ``crowds_zara03``
 trajectories from ``../shared/data/pedestrians``, the 5 longest walkers carry phones that are on
 for the whole log, at most ``--duration``; each seed draws the phones: carry, yaw, clock, IMU
 rate). Prints IDF1, mean error, time bound to somebody else and the estimated clock offset
-error per row.
+error per row. ``--only`` keeps the rows whose name contains one of its comma-separated words;
+``--jobs`` runs that many rows at once (each row is one process: "run s" is then its own time
+on a shared machine).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import argparse
 import sys
 import tempfile
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -70,42 +74,55 @@ def _run(tmp: Path, name: str, sc: VmScenario, cfg: VmTrackConfig | None = None)
     ]
 
 
+def _scenarios(args: argparse.Namespace) -> list[tuple[str, VmScenario]]:
+    seeds = [int(s) for s in args.seeds.split(",")][: 1 if args.quick else None]
+    base = VmScenario(field="lobby", users=5, nonusers=3, duration_s=args.duration)
+    rows = [(f"realistic seed {s}", replace(base, seed=s)) for s in seeds]
+    rows += [(f"paper seed {s}", replace(base, seed=s, preset="paper")) for s in seeds]
+    for yaw in (0.0, 45.0, 90.0, 180.0):
+        rows.append((f"carry {yaw:.0f} deg", replace(base, seed=seeds[0], carry_yaw_deg=yaw)))
+    rows.append(("clocks +-2 s", replace(base, seed=seeds[0], clock_offset_s=2.0)))
+    if args.quick:
+        return rows
+    rows += [(f"crowd 40 seed {s}", replace(base, seed=s, nonusers=35)) for s in seeds]
+    # real ETH/UCY scenes: the 5 longest walkers carry phones, on for the whole log
+    for scene in ("students001", "crowds_zara01", "crowds_zara03"):
+        path = SHARED / f"{scene}.txt"
+        if not path.is_file():
+            continue
+        span = max(t.t_s[-1] for t in load_trajectories_csv(path))
+        for s in seeds:
+            sc = VmScenario(
+                trajectories=str(path),
+                phones=_longest_walkers(path),
+                duration_s=min(span, args.duration),
+                seed=s,
+            )
+            rows.append((f"{scene} seed {s}", sc))
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--duration", type=float, default=300.0)
     ap.add_argument("--seeds", default="1,2,3")
     ap.add_argument("--quick", action="store_true", help="one seed, no crowd, no students")
+    ap.add_argument("--only", default="", help="comma-separated words; rows naming one")
+    ap.add_argument("--jobs", type=int, default=1, help="rows run at once")
     args = ap.parse_args(argv)
-    seeds = [int(s) for s in args.seeds.split(",")][: 1 if args.quick else None]
-    base = VmScenario(field="lobby", users=5, nonusers=3, duration_s=args.duration)
+    todo = _scenarios(args)
+    if args.only:
+        words = args.only.split(",")
+        todo = [(n, sc) for n, sc in todo if any(w in n for w in words)]
     rows = [["scenario", "IDF1", "err m", "wrong s", "ambig.", "clock err s", "run s"]]
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        for s in seeds:
-            rows.append(_run(tmp, f"realistic seed {s}", replace(base, seed=s)))
-        for s in seeds:
-            rows.append(_run(tmp, f"paper seed {s}", replace(base, seed=s, preset="paper")))
-        for yaw in (0.0, 45.0, 90.0, 180.0):
-            sc = replace(base, seed=seeds[0], carry_yaw_deg=yaw)
-            rows.append(_run(tmp, f"carry {yaw:.0f} deg", sc))
-        rows.append(_run(tmp, "clocks +-2 s", replace(base, seed=seeds[0], clock_offset_s=2.0)))
-        if not args.quick:
-            for s in seeds:
-                rows.append(_run(tmp, f"crowd 40 seed {s}", replace(base, seed=s, nonusers=35)))
-            # real ETH/UCY scenes: the 5 longest walkers carry phones, on for the whole log
-            for scene in ("students001", "crowds_zara01", "crowds_zara03"):
-                path = SHARED / f"{scene}.txt"
-                if not path.is_file():
-                    continue
-                span = max(t.t_s[-1] for t in load_trajectories_csv(path))
-                for s in seeds:
-                    sc = VmScenario(
-                        trajectories=str(path),
-                        phones=_longest_walkers(path),
-                        duration_s=min(span, args.duration),
-                        seed=s,
-                    )
-                    rows.append(_run(tmp, f"{scene} seed {s}", sc))
+        if args.jobs > 1:
+            with ProcessPoolExecutor(args.jobs) as pool:
+                futures = [pool.submit(_run, tmp, n, sc) for n, sc in todo]
+                rows += [f.result() for f in futures]
+        else:
+            rows += [_run(tmp, n, sc) for n, sc in todo]
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     for r in rows:
         print("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)))

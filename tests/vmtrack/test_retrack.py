@@ -18,8 +18,10 @@ from trackctl.vmtrack.radio import RadioEvidence
 from trackctl.vmtrack.retrack import (
     RetrackConfig,
     _displacements,
+    _Follower,
     _Grid,
     _layer_costs,
+    _refit,
     _search,
     _step_costs,
     _viterbi_path,
@@ -435,3 +437,70 @@ def test_each_aps_calibration_is_fitted_where_the_paths_put_the_carriers():
     assert fit.readings > 200
     for i in (0, 1, 2):
         assert _share_on(out[f"m{i}"].xy, people[i], len(frame_t)) > 0.8
+
+
+def test_the_refit_does_not_reach_across_a_carry_change_the_phone_saw():
+    """A phone taken out of a pocket turns by 90 deg at once: the alignment refitted from the
+    carrier's detections is each side's own up to the change, not a blend of the two."""
+    frame_t, _, people = _scene(5, n_people=1, seconds=120.0)
+    walk = people[0]
+    n = len(frame_t)
+    change = n // 2
+    yaw = np.where(np.arange(n) < change, 0.0, 90.0)
+    phone = _phone(walk, frame_t, yaw)
+    hits = {k: walk[k] for k in range(n)}
+    track = dead_reckoned(phone)
+
+    def yaw_err(carry_changes: np.ndarray | None) -> float:
+        fit = _refit(frame_t, hits, track, AlignConfig(), CFG, carry_changes)
+        assert fit is not None
+        got = np.degrees(np.angle(fit[1]))
+        near = np.r_[change - 15 : change - 1, change + 1 : change + 15]  # 5 s either side
+        return float(np.max(np.abs((got[near] - yaw[near] + 180) % 360 - 180)))
+
+    assert yaw_err(np.array([frame_t[change]])) < 5.0
+    assert yaw_err(None) > 20.0  # a window across the change blends the two yaws
+
+
+def _twin_scene(seed: int, twin: bool):
+    """A carrier and (``twin``) a walker who moves as the carrier turned by 90 deg, 5 m away,
+    both detected (0.1 m noise): a phone fits the twin as well at a yaw 90 deg off."""
+    rng = np.random.default_rng(seed)
+    frame_t, _, people = _scene(seed, n_people=1, seconds=60.0)
+    carrier = people[0]
+    other = (carrier - carrier[0]) @ np.array([[0.0, 1.0], [-1.0, 0.0]]) + carrier[0] + (5.0, 0)
+    walkers = [carrier, other] if twin else [carrier]
+    points = [
+        np.array([w[k] + rng.normal(0, 0.1, 2) for w in walkers]) for k in range(len(frame_t))
+    ]
+    return frame_t, points, carrier
+
+
+@pytest.mark.parametrize("twin", [True, False])
+def test_a_path_another_alignment_fits_as_well_is_not_published(twin):
+    frame_t, points, carrier = _twin_scene(6, twin)
+    n = len(frame_t)
+    phone = _phone(carrier, frame_t, 0.0)
+    grid = _Grid(points, CFG.cell_m).with_visits(points, CFG)
+    follow = _Follower(frame_t, points, {"m": phone}, grid, AlignConfig(), CFG, False)
+    found = follow("m", 0.0, np.ones(n, complex), False, None)
+    assert found is not None and _share_on(found.xy, carrier, n) > 0.9
+    # the search's other alignment: the phone turned by 90 deg, onto the twin
+    follow.alternatives["m"] = [(0.0, np.full(n, 1j))]
+    settled = follow.settle("m", found, None)
+    if twin:
+        assert len(settled.xy) < 0.1 * n
+        assert settled.ambiguous_s > 0.9 * n / FPS
+    else:
+        assert settled.xy == found.xy and settled.ambiguous_s == 0.0
+    none = _Follower(
+        frame_t,
+        points,
+        {"m": phone},
+        grid,
+        AlignConfig(),
+        RetrackConfig(ambiguity_margin=None),
+        False,
+    )
+    none.alternatives["m"] = follow.alternatives["m"]
+    assert none.settle("m", found, None).xy == found.xy

@@ -679,6 +679,7 @@ def _identity_metrics(
         out[f"step_scale/{mid}"] = round(al.scale, 3) if al else None
         pt = retracked.get(mid) if retracked else None
         out[f"withheld_s/{mid}"] = round(pt.withheld_s, 1) if pt else None
+        out[f"ambiguous_s/{mid}"] = round(pt.ambiguous_s, 1) if pt else None
     return out
 
 

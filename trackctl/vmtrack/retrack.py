@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import ndimage
@@ -159,6 +159,16 @@ class RetrackConfig:
     notice. Not the -log of its chance (~10): a wrong yaw that may change cheaply hops from
     walker to walker in a crowd; at 50 missed frames' cost, only a change the next minute
     confirms is taken."""
+    ambiguity_candidates: int = 8
+    ambiguity_margin: float | None = 10.0
+    """A phone's path is weighed against the other alignments its search found (up to
+    ``ambiguity_candidates``, each refined): where one whose path costs at most this more (or
+    less) puts the carrier more than ``gate_m`` away, the frame is ambiguous and is not
+    published (:meth:`_Follower.settle`; ``ambiguous_s/<MID>`` in the report). In a dense
+    group the walker beside or behind the carrier fits a phone with another clock offset and
+    yaw nearly as well (`students001` seed 2: eight alignments within 8 of each other, three
+    of them on the carrier); publishing the cheapest would be a guess. On the 10-person lobby
+    the nearest alternative that moves a path costs 50 more. None: no alternatives weighed."""
     refine_passes: int = 2
     velocity_window_s: float = 7.0
     """Centred window of the least-squares velocity of the path's detections and of the phone's
@@ -169,9 +179,6 @@ class RetrackConfig:
     """Detections a refit window needs."""
     radio: RadioConfig = field(default_factory=RadioConfig)
     """How the phones' RSSI at the site's APs weighs in (:mod:`~trackctl.vmtrack.radio`)."""
-    research_share: float = 0.1
-    """With the APs' calibration fitted after the first pass, a phone whose path it moves on
-    this share of the frames is searched again (its alignment was found under a wrong model)."""
     max_bytes: int = 2_000_000_000
     """Memory the re-tracking may take (about 6 bytes per grid cell and frame: the frames'
     distance grids and one phone's back-pointers); above it the re-tracking is skipped with a
@@ -194,6 +201,9 @@ class PhoneTrack:
     withheld_s: float = 0.0
     """Seconds of the path on detections not published: stretches whose motion shares too
     few changes with the phone's to say it is the carrier (:func:`_evidence`)."""
+    ambiguous_s: float = 0.0
+    """Seconds not published because another alignment nearly as cheap puts the carrier
+    elsewhere (:attr:`RetrackConfig.ambiguity_margin`)."""
 
 
 class Retracked(dict[str, PhoneTrack]):
@@ -566,6 +576,9 @@ class _Searcher:
     visit: _Visit | None
     lags: np.ndarray
     """Clock offsets of the offset and scale pass."""
+    candidates: list[tuple[float, np.ndarray]] = field(default_factory=list)
+    """The one-yaw search's best (clock offset, rotation) of distinct yaws, cheapest first
+    (``ambiguity_candidates`` of them)."""
 
     def costs(self, walks: np.ndarray) -> np.ndarray:
         """The whole cost of each layer's best path (``walks``: frames x layers)."""
@@ -620,8 +633,11 @@ class _Searcher:
         if not changed:
             # every (offset, yaw) at once; the few best yaws refined
             costs = self.costs(self.walks([(float(lg), r) for lg in coarse for r in rot]))
-            for i in _distinct_best(costs.reshape(len(coarse), len(rot)), cfg.search_candidates):
+            k = max(cfg.search_candidates, cfg.ambiguity_candidates)
+            for i in _distinct_best(costs.reshape(len(coarse), len(rot)), k):
                 found.append((float(coarse[i // len(rot)]), np.full(n, rot[i % len(rot)])))
+            self.candidates = found[: cfg.ambiguity_candidates]
+            found = found[: cfg.search_candidates]
         else:
             # a yaw per stretch between the carry changes the phone saw, at every offset
             for lg in coarse:
@@ -632,6 +648,7 @@ class _Searcher:
             if not found:
                 return None
             order = np.argsort(self.costs(self.walks(found)))
+            self.candidates = [found[i] for i in order[: cfg.ambiguity_candidates]]
             found = [found[i] for i in order[: cfg.search_candidates]]
         refined = [(*self.offset_and_scale(a), a) for _, a in found]
         _, lag, scale, a = min(refined, key=lambda c: c[0])
@@ -675,6 +692,7 @@ def _search(
     carry_changes: np.ndarray | None = None,
     space: tuple[_Grid, Sequence[np.ndarray | float]] | None = None,
     visit: _Visit | None = None,
+    alternatives: list[tuple[float, np.ndarray]] | None = None,
 ) -> tuple[float, np.ndarray] | None:
     """The phone's alignment found from the detections alone (None without a walk), the
     cheaper of two searches:
@@ -689,7 +707,10 @@ def _search(
 
     Each is judged by the cost of its best path, the yaw path's changes of yaw included.
     ``space``: the search grid and its emissions (:func:`_search_field`); ``visit``: the
-    phone's costs of coming into view and of being out of it (default: the grid's)."""
+    phone's costs of coming into view and of being out of it (default: the grid's).
+    ``alternatives``, when given, receives the other alignments the searches found (the
+    one-yaw search's best yaws, the yaw path): what :meth:`_Follower.settle` weighs the
+    found one against."""
     n = len(frame_t)
     grid, emissions = space or _search_field(points, cfg)
     dt = float(np.median(np.diff(frame_t))) / 1e9 if n > 1 else 1.0
@@ -709,6 +730,10 @@ def _search(
     )
     one = searcher.steady(coarse)
     path = searcher.yaw_path(lag_s)
+    if alternatives is not None:
+        alternatives.extend(searcher.candidates)
+        if path is not None:
+            alternatives.append(path)
     if one is None or path is None:
         return one or path
     costs = searcher.costs(searcher.walks([path, one]))
@@ -835,9 +860,14 @@ def _refit(
     track: np.ndarray,
     acfg: AlignConfig,
     cfg: RetrackConfig,
+    carry_changes: np.ndarray | None = None,
 ) -> tuple[float, np.ndarray] | None:
     """Clock offset and ``a`` per frame refitted from the detections on the path (each frame's
-    centred ``align_window_s`` window; one offset, the one these fits explain best)."""
+    centred ``align_window_s`` window; one offset, the one these fits explain best). A window
+    does not reach across a carry change the phone saw (``carry_changes``, phone-clock
+    times): the yaw changes there at once, and a window across it would fit neither yaw (on
+    `students001` seed 2 a phone taken out of a back pocket turned 83 deg; the smeared yaw
+    lost the carrier for another walker)."""
     ks = np.array(sorted(hits))
     if len(ks) < cfg.min_align_frames:
         return None
@@ -849,9 +879,13 @@ def _refit(
     half_v = cfg.velocity_window_s / 2
     zt = visual_velocity(det, at, half_v)
     idx = np.arange(n)
-    lo, hi = np.maximum(idx - half, 0), np.minimum(idx + half + 1, n)
     best: tuple[float, float, np.ndarray] | None = None
     for lag in lag_grid(acfg):
+        seg = np.cumsum(_carry_frames(frame_t, carry_changes, float(lag)))
+        seg -= seg[0]
+        first = np.flatnonzero(np.r_[True, np.diff(seg) != 0])
+        lo = np.maximum(idx - half, first[seg])
+        hi = np.minimum(idx + half + 1, np.r_[first[1:], n][seg])
         zl = visual_velocity(track, at + lag * 1e9, half_v)
         ok = ~(np.isnan(zl) | np.isnan(zt))
         sums = [np.zeros(n, complex), np.zeros(n), np.zeros(n), np.zeros(n)]
@@ -1034,8 +1068,11 @@ def retrack(
         got = follow(mid, lag, a0, not aligned, radio)
         if got is not None:
             out[mid] = got
+    final = radio
     if radio and radio.cfg.enabled and radio.cfg.fit and out:
-        _calibrated_pass(follow, out, radio, frame_t, cfg)
+        final = _calibrated_pass(follow, out, radio, frame_t, cfg)
+    for mid, found in out.items():
+        out[mid] = follow.settle(mid, found, final)
     return out
 
 
@@ -1045,11 +1082,14 @@ def _calibrated_pass(
     radio: RadioEvidence,
     frame_t: np.ndarray,
     cfg: RetrackConfig,
-) -> None:
+) -> RadioEvidence:
     """The APs' calibration from where the first pass put the carriers (on detections), then
-    each path again under it, from the first pass's alignment (refitted, not searched). A path
-    that the calibration moves (``research_share`` of its frames) had its alignment searched
-    under a wrong model: it is searched again."""
+    each path again under it, twice: from the first pass's alignment (refitted, not searched)
+    and searched afresh; the cheaper path is kept. The first pass searched under the default
+    model, whose errors (7 dB at 10 m) can make a wrong alignment the cheapest, and a refit
+    from it only finds the nearest optimum (`students001` seed 3: a phone 2 s off its clock
+    offset on the walker ahead of its carrier, right in 43 of 114 frames, 114 searched
+    again)."""
     on = {mid: sorted(tr.seen) for mid, tr in out.items()}
     calibrated = radio.calibrated(
         {mid: (frame_t[ks], np.array([out[mid].xy[k] for k in ks])) for mid, ks in on.items()}
@@ -1057,11 +1097,18 @@ def _calibrated_pass(
     out.calibration = calibrated.model
     for mid, first in list(out.items()):
         again = follow(mid, first.lag_s, first.a, False, calibrated)
-        if again is not None and _moved(first, again, cfg.gate_m) > cfg.research_share:
-            out.searched_again.append(mid)
-            again = follow(mid, first.lag_s, first.a, not follow.aligned, calibrated)
+        if not follow.aligned:
+            searched = follow(mid, first.lag_s, first.a, True, calibrated)
+            if searched is not None and (
+                again is None
+                or follow.cost(mid, searched, calibrated) < follow.cost(mid, again, calibrated)
+            ):
+                if again is None or _moved(again, searched, cfg.gate_m) > 0:
+                    out.searched_again.append(mid)
+                again = searched
         if again is not None:
             out[mid] = again
+    return calibrated
 
 
 def _moved(a: PhoneTrack, b: PhoneTrack, within_m: float) -> float:
@@ -1098,6 +1145,8 @@ class _Follower:
         self.emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
         self.space: tuple[_Grid, list[np.ndarray | float]] | None = None
         self.walks = {mid: dead_reckoned(phones[mid]) for mid in sorted(phones)}
+        self.alternatives: dict[str, list[tuple[float, np.ndarray]]] = {}
+        """Each phone's other alignments from its last search."""
 
     def __call__(
         self, mid: str, lag: float, a: np.ndarray, search: bool, radio: RadioEvidence | None
@@ -1110,6 +1159,7 @@ class _Follower:
                 self.space = _search_field(points, cfg)
             changes = self.phones[mid].carry_changes
             coarse_em, coarse_visit = _with_radio(radio, mid, *self.space)
+            self.alternatives[mid] = []
             found = _search(
                 frame_t,
                 points,
@@ -1120,6 +1170,7 @@ class _Follower:
                 changes,
                 (self.space[0], coarse_em),
                 coarse_visit,
+                self.alternatives[mid],
             )
             if found is None:
                 return None
@@ -1131,9 +1182,48 @@ class _Follower:
             xy, seen, hits, withheld = _publish(frame_t, points, grid, cells, u, cfg)
             if p == passes:
                 break
-            fit = _refit(frame_t, hits, track, self.acfg, cfg)
+            fit = _refit(frame_t, hits, track, self.acfg, cfg, self.phones[mid].carry_changes)
             if fit is None:
                 break
             lag, a = fit
         velocity = np.column_stack([u.real, u.imag]) / self.dt
         return PhoneTrack(xy, seen, velocity, lag, a, withheld)
+
+    def cost(self, mid: str, found: PhoneTrack, radio: RadioEvidence | None) -> float:
+        """The cost of the cheapest path under ``found``'s alignment (paths of two alignments
+        of one phone compare)."""
+        u = _displacements(self.frame_t, self.walks[mid], found.lag_s, found.a)
+        phone_em, visit = _with_radio(radio, mid, self.grid, self.emissions)
+        costs = _layer_costs(
+            self.grid, phone_em, u[:, None], self.steps, visit=visit, absolute=True
+        )
+        return float(costs[-1, 0])
+
+    def settle(self, mid: str, found: PhoneTrack, radio: RadioEvidence | None) -> PhoneTrack:
+        """``found`` without the frames where another alignment of its last search, refined,
+        costs at most ``ambiguity_margin`` more (or less) and puts the carrier more than
+        ``gate_m`` away (``ambiguous_s`` counts them). Frames the other does not publish are
+        not in dispute: it did not see the carrier there."""
+        cfg = self.cfg
+        alternatives = self.alternatives.get(mid)
+        if cfg.ambiguity_margin is None or not alternatives:
+            return found
+        best = self.cost(mid, found, radio)
+        disputed: set[int] = set()
+        for lag, a in alternatives:
+            other = self(mid, lag, a, False, radio)
+            if other is None or self.cost(mid, other, radio) - best > cfg.ambiguity_margin:
+                continue
+            for k, p in found.xy.items():
+                q = other.xy.get(k)
+                if q is not None and np.hypot(p[0] - q[0], p[1] - q[1]) > cfg.gate_m:
+                    disputed.add(k)
+        if not disputed:
+            return found
+        xy = {k: v for k, v in found.xy.items() if k not in disputed}
+        return replace(
+            found,
+            xy=xy,
+            seen=found.seen - disputed,
+            ambiguous_s=found.ambiguous_s + len(disputed) * self.dt,
+        )
