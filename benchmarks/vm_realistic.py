@@ -12,7 +12,8 @@ for the whole log, at most ``--duration``; each seed draws the phones: carry, ya
 rate). Prints IDF1, mean error, time bound to somebody else and the estimated clock offset
 error per row. ``--only`` keeps the rows whose name contains one of its comma-separated words;
 ``--jobs`` runs that many rows at once (each row is one process: "run s" is then its own time
-on a shared machine).
+on a shared machine). Each row is written to stderr as it finishes (a full run takes over an
+hour); the aligned table goes to stdout at the end, in the scenarios' order.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ import argparse
 import sys
 import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Mapping
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import replace
 from pathlib import Path
 
@@ -44,7 +46,7 @@ def _longest_walkers(path: Path, k: int = 5) -> tuple[str, ...]:
     return tuple(sorted(length, key=lambda p: -length[p])[:k])
 
 
-def _clock_error(m: dict[str, object], out: Path) -> float | None:
+def _clock_error(m: Mapping[str, object], out: Path) -> float | None:
     truth = LogReader(out).metadata().get("phone_truth", {})
     errs = []
     for key, value in truth.items():
@@ -114,15 +116,24 @@ def main(argv: list[str] | None = None) -> int:
     if args.only:
         words = args.only.split(",")
         todo = [(n, sc) for n, sc in todo if any(w in n for w in words)]
-    rows = [["scenario", "IDF1", "err m", "wrong s", "ambig.", "clock err s", "run s"]]
+    head = ["scenario", "IDF1", "err m", "wrong s", "ambig.", "clock err s", "run s"]
+    done: dict[str, list[str]] = {}
+
+    def finished(row: list[str]) -> None:
+        done[row[0]] = row
+        print("  ".join(f"{h}={c}" for h, c in zip(head, row, strict=True)), file=sys.stderr)
+
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         if args.jobs > 1:
             with ProcessPoolExecutor(args.jobs) as pool:
                 futures = [pool.submit(_run, tmp, n, sc) for n, sc in todo]
-                rows += [f.result() for f in futures]
+                for f in as_completed(futures):
+                    finished(f.result())
         else:
-            rows += [_run(tmp, n, sc) for n, sc in todo]
+            for n, sc in todo:
+                finished(_run(tmp, n, sc))
+    rows = [head] + [done[n] for n, _ in todo]
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     for r in rows:
         print("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)))
