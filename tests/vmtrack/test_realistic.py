@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trackctl.logs import LogReader
+from trackctl.logs import LogReader, topics
 from trackctl.processing import run_processors
 from trackctl.sim.vm import VmScenario, simulate_vm
 from trackctl.vmtrack import VmTrackProcessor
@@ -115,3 +115,50 @@ def test_paper_preset_keeps_the_papers_phones(tmp_path: Path) -> None:
     assert "phone_truth" not in LogReader(log).metadata()
     with pytest.raises(Exception, match="--preset realistic"):
         replace(LOBBY, preset="paper", carry_yaw_deg=45.0)
+
+
+def test_a_phone_whose_carrier_never_comes_into_view_is_placed_nowhere(tmp_path: Path) -> None:
+    """Phones are on for the whole log, their carriers need not come into view at all (in
+    `biwi_hotel` most of the day's walkers pass after the log ends): such a phone is published
+    on no track, and the report gives no alignment for it rather than the search's guess."""
+    rows = ["t_s,id,x_m,y_m"]
+    # each walks a leg, stands 3 s, turns and walks another: motion a phone can be matched by
+    walks = {
+        "p1": ((0.5, 1.0), (6.0, 1.0), (6.0, 9.5), 0.0),
+        "p2": ((11.5, 9.0), (11.5, 2.0), (1.0, 2.0), 5.0),
+        "p3": ((0.5, 5.0), (8.0, 5.0), (8.0, 0.5), 12.0),
+        "p4": ((6.0, 9.5), (3.0, 5.0), (11.5, 5.0), 20.0),
+        "ghost": ((0.5, 1.0), (6.0, 1.0), (6.0, 9.5), 200.0),
+    }
+    for pid, (a, turn, b, t0) in walks.items():
+        t = t0
+        for start, end, stand in ((a, turn, 3.0), (turn, b, 0.0)):
+            steps = int(np.hypot(*np.subtract(end, start)) / 1.3 / 0.1)
+            for k in range(steps + 1):
+                x, y = np.add(start, np.subtract(end, start) * k / steps)
+                rows.append(f"{t + 0.1 * k:.1f},{pid},{x:.3f},{y:.3f}")
+            t += 0.1 * steps
+            for k in range(1, int(stand / 0.1)):
+                rows.append(f"{t + 0.1 * k:.1f},{pid},{end[0]:.3f},{end[1]:.3f}")
+            t += stand
+    csv = tmp_path / "scene.csv"
+    csv.write_text("\n".join(rows) + "\n")
+    scenario = VmScenario(
+        trajectories=str(csv), phones=("p1", "p2", "ghost"), duration_s=40, seed=1
+    )
+    m, out = _run(tmp_path, scenario, "ghost")
+    reader = LogReader(out)
+    macs = {k.rpartition("/")[0] for k in reader.metadata()["phone_truth"]}
+    carried = {
+        e.electronic_id
+        for g in reader.messages([topics.GROUND_TRUTH])
+        for e in g.message.entities
+        if e.electronic_id
+    }
+    (ghost,) = macs - carried
+    published = {t.track_id for g in reader.messages([TRACKS_TOPIC]) for t in g.message.tracks}
+    assert ghost not in published
+    assert carried <= published
+    assert m[f"clock_offset_s/{ghost}"] is None
+    assert m[f"yaw_offset_deg/{ghost}"] is None
+    assert all(m[f"clock_offset_s/{mid}"] is not None for mid in carried)

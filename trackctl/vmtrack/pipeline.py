@@ -531,7 +531,7 @@ def _write_and_score(
         retracked = retrack(
             frame_t, points, phones, ids.known, cfg.align, cfg.retrack, cfg.phones_aligned, radio
         )
-        ids.alignments.update(_retrack_alignments(retracked))
+        _take_retrack_alignments(ids.alignments, retracked)
     published: dict[str, int] = {}
     coasting = shown = 0
     wrong_s = 0.0
@@ -643,19 +643,24 @@ def _radio_metrics(retracked: Retracked) -> dict[str, float | int | None]:
     return out
 
 
-def _retrack_alignments(retracked: dict[str, PhoneTrack]) -> dict[str, Alignment]:
-    """Each re-tracked phone's alignment for the report: its clock offset, and the circular
-    mean of its yaw and the median of its scale over the frames it was seen."""
-    out = {}
+def _take_retrack_alignments(
+    alignments: dict[str, Alignment], retracked: dict[str, PhoneTrack]
+) -> None:
+    """Each re-tracked phone's alignment into ``alignments`` (for the report): its clock
+    offset, and the circular mean of its yaw and the median of its scale over the frames it was
+    seen. A phone seen nowhere (its carrier never in view, or every frame withheld) has none:
+    the search's guess there has nothing behind it, and the report says so rather than give
+    it."""
     for mid, pt in retracked.items():
         seen = np.array(sorted(pt.seen), int)
-        a = pt.a[seen] if len(seen) else pt.a
+        a = pt.a[seen]
         a = a[~np.isnan(a)]
         if not len(a):
+            alignments.pop(mid, None)
             continue
         yaw = np.angle(np.mean(a / np.abs(a)))
-        out[mid] = Alignment(complex(float(np.median(np.abs(a))) * np.exp(1j * yaw)), pt.lag_s, -1)
-    return out
+        scale = float(np.median(np.abs(a)))
+        alignments[mid] = Alignment(complex(scale * np.exp(1j * yaw)), pt.lag_s, -1)
 
 
 def _identity_metrics(
