@@ -160,3 +160,22 @@ def test_fitted_evidence_weighs_each_ap_by_its_own_model():
     assert _at(grid, fitted, 5.0, 6.0) < _at(grid, fitted, 2.0, 6.0) - 1.0
     # the default model puts the same level much nearer the AP
     assert _at(grid, default, 2.0, 6.0) < _at(grid, default, 5.0, 6.0)
+
+
+def test_gain_is_the_away_cost_less_the_in_view_cost_at_the_path():
+    frame_t = np.arange(4) * 1_000_000_000
+    level = MODEL[0] - 25 * math.log10(5.0)
+    scans = [_scan(0, {"m": level}), _scan(2_000_000_000, {"other": -50.0})]
+    radio = RadioEvidence(frame_t, scans, MODEL, RadioConfig())
+    grid = _room()
+    path = np.array([[5.0, 6.0], [5.0, 6.0], [5.0, 6.0], [np.nan, np.nan]])
+    gain = radio.gain("m", path)
+    heard, unheard = radio.cost("m", grid, 0), radio.cost("m", grid, 2)
+    assert heard is not None and unheard is not None
+    away = radio.away("m", 0.0)
+    assert gain[0] == pytest.approx(away[0] - _at(grid, heard, 5.0, 6.0), abs=0.05)
+    assert gain[2] == pytest.approx(-_at(grid, unheard, 5.0, 6.0), abs=0.05)
+    assert gain[1] == 0.0 and gain[3] == 0.0  # no scan; out of view
+    assert gain[0] > 0 > gain[2]
+    # heard at the level of 5 m, a path 1 m from the AP gains less than one 5 m away
+    assert radio.gain("m", np.array([[1.0, 6.0]]))[0] < gain[0] - 1.0

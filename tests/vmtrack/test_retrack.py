@@ -21,6 +21,7 @@ from trackctl.vmtrack.retrack import (
     _Follower,
     _Grid,
     _layer_costs,
+    _publish,
     _refit,
     _search,
     _step_costs,
@@ -372,6 +373,38 @@ def test_a_stranger_in_view_while_no_ap_hears_the_phone_is_not_its_carrier():
     out = retrack(frame_t, points, phone, {}, AlignConfig(), CFG, radio=radio)["m"]
     assert not [k for k in out.xy if k < come]
     assert _share_on(out.xy, carrier, n - come) > 0.9
+
+
+def test_a_straight_walk_is_published_on_the_evidence_of_the_phones_rssi():
+    # a hotel entrance: the carrier crosses the view (16 m) on a straight line, so the stretch
+    # shares no turn or stop with the phone and motion alone does not publish it; an AP that
+    # hears the phone at the level of the path's distance just then does.
+    n = int(30 * FPS)
+    frame_t = (np.arange(n) * 1e9 / FPS).astype(np.int64)
+    t = np.arange(n) / FPS
+    carrier = np.column_stack([-8.0 + 1.2 * t, np.full(n, 5.0)])
+    rng = np.random.default_rng(22)
+    inside = (carrier[:, 0] >= 0.0) & (carrier[:, 0] <= 16.0)
+    points = [
+        (carrier[k][None] + rng.normal(0, 0.3, (1, 2))) if inside[k] else np.empty((0, 2))
+        for k in range(n)
+    ]
+    grid = _Grid([np.array([[-10.0, 0.0], [26.0, 10.0]])], CFG.cell_m)
+    cells = np.round((carrier - grid.lo) / grid.cell).astype(int)[:, ::-1]
+    cells[~inside] = -1
+    u = np.r_[0, np.diff(carrier[:, 0])] + 0j
+    xy, _, _, withheld = _publish(frame_t, points, grid, cells, u, CFG)
+    assert not xy and withheld > 10.0
+    radio = RadioEvidence(frame_t, _scans(frame_t, carrier, inside, 23), (-36.0, 2.5), CFG.radio)
+    gain = radio.gain("m", grid.xy(cells))
+    assert gain.sum() > CFG.min_evidence
+    xy, _, _, withheld = _publish(frame_t, points, grid, cells, u, CFG, gain)
+    assert withheld == 0.0 and _share_on(xy, carrier, int(inside.sum())) > 0.95
+    # an AP that would have heard a phone there and did not: somebody else's walk
+    deaf = RadioEvidence(frame_t, _scans(frame_t, carrier, ~inside, 23), (-36.0, 2.5), CFG.radio)
+    against = deaf.gain("m", grid.xy(cells))
+    xy, _, _, _ = _publish(frame_t, points, grid, cells, u, CFG, against)
+    assert against.sum() < 0 and not xy
 
 
 def test_a_carry_change_the_phone_saw_is_searched_as_two_steady_yaws():

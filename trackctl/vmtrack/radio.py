@@ -254,19 +254,26 @@ class RadioEvidence:
         seen = self.by_frame.get(k)
         if not seen:
             return None
-        cfg = self.cfg
         total = np.zeros(grid.shape, np.float32)
         for model, ap, heard in seen:
-            mu = model.mean(self._distance(grid, ap))
-            p = cfg.hear_prob * ndtr((mu - cfg.floor_dbm) / model.sigma_db)
-            r = heard.get(mid)
-            if r is None:
-                total += -np.log1p(-p)
-                continue
-            z = np.abs(r - mu) / model.sigma_db
-            h = cfg.huber
-            total += np.where(z < h, 0.5 * z * z, h * z - 0.5 * h * h) - np.log(p)
+            total += _scan_cost(model, self._distance(grid, ap), heard.get(mid), self.cfg)
         return total
+
+    def gain(self, mid: str, path: np.ndarray) -> np.ndarray:
+        """Per frame, how much better phone ``mid``'s scans fit its carrier at ``path`` ((n, 2)
+        positions; NaN: out of view, no gain) than out of view: the away state's cost of the
+        frame's scans (:meth:`away`) less their in-view cost there (:meth:`cost`). A
+        log-likelihood ratio, 0 at frames without scans."""
+        out = np.zeros(self.n)
+        for k, seen in self.by_frame.items():
+            if k >= len(path) or np.isnan(path[k]).any():
+                continue
+            for model, ap, heard in seen:
+                d = np.maximum(np.hypot(path[k, 0] - ap[0], path[k, 1] - ap[1]), 0.3)
+                r = heard.get(mid)
+                away = 0.0 if r is None else self.cfg.away_heard_cost
+                out[k] += away - float(_scan_cost(model, np.array(d), r, self.cfg))
+        return out
 
     def _distance(self, grid: _Grid, ap: tuple[float, float]) -> np.ndarray:
         key = (id(grid), ap)
@@ -278,6 +285,18 @@ class RadioEvidence:
             d = np.maximum(np.hypot(x, y), 0.3).astype(np.float32)
             self._dist[key] = d
         return d
+
+
+def _scan_cost(model: PathLoss, d: np.ndarray, r: float | None, cfg: RadioConfig) -> np.ndarray:
+    """The in-view cost of one AP's scan at distances ``d`` from it: heard at ``r`` dBm, or
+    not heard (None)."""
+    mu = model.mean(d)
+    p = cfg.hear_prob * ndtr((mu - cfg.floor_dbm) / model.sigma_db)
+    if r is None:
+        return np.asarray(-np.log1p(-p))
+    z = np.abs(r - mu) / model.sigma_db
+    h = cfg.huber
+    return np.asarray(np.where(z < h, 0.5 * z * z, h * z - 0.5 * h * h) - np.log(p))
 
 
 class _WithRadio(Sequence[np.ndarray | float]):

@@ -111,8 +111,11 @@ class RetrackConfig:
     evidence_sigma_mps: float = 0.3
     """A stretch is published only when its detections share ``min_evidence`` of motion
     changes with the phone (:func:`_evidence`: changes of velocity over ``evidence_lag_s``, in
-    units of ``evidence_sigma_mps``; a shared 35 deg turn at walking pace gives about 6). None
-    publishes every stretch."""
+    units of ``evidence_sigma_mps``; a shared 35 deg turn at walking pace gives about 6), its
+    RSSI's log-likelihood ratio for the path against the carrier out of view counted in (a
+    straight walk past an AP that hears the phone loud then: `biwi_hotel`, where the 5
+    farthest walkers cross the view in 8-23 s on straight lines, and none was published on
+    motion alone). None publishes every stretch."""
     gate_m: float = 1.0
     """A frame counts as seen when a detection is this near the path."""
     fill_s: float = 2.0
@@ -914,6 +917,7 @@ def _publish(
     cells: np.ndarray,
     u: np.ndarray,
     cfg: RetrackConfig,
+    radio_gain: np.ndarray | None = None,
 ) -> tuple[dict[int, tuple[float, float]], set[int], dict[int, np.ndarray], float]:
     """Positions to publish (frame index -> xy), the seen frames, the detections on the
     path (frame index -> xy), and the seconds of stretches withheld for want of evidence.
@@ -921,7 +925,10 @@ def _publish(
     Seen frames less than ``fill_s`` apart form a stretch; a stretch shorter than
     ``min_stretch_s`` is dropped, and so is one whose detections share less than
     ``min_evidence`` of motion changes with the phone (:func:`_evidence`: a stranger who
-    walks straight fits a phone of unknown yaw as well as its carrier); two stretches at most
+    walks straight fits a phone of unknown yaw as well as its carrier) and of its RSSI
+    (``radio_gain``, per frame: :meth:`~trackctl.vmtrack.radio.RadioEvidence.gain`, summed
+    over the stretch: a straight walk past an AP that hears the phone then, and not a
+    stranger's while the carrier is away); two stretches at most
     ``unseen_s`` apart are joined when
     the phone's walk across the gap lands within ``unseen_m`` (+ 15 % of the walk) of where
     the next one starts (the carrier walked where no camera saw them). A published position
@@ -948,7 +955,10 @@ def _publish(
     withheld = 0.0
     if cfg.min_evidence is not None:
         track = np.column_stack([frame_t.astype(float), walk.real, walk.imag])
-        judged = [(r, _evidence(frame_t, r, hits, track, cfg) >= cfg.min_evidence) for r in kept]
+        judged = [
+            (r, _evidence(frame_t, r, hits, track, cfg, radio_gain) >= cfg.min_evidence)
+            for r in kept
+        ]
         withheld = float(sum(t[r[-1]] - t[r[0]] for r, ok in judged if not ok))
         kept = [r for r, ok in judged if ok]
     if not kept:
@@ -985,14 +995,18 @@ def _evidence(
     hits: dict[int, np.ndarray],
     track: np.ndarray,
     cfg: RetrackConfig,
+    radio_gain: np.ndarray | None = None,
 ) -> float:
-    """The motion changes a stretch's detections share with the phone: the integral over its
-    time of Re(dv conj(dp)) / 2 sigma_v^2 (per second: the same at any frame rate), dv the
-    change of the detections' velocity over ``evidence_lag_s`` (centred least squares over a
-    third of ``velocity_window_s``), dp the same of the phone's aligned walk. A person who
-    walks straight or stands changes nothing, whatever the phone does, and the detections'
-    noise averages out: evidence comes only from turns, stops and starts made together.
-    ``track``: the phone's aligned walk (t_ns, x, y) at every frame."""
+    """The evidence that a stretch's detections are the phone's carrier: the motion changes
+    they share with the phone, plus (with ``radio_gain``, per frame) its sum over the
+    stretch's frames. The motion: the integral over its time of Re(dv conj(dp)) / 2 sigma_v^2
+    (per second: the same at any frame rate), dv the change of the detections' velocity over
+    ``evidence_lag_s`` (centred least squares over a third of ``velocity_window_s``), dp the
+    same of the phone's aligned walk. A person who walks straight or stands changes nothing,
+    whatever the phone does, and the detections' noise averages out: motion evidence comes
+    only from turns, stops and starts made together; a straight walk through the view (a
+    hotel's entrance) is told by the RSSI alone. ``track``: the phone's aligned walk
+    (t_ns, x, y) at every frame."""
     ks = stretch
     det = np.array([[frame_t[k], *hits[k]] for k in ks], float)
     at = frame_t[ks].astype(float)
@@ -1001,11 +1015,12 @@ def _evidence(
     dv = visual_velocity(det, at, half) - visual_velocity(det, before, half)
     dp = visual_velocity(track, at, half) - visual_velocity(track, before, half)
     ok = ~(np.isnan(dv) | np.isnan(dp))
+    radio = float(radio_gain[ks[0] : ks[-1] + 1].sum()) if radio_gain is not None else 0.0
     if not ok.any():
-        return 0.0
+        return radio
     dt = float(np.median(np.diff(frame_t[ks[0] : ks[-1] + 1]))) / 1e9
     gain = (dv[ok] * np.conj(dp[ok])).real.sum() * dt
-    return float(gain / (2 * cfg.evidence_sigma_mps**2))
+    return float(gain / (2 * cfg.evidence_sigma_mps**2)) + radio
 
 
 def _with_radio(
@@ -1179,7 +1194,8 @@ class _Follower:
         for p in range(passes + 1):
             u = _displacements(frame_t, track, lag, a)
             cells = _viterbi_path(grid, phone_em, u, self.steps, visit)
-            xy, seen, hits, withheld = _publish(frame_t, points, grid, cells, u, cfg)
+            gain = radio.gain(mid, grid.xy(cells)) if radio and radio.cfg.enabled else None
+            xy, seen, hits, withheld = _publish(frame_t, points, grid, cells, u, cfg, gain)
             if p == passes:
                 break
             fit = _refit(frame_t, hits, track, self.acfg, cfg, self.phones[mid].carry_changes)
