@@ -3,6 +3,7 @@ detections by their phone's walk, whatever the phone's yaw, clock and step."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -17,13 +18,16 @@ from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.radio import RadioEvidence
 from trackctl.vmtrack.retrack import (
     RetrackConfig,
+    Retracked,
     _displacements,
+    _exclusive,
     _Follower,
     _Grid,
     _layer_costs,
     _publish,
     _refit,
     _search,
+    _shared,
     _step_costs,
     _viterbi_path,
     _yaw_changes_cost,
@@ -537,3 +541,58 @@ def test_a_path_another_alignment_fits_as_well_is_not_published(twin):
     )
     none.alternatives["m"] = follow.alternatives["m"]
     assert none.settle("m", found, None).xy == found.xy
+
+
+def _pair_scene(seed: int):
+    """Two carriers walking side by side 0.8 m apart (the same turns: their phones fit either),
+    and one stranger; detections of all three (0.15 m noise)."""
+    frame_t, _, people = _scene(seed, n_people=2, seconds=60.0)
+    one = people[0]
+    v = np.gradient(one, axis=0)
+    side = np.column_stack([-v[:, 1], v[:, 0]]) / np.maximum(np.hypot(*v.T), 1e-9)[:, None]
+    two = one + 0.8 * np.median(side, axis=0) / np.hypot(*np.median(side, axis=0))
+    rng = np.random.default_rng(seed)
+    walkers = [one, two, people[1]]
+    points = [
+        np.array([w[k] + rng.normal(0, 0.15, 2) for w in walkers]) for k in range(len(frame_t))
+    ]
+    return frame_t, points, one, two
+
+
+def _on(xy: dict[int, tuple[float, float]], walk: np.ndarray, other: np.ndarray) -> float:
+    """Share of the published frames nearer ``walk`` than ``other``."""
+    return sum(math.dist(p, walk[k]) < math.dist(p, other[k]) for k, p in xy.items()) / max(
+        len(xy), 1
+    )
+
+
+def test_two_phones_on_one_of_a_pair_are_parted_onto_both():
+    frame_t, points, one, two = _pair_scene(7)
+    n = len(frame_t)
+    phones = {"a": _phone(one, frame_t, 0.0), "b": _phone(two, frame_t, 0.0)}
+    grid = _Grid(points, CFG.cell_m).with_visits(points, CFG)
+    follow = _Follower(frame_t, points, phones, grid, AlignConfig(), CFG, False)
+    out = Retracked()
+    found = follow("a", 0.0, np.ones(n, complex), False, None)
+    assert found is not None
+    assert len(found.xy) > 0.9 * n and max(_on(found.xy, one, two), _on(found.xy, two, one)) > 0.9
+    # each phone followed alone may end on the same walker: b's walk fits a's as well
+    out["a"], out["b"] = found, dataclasses.replace(found)
+    min_frames = int(CFG.min_stretch_s * FPS)
+    assert _shared(points, out, min_frames, CFG.gate_m) is not None
+    _exclusive(follow, out, None)
+    on_one = [m for m in out if len(out[m].xy) > 0.9 * n and _on(out[m].xy, one, two) > 0.9]
+    on_two = [m for m in out if len(out[m].xy) > 0.9 * n and _on(out[m].xy, two, one) > 0.9]
+    assert len(on_one) == 1 and len(on_two) == 1
+    assert _shared(points, out, min_frames, CFG.gate_m) is None
+
+
+def test_a_pair_walking_side_by_side_has_one_phone_each():
+    frame_t, points, one, two = _pair_scene(8)
+    n = len(frame_t)
+    phones = {"a": _phone(one, frame_t, 20.0), "b": _phone(two, frame_t, -60.0, lag_s=1.0)}
+    out = retrack(frame_t, points, phones, {}, AlignConfig(), CFG)
+    on_one = [m for m in out if len(out[m].xy) > 0.8 * n and _on(out[m].xy, one, two) > 0.9]
+    on_two = [m for m in out if len(out[m].xy) > 0.8 * n and _on(out[m].xy, two, one) > 0.9]
+    assert len(on_one) == 1 and len(on_two) == 1
+    assert _shared(points, out, int(CFG.min_stretch_s * FPS), CFG.gate_m) is None

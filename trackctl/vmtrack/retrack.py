@@ -172,6 +172,11 @@ class RetrackConfig:
     yaw nearly as well (`students001` seed 2: eight alignments within 8 of each other, three
     of them on the carrier); publishing the cheapest would be a guess. On the 10-person lobby
     the nearest alternative that moves a path costs 50 more. None: no alternatives weighed."""
+    exclusive: bool = True
+    """One person carries one phone: two phones whose paths share detections for
+    ``min_stretch_s`` or more are settled jointly, the one that loses least without them
+    followed again without them (:func:`_exclusive`). Off for a site where people carry two
+    phones (both would then be moved apart)."""
     refine_passes: int = 2
     velocity_window_s: float = 7.0
     """Centred window of the least-squares velocity of the path's detections and of the phone's
@@ -1088,7 +1093,67 @@ def retrack(
         final = _calibrated_pass(follow, out, radio, frame_t, cfg)
     for mid, found in out.items():
         out[mid] = follow.settle(mid, found, final)
+    if cfg.exclusive:
+        _exclusive(follow, out, final)
     return out
+
+
+def _shared(
+    points: Sequence[np.ndarray], out: Retracked, min_frames: int, gate_m: float
+) -> tuple[str, str, list[int]] | None:
+    """The two phones whose paths are on the same detections in the most frames (at least
+    ``min_frames``), and those frames; None when no two are."""
+    near: dict[str, dict[int, int]] = {}
+    for mid, tr in out.items():
+        near[mid] = {}
+        for k in tr.seen:
+            p = points[k]
+            if len(p) and k in tr.xy:
+                d = np.hypot(p[:, 0] - tr.xy[k][0], p[:, 1] - tr.xy[k][1])
+                j = int(np.argmin(d))
+                if d[j] < gate_m:
+                    near[mid][k] = j
+    best: tuple[str, str, list[int]] | None = None
+    mids = sorted(out)
+    for i, a in enumerate(mids):
+        for b in mids[i + 1 :]:
+            ks = sorted(k for k, j in near[a].items() if near[b].get(k) == j)
+            if len(ks) >= min_frames and (best is None or len(ks) > len(best[2])):
+                best = (a, b, ks)
+    return best
+
+
+def _exclusive(follow: _Follower, out: Retracked, radio: RadioEvidence | None) -> None:
+    """One person, one phone (in place): where two phones' paths are on the same detections
+    for ``min_stretch_s`` or more, the phone whose path costs least more without them
+    (:meth:`_Follower.cost`, each under its own alignment refitted) gives them up and is
+    followed again without them; the other keeps its path. Two walkers side by side fit
+    each other's phones nearly as well, and each phone followed alone can end on the one
+    that fits it best (`biwi_hotel` seed 1: two phones on one of a pair); the pair's
+    cheapest joint answer puts the phones on both. Repeated while any two share (a phone
+    moved may land on a third's carrier), at most twice per phone."""
+    cfg = follow.cfg
+    min_frames = max(int(round(cfg.min_stretch_s / follow.dt)), 1)
+    for _ in range(2 * len(out)):
+        shared = _shared(follow.points, out, min_frames, cfg.gate_m)
+        if shared is None:
+            return
+        a, b, ks = shared
+        options = []
+        for keep, move in ((a, b), (b, a)):
+            before = follow.cost(move, out[move], radio)
+            held = follow.taken.get(move, {})
+            follow.taken[move] = follow.holding(move, out[keep], ks)
+            moved = follow(move, out[move].lag_s, out[move].a, False, radio)
+            rise = np.inf if moved is None else follow.cost(move, moved, radio) - before
+            options.append((rise, move, follow.taken[move], moved))
+            follow.taken[move] = held
+        rise, move, taken, moved = min(options, key=lambda o: o[0])
+        follow.taken[move] = taken
+        if moved is None:
+            del out[move]
+        else:
+            out[move] = follow.settle(move, moved, radio)
 
 
 def _calibrated_pass(
@@ -1162,16 +1227,47 @@ class _Follower:
         self.walks = {mid: dead_reckoned(phones[mid]) for mid in sorted(phones)}
         self.alternatives: dict[str, list[tuple[float, np.ndarray]]] = {}
         """Each phone's other alignments from its last search."""
+        self.taken: dict[str, dict[int, np.ndarray]] = {}
+        """Per phone, the frames where another phone's carrier holds a detection, and what is
+        left of the frame's detections without it (:func:`_exclusive`)."""
+
+    def _frames(self, mid: str) -> tuple[Sequence[np.ndarray], Sequence[np.ndarray | float]]:
+        """The detections phone ``mid`` may be on, and their emissions: every frame's but those
+        another phone's carrier holds."""
+        taken = self.taken.get(mid)
+        if not taken:
+            return self.points, self.emissions
+        points, emissions = list(self.points), list(self.emissions)
+        for k, left in taken.items():
+            points[k] = left
+            emissions[k] = self.grid.emission(left, self.cfg.det_sigma_m, self.cfg.miss_cost)
+        return points, emissions
+
+    def holding(self, mid: str, keeper: PhoneTrack, frames: Sequence[int]) -> dict[int, np.ndarray]:
+        """Phone ``mid``'s taken detections (:attr:`taken`) with, at each of ``frames``, the one
+        ``keeper``'s carrier is on (the nearest to its position, within ``gate_m``) added."""
+        taken = dict(self.taken.get(mid, {}))
+        for k in frames:
+            left = taken.get(k, self.points[k])
+            if not len(left):
+                continue
+            x, y = keeper.xy[k]
+            d = np.hypot(left[:, 0] - x, left[:, 1] - y)
+            j = int(np.argmin(d))
+            if d[j] < self.cfg.gate_m:
+                taken[k] = np.delete(left, j, axis=0)
+        return taken
 
     def __call__(
         self, mid: str, lag: float, a: np.ndarray, search: bool, radio: RadioEvidence | None
     ) -> PhoneTrack | None:
-        frame_t, points, grid, cfg = self.frame_t, self.points, self.grid, self.cfg
+        frame_t, grid, cfg = self.frame_t, self.grid, self.cfg
         track = self.walks[mid]
-        phone_em, visit = _with_radio(radio, mid, grid, self.emissions)
+        points, emissions = self._frames(mid)
+        phone_em, visit = _with_radio(radio, mid, grid, emissions)
         if search:
             if self.space is None:
-                self.space = _search_field(points, cfg)
+                self.space = _search_field(self.points, cfg)
             changes = self.phones[mid].carry_changes
             coarse_em, coarse_visit = _with_radio(radio, mid, *self.space)
             self.alternatives[mid] = []
@@ -1209,7 +1305,7 @@ class _Follower:
         """The cost of the cheapest path under ``found``'s alignment (paths of two alignments
         of one phone compare)."""
         u = _displacements(self.frame_t, self.walks[mid], found.lag_s, found.a)
-        phone_em, visit = _with_radio(radio, mid, self.grid, self.emissions)
+        phone_em, visit = _with_radio(radio, mid, self.grid, self._frames(mid)[1])
         costs = _layer_costs(
             self.grid, phone_em, u[:, None], self.steps, visit=visit, absolute=True
         )
