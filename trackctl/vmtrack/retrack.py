@@ -1290,7 +1290,9 @@ class _Follower:
         for p in range(passes + 1):
             u = _displacements(frame_t, track, lag, a)
             cells = _viterbi_path(grid, phone_em, u, self.steps, visit)
-            gain = radio.gain(mid, grid.xy(cells)) if radio and radio.cfg.enabled else None
+            gain = None
+            if radio and radio.cfg.enabled and cfg.min_evidence is not None:
+                gain = radio.gain(mid, grid.xy(cells))  # read by the publication rule only
             xy, seen, hits, withheld = _publish(frame_t, points, grid, cells, u, cfg, gain)
             if p == passes:
                 break
