@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from trackctl.vmtrack.align import AlignConfig, Alignment, PairEvidence, lag_grid
@@ -35,6 +35,9 @@ def test_fit_recovers_yaw_scale_and_lag(
 ) -> None:
     step = int(round(CFG.lag_step_s * 10))  # samples per lag step at 10 Hz
     z_phone = _walk(600, seed)
+    # a phone that stands through the window has no heading or step to recover (seed 984
+    # stands throughout: the fit is rightly None)
+    assume(np.abs(z_phone[100:500]).mean() > 0.3)
     a = scale * np.exp(1j * yaw)
     ev = PairEvidence(len(LAGS))
     centre = len(LAGS) // 2

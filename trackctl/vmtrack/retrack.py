@@ -915,6 +915,15 @@ def _refit(
     return None if best is None else (best[1], best[2])
 
 
+def _nearest(points: np.ndarray, xy: Sequence[float] | np.ndarray, within_m: float) -> int | None:
+    """Index of the detection in ``points`` nearest ``xy``, if it is within ``within_m``."""
+    if not len(points):
+        return None
+    d = np.hypot(points[:, 0] - xy[0], points[:, 1] - xy[1])
+    j = int(np.argmin(d))
+    return j if d[j] < within_m else None
+
+
 def _publish(
     frame_t: np.ndarray,
     points: Sequence[np.ndarray],
@@ -942,11 +951,10 @@ def _publish(
     path = grid.xy(cells)
     hits: dict[int, np.ndarray] = {}
     for k, p in enumerate(points):
-        if not len(p) or np.isnan(u[k]):
+        if np.isnan(u[k]):
             continue
-        d = np.hypot(p[:, 0] - path[k, 0], p[:, 1] - path[k, 1])
-        j = int(np.argmin(d))
-        if d[j] < cfg.gate_m:
+        j = _nearest(p, path[k], cfg.gate_m)
+        if j is not None:
             hits[k] = p[j]
     if not hits:
         return {}, set(), hits, 0.0
@@ -1107,12 +1115,9 @@ def _shared(
     for mid, tr in out.items():
         near[mid] = {}
         for k in tr.seen:
-            p = points[k]
-            if len(p) and k in tr.xy:
-                d = np.hypot(p[:, 0] - tr.xy[k][0], p[:, 1] - tr.xy[k][1])
-                j = int(np.argmin(d))
-                if d[j] < gate_m:
-                    near[mid][k] = j
+            j = _nearest(points[k], tr.xy[k], gate_m) if k in tr.xy else None
+            if j is not None:
+                near[mid][k] = j
     best: tuple[str, str, list[int]] | None = None
     mids = sorted(out)
     for i, a in enumerate(mids):
@@ -1249,12 +1254,8 @@ class _Follower:
         taken = dict(self.taken.get(mid, {}))
         for k in frames:
             left = taken.get(k, self.points[k])
-            if not len(left):
-                continue
-            x, y = keeper.xy[k]
-            d = np.hypot(left[:, 0] - x, left[:, 1] - y)
-            j = int(np.argmin(d))
-            if d[j] < self.cfg.gate_m:
+            j = _nearest(left, keeper.xy[k], self.cfg.gate_m)
+            if j is not None:
                 taken[k] = np.delete(left, j, axis=0)
         return taken
 
