@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy import ndimage
 
 from trackctl.logs.messages import RssiReading, RssiScan, Vec3
 from trackctl.vmtrack.align import AlignConfig
@@ -26,6 +27,7 @@ from trackctl.vmtrack.retrack import (
     _layer_costs,
     _publish,
     _refit,
+    _relax,
     _search,
     _shared,
     _step_costs,
@@ -110,6 +112,25 @@ def test_emission_is_the_distance_to_the_nearest_detection(pts, probe):
     got = math.sqrt(e[cell[1], cell[0]] * 2 * 0.35**2)
     # detections are snapped to cells: half a cell's diagonal at most
     assert abs(got - d) <= grid.cell * math.sqrt(2) / 2 + 1e-6
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    st.integers(1, 3),
+    st.integers(1, 7),
+    st.integers(1, 7),
+    st.integers(0, 2**32 - 1),
+    st.lists(st.floats(0, 50, width=32), min_size=9, max_size=9),
+)
+def test_relax_is_grey_erosion_bit_for_bit(layers, rows, cols, seed, steps):
+    rng = np.random.default_rng(seed)
+    acc = (rng.random((layers, rows, cols)) * 100).astype(np.float32)
+    acc[rng.random(acc.shape) < 0.2] = np.float32(1e9)  # cells no path reaches
+    costs = np.array(steps, np.float32)  # not symmetric: the offsets' orientation counts
+    want = ndimage.grey_erosion(
+        acc, structure=-costs.reshape(1, 3, 3), mode="constant", cval=np.float32(1e9)
+    )
+    assert np.array_equal(_relax(acc, costs), want)
 
 
 def test_the_path_follows_the_phone_through_a_crowd():

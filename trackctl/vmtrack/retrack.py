@@ -363,6 +363,26 @@ def _whole_cells(frac: np.ndarray, move: complex, cell: float) -> tuple[int, int
     return sx, sy
 
 
+def _relax(acc: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Each cell's cheapest predecessor: the minimum over the 3 x 3 neighbourhood of ``acc``
+    (layers, rows, columns) plus the step's cost (``steps``, in :data:`_OFFS` order), cells
+    off the grid at :data:`_BIG`. This is ``ndimage.grey_erosion`` with the structure
+    ``-steps`` (bit for bit), written as nine minima of shifted views: scipy's erosion with a
+    non-flat structure walks the structure per element and took half of the re-tracking's
+    time (3x slower, measured on 9 x 80 x 100 layers)."""
+    n, h, w = acc.shape
+    pad = np.full((n, h + 2, w + 2), _BIG, np.float32)
+    pad[:, 1:-1, 1:-1] = acc
+    c = steps.reshape(3, 3)
+    out = acc + c[1, 1]
+    for dy, dx in _OFFS:
+        if dy or dx:
+            np.minimum(
+                out, pad[:, 1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w] + c[1 + dy, 1 + dx], out=out
+            )
+    return out
+
+
 def _step_costs(
     cell: float, dt: float, cfg: RetrackConfig, sigma_mps: float | None = None
 ) -> np.ndarray:
@@ -422,8 +442,6 @@ def _layer_costs(
         acc += doors  # in view at the first frame: as if just come in
         before = np.zeros(n_r, np.float32)
         after = np.full(n_r, _BIG, np.float32)
-    # grey erosion subtracts its structure: a negative step cost adds it
-    structure = -steps.reshape(1, 3, 3)
     for k in range(len(walks)):
         if visit is not None:
             away = aways[k]
@@ -437,7 +455,7 @@ def _layer_costs(
                 continue
             sx, sy = _whole_cells(frac[r], v, grid.cell)
             moved[r] = _shift(acc[r], sy, sx)
-        acc = ndimage.grey_erosion(moved, structure=structure, mode="constant", cval=_BIG)
+        acc = _relax(moved, steps)
         if turn_cost is not None:
             turn = np.minimum(np.roll(acc, 1, axis=0), np.roll(acc, -1, axis=0))
             np.minimum(acc, turn + np.float32(turn_cost), out=acc)
