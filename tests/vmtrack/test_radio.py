@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from trackctl.logs.messages import RssiReading, RssiScan, Vec3
-from trackctl.vmtrack.radio import PathLoss, RadioConfig, RadioEvidence, fit_path_loss
+from trackctl.vmtrack.radio import (
+    PathLoss,
+    RadioConfig,
+    RadioEvidence,
+    _scan_cost,
+    fit_path_loss,
+)
 from trackctl.vmtrack.retrack import _Grid
 
 MODEL = (-40.0, 2.5)
@@ -58,6 +64,33 @@ def test_a_phone_no_ap_hears_is_out_of_view_and_one_heard_in_it():
     # in view anywhere in the room, the AP would have heard it: -log(1 - 0.9)
     assert unheard.min() == pytest.approx(-math.log(1 - cfg.hear_prob), rel=0.01)
     assert unheard.min() > cfg.away_heard_cost
+
+
+def test_a_frames_cost_is_the_sum_of_its_scans_costs_bit_for_bit():
+    # the AP's level and hearing chance are computed once per grid; each scan's cost is
+    # what _scan_cost gives it on its own (heard at two levels, not heard, two APs)
+    frame_t = np.arange(3) * 1_000_000_000
+    scans = [
+        _scan(0, {"m": -62.0}),
+        _scan(10, {"other": -50.0}, ap=(12.0, 2.0)),
+        _scan(1_000_000_000, {"m": -48.5}),
+        _scan(2_000_000_000, {"other": -70.0}),
+    ]
+    cfg = RadioConfig()
+    radio = RadioEvidence(frame_t, scans, MODEL, cfg)
+    grid = _room()
+    rows, cols = np.indices(grid.shape)
+    for k, parts in enumerate([[(AP, -62.0), ((12.0, 2.0), None)], [(AP, -48.5)], [(AP, None)]]):
+        want = np.zeros(grid.shape, np.float32)
+        for ap, r in parts:
+            d = np.hypot(
+                grid.lo[0] + cols * grid.cell - ap[0], grid.lo[1] + rows * grid.cell - ap[1]
+            )
+            d = np.maximum(d, 0.3).astype(np.float32)
+            want += _scan_cost(radio.default, d, r, cfg)
+        for _ in range(2):  # computed, then from the AP's cached level
+            got = radio.cost("m", grid, k)
+            assert got is not None and np.array_equal(got, want)
 
 
 def test_scans_without_an_ap_position_are_left_out():

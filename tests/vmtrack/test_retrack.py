@@ -18,6 +18,7 @@ from trackctl.vmtrack.identify import dead_reckoned
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.radio import RadioEvidence
 from trackctl.vmtrack.retrack import (
+    _OFFS,
     RetrackConfig,
     Retracked,
     _displacements,
@@ -25,6 +26,7 @@ from trackctl.vmtrack.retrack import (
     _Follower,
     _Grid,
     _layer_costs,
+    _predecessors,
     _publish,
     _refit,
     _relax,
@@ -32,6 +34,8 @@ from trackctl.vmtrack.retrack import (
     _shared,
     _step_costs,
     _viterbi_path,
+    _whole_cells,
+    _whole_cells_all,
     _yaw_changes_cost,
     _yaw_choice,
     retrack,
@@ -131,6 +135,60 @@ def test_relax_is_grey_erosion_bit_for_bit(layers, rows, cols, seed, steps):
         acc, structure=-costs.reshape(1, 3, 3), mode="constant", cval=np.float32(1e9)
     )
     assert np.array_equal(_relax(acc, costs), want)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(1, 7), st.integers(1, 7), st.integers(0, 2**32 - 1))
+def test_predecessors_are_argmin_over_the_shifted_copies_bit_for_bit(rows, cols, seed):
+    rng = np.random.default_rng(seed)
+    acc = (rng.random((rows, cols)) * 20).astype(np.float32)
+    acc[rng.random(acc.shape) < 0.2] = np.float32(1e9)
+    acc[rng.random(acc.shape) < 0.3] = np.float32(5.0)  # ties: the first offset wins
+    steps = rng.choice(np.float32([0.0, 0.5, 2.0]), 9)  # ties between offsets too
+    pad = np.full((rows + 2, cols + 2), np.float32(1e9), np.float32)
+    pad[1:-1, 1:-1] = acc
+    stack = []
+    for i, (dy, dx) in enumerate(_OFFS):
+        moved = np.full_like(acc, np.float32(1e9))
+        ys = slice(max(-dy, 0), rows - max(dy, 0))
+        yd = slice(max(dy, 0), rows - max(-dy, 0))
+        xs = slice(max(-dx, 0), cols - max(dx, 0))
+        xd = slice(max(dx, 0), cols - max(-dx, 0))
+        moved[yd, xd] = acc[ys, xs]
+        stack.append(moved + steps[i])
+    want_back = np.argmin(np.stack(stack), axis=0)
+    back = np.full((rows, cols), -7, np.int8)
+    best = _predecessors(pad, steps, back)
+    assert np.array_equal(back, want_back)
+    assert np.array_equal(best, np.min(np.stack(stack), axis=0))
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    st.lists(
+        st.lists(
+            st.one_of(st.just(complex("nan")), st.complex_numbers(max_magnitude=3.0)),
+            min_size=4,
+            max_size=4,
+        ),
+        min_size=1,
+        max_size=12,
+    ),
+    st.sampled_from([0.2, 0.3]),
+)
+def test_whole_cells_of_all_layers_are_each_layers(moves, cell):
+    frac_all = np.zeros((4, 2))
+    frac_one = np.zeros((4, 2))
+    for row in moves:
+        got = _whole_cells_all(frac_all, np.array(row, complex), cell)
+        for r, v in enumerate(row):
+            if np.isnan(v):
+                frac_one[r] = 0.0
+                want = (0, 0)
+            else:
+                want = _whole_cells(frac_one[r], v, cell)
+            assert tuple(got[r]) == want
+        assert np.array_equal(frac_all, frac_one)
 
 
 def test_the_path_follows_the_phone_through_a_crowd():

@@ -345,15 +345,6 @@ def _slices(d: int, n: int) -> tuple[slice, slice]:
     return (slice(0, n - d), slice(d, n)) if d >= 0 else (slice(-d, n), slice(0, n + d))
 
 
-def _shift(a: np.ndarray, sy: int, sx: int) -> np.ndarray:
-    """``a`` moved by (sy, sx) cells along its last two axes; what enters is unreachable."""
-    out = np.full_like(a, _BIG)
-    ys, yd = _slices(sy, a.shape[-2])
-    xs, xd = _slices(sx, a.shape[-1])
-    out[..., yd, xd] = a[..., ys, xs]
-    return out
-
-
 def _whole_cells(frac: np.ndarray, move: complex, cell: float) -> tuple[int, int]:
     """The whole cells (x, y) of ``move`` plus the fraction carried in ``frac`` (updated in
     place: what is left over is carried to the next frame)."""
@@ -361,6 +352,28 @@ def _whole_cells(frac: np.ndarray, move: complex, cell: float) -> tuple[int, int
     sx, sy = int(round(frac[0])), int(round(frac[1]))
     frac -= (sx, sy)
     return sx, sy
+
+
+def _whole_cells_all(frac: np.ndarray, moves: np.ndarray, cell: float) -> np.ndarray:
+    """:func:`_whole_cells` for every layer at once (``frac`` (layers, 2), ``moves`` complex
+    (layers,)), the same numbers: the whole cells (layers, 2: x, y); a layer whose move is
+    NaN restarts (its fraction set to 0, its cells 0)."""
+    ok = ~np.isnan(moves)
+    frac[~ok] = 0.0
+    frac[ok, 0] += moves[ok].real / cell
+    frac[ok, 1] += moves[ok].imag / cell
+    whole = np.round(frac)  # half to even, as Python's round
+    frac -= whole
+    return whole.astype(int)
+
+
+def _shift_into(pad: np.ndarray, a: np.ndarray, sy: int, sx: int) -> None:
+    """``a`` (rows, columns) moved by (sy, sx) cells, written into the inside of ``pad`` (a
+    border of one cell around it): what enters stays as the caller set it (:data:`_BIG`,
+    unreachable)."""
+    ys, yd = _slices(sy, a.shape[0])
+    xs, xd = _slices(sx, a.shape[1])
+    pad[1:-1, 1:-1][yd, xd] = a[ys, xs]
 
 
 def _relax(acc: np.ndarray, steps: np.ndarray) -> np.ndarray:
@@ -373,14 +386,41 @@ def _relax(acc: np.ndarray, steps: np.ndarray) -> np.ndarray:
     n, h, w = acc.shape
     pad = np.full((n, h + 2, w + 2), _BIG, np.float32)
     pad[:, 1:-1, 1:-1] = acc
+    return _relax_padded(pad, steps)
+
+
+def _relax_padded(pad: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """:func:`_relax` of the inside of ``pad`` (layers, rows + 2, columns + 2; its border at
+    :data:`_BIG`)."""
+    h, w = pad.shape[1] - 2, pad.shape[2] - 2
     c = steps.reshape(3, 3)
-    out = acc + c[1, 1]
+    out = pad[:, 1:-1, 1:-1] + c[1, 1]
     for dy, dx in _OFFS:
         if dy or dx:
             np.minimum(
                 out, pad[:, 1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w] + c[1 + dy, 1 + dx], out=out
             )
     return out
+
+
+def _predecessors(pad: np.ndarray, steps: np.ndarray, back: np.ndarray) -> np.ndarray:
+    """For one layer (``pad``: rows + 2, columns + 2, border at :data:`_BIG`), each cell's
+    cheapest predecessor's cost plus the step's, and which step it is (index into
+    :data:`_OFFS`, written into ``back``; the first of equals, as ``np.argmin`` over the
+    nine shifted copies: the same numbers without stacking them)."""
+    h, w = pad.shape[0] - 2, pad.shape[1] - 2
+
+    def shifted(i: int) -> np.ndarray:
+        dy, dx = _OFFS[i]
+        return pad[1 - dy : 1 - dy + h, 1 - dx : 1 - dx + w] + steps[i]
+
+    best = shifted(0)
+    back[:] = 0
+    for i in range(1, len(_OFFS)):
+        cand = shifted(i)
+        np.putmask(back, cand < best, i)
+        np.minimum(best, cand, out=best)
+    return best
 
 
 def _step_costs(
@@ -433,6 +473,7 @@ def _layer_costs(
     (:attr:`RetrackConfig.away_cost`)."""
     n_r = walks.shape[1]
     acc = np.zeros((n_r, *grid.shape), np.float32)
+    pad = np.empty((n_r, grid.shape[0] + 2, grid.shape[1] + 2), np.float32)
     out = np.zeros(walks.shape)
     frac = np.zeros((n_r, 2))
     total = 0.0
@@ -446,16 +487,16 @@ def _layer_costs(
         if visit is not None:
             away = aways[k]
             after = np.minimum(after, (acc + doors).min(axis=(1, 2))) + away
-        moved = np.empty_like(acc)
+        # each layer shifted by its whole cells, straight into the relaxation's padded buffer
+        restart = np.isnan(walks[k])
+        whole = _whole_cells_all(frac, walks[k], grid.cell)
+        pad.fill(_BIG)
         for r in range(n_r):
-            v = walks[k, r]
-            if np.isnan(v):
-                moved[r] = acc[r].min()
-                frac[r] = 0.0
-                continue
-            sx, sy = _whole_cells(frac[r], v, grid.cell)
-            moved[r] = _shift(acc[r], sy, sx)
-        acc = _relax(moved, steps)
+            if restart[r]:
+                pad[r, 1:-1, 1:-1] = acc[r].min()
+            else:
+                _shift_into(pad[r], acc[r], int(whole[r, 1]), int(whole[r, 0]))
+        acc = _relax_padded(pad, steps)
         if turn_cost is not None:
             turn = np.minimum(np.roll(acc, 1, axis=0), np.roll(acc, -1, axis=0))
             np.minimum(acc, turn + np.float32(turn_cost), out=acc)
@@ -494,6 +535,7 @@ def _viterbi_path(
     n = len(u)
     acc = np.zeros(grid.shape, np.float32)
     back = np.zeros((n, *grid.shape), np.int8)
+    pad = np.empty((grid.shape[0] + 2, grid.shape[1] + 2), np.float32)
     shifts = np.zeros((n, 2), int)
     frac = np.zeros(2)
     restart: dict[int, tuple[int, int]] = {}
@@ -523,10 +565,9 @@ def _viterbi_path(
         else:
             sx, sy = _whole_cells(frac, uk, grid.cell)
             shifts[k] = (sy, sx)
-            moved = _shift(acc, sy, sx)
-            stack = np.stack([_shift(moved, dy, dx) + steps[i] for i, (dy, dx) in enumerate(_OFFS)])
-            back[k] = np.argmin(stack, axis=0)
-            acc = np.take_along_axis(stack, back[k][None].astype(np.intp), 0)[0]
+            pad.fill(_BIG)
+            _shift_into(pad, acc, sy, sx)
+            acc = _predecessors(pad, steps, back[k])
             if visit is not None:
                 come_in = before + doors
                 new = come_in < acc
