@@ -125,12 +125,15 @@ def test_emission_is_the_distance_to_the_nearest_detection(pts, probe):
     st.integers(1, 7),
     st.integers(0, 2**32 - 1),
     st.lists(st.floats(0, 50, width=32), min_size=9, max_size=9),
+    st.booleans(),
 )
-def test_relax_is_grey_erosion_bit_for_bit(layers, rows, cols, seed, steps):
+def test_relax_is_grey_erosion_bit_for_bit(layers, rows, cols, seed, steps, by_length):
     rng = np.random.default_rng(seed)
     acc = (rng.random((layers, rows, cols)) * 100).astype(np.float32)
     acc[rng.random(acc.shape) < 0.2] = np.float32(1e9)  # cells no path reaches
     costs = np.array(steps, np.float32)  # not symmetric: the offsets' orientation counts
+    if by_length:  # the random walk's: a cost per step length (sides, corners share one)
+        costs = costs[[abs(dy) + abs(dx) for dy, dx in _OFFS]]
     want = ndimage.grey_erosion(
         acc, structure=-costs.reshape(1, 3, 3), mode="constant", cval=np.float32(1e9)
     )

@@ -380,27 +380,63 @@ def _relax(acc: np.ndarray, steps: np.ndarray) -> np.ndarray:
     """Each cell's cheapest predecessor: the minimum over the 3 x 3 neighbourhood of ``acc``
     (layers, rows, columns) plus the step's cost (``steps``, in :data:`_OFFS` order), cells
     off the grid at :data:`_BIG`. This is ``ndimage.grey_erosion`` with the structure
-    ``-steps`` (bit for bit), written as nine minima of shifted views: scipy's erosion with a
+    ``-steps`` (bit for bit), written as minima of shifted views: scipy's erosion with a
     non-flat structure walks the structure per element and took half of the re-tracking's
     time (3x slower, measured on 9 x 80 x 100 layers)."""
-    n, h, w = acc.shape
-    pad = np.full((n, h + 2, w + 2), _BIG, np.float32)
-    pad[:, 1:-1, 1:-1] = acc
-    return _relax_padded(pad, steps)
+    relax = _Relaxation(acc.shape)
+    relax.inside[:] = acc
+    return relax(steps)
 
 
-def _relax_padded(pad: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """:func:`_relax` of the inside of ``pad`` (layers, rows + 2, columns + 2; its border at
-    :data:`_BIG`)."""
-    h, w = pad.shape[1] - 2, pad.shape[2] - 2
-    c = steps.reshape(3, 3)
-    out = pad[:, 1:-1, 1:-1] + c[1, 1]
-    for dy, dx in _OFFS:
-        if dy or dx:
-            np.minimum(
-                out, pad[:, 1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w] + c[1 + dy, 1 + dx], out=out
-            )
-    return out
+class _Relaxation:
+    """:func:`_relax` over layers of one shape, frame after frame, in buffers it keeps: the
+    caller writes each frame's layers into :attr:`pad` (border at :data:`_BIG`) and calls it.
+    Fresh temporaries of a few hundred kB each are mapped anew by the allocator, a page fault
+    per page; reused, the relaxation runs 2x faster (0.48 against 0.9-1.3 ms on 24 x 60 x 80
+    layers)."""
+
+    def __init__(self, shape: tuple[int, ...]) -> None:
+        n, h, w = shape
+        self.pad = np.full((n, h + 2, w + 2), _BIG, np.float32)
+        self.inside = self.pad[:, 1:-1, 1:-1]
+        self._out = np.empty((n, h, w), np.float32)
+        self._sides = np.empty((n, h, w), np.float32)
+        self._corners = np.empty((n, h, w), np.float32)
+        self._across = np.empty((n, h + 2, w), np.float32)
+
+    def __call__(self, steps: np.ndarray) -> np.ndarray:
+        """The relaxation of :attr:`pad`'s inside (valid until the next call)."""
+        pad, out, sides, corners, across = (
+            self.pad,
+            self._out,
+            self._sides,
+            self._corners,
+            self._across,
+        )
+        h, w = out.shape[1:]
+        c = steps.reshape(3, 3)
+        np.add(self.inside, c[1, 1], out=out)
+        edge, corner = c[[0, 1, 1, 2], [1, 0, 2, 1]], c[[0, 0, 2, 2], [0, 2, 0, 2]]
+        if (edge == edge[0]).all() and (corner == corner[0]).all():
+            # the random walk's steps cost by length only: rounding is monotone, so the
+            # minimum of (a + k, b + k) is the minimum of (a, b) plus k, bit for bit, and the
+            # four sides (and the four corners) take one addition; the corners come from
+            # the sides' row minima
+            np.minimum(pad[:, :, :-2], pad[:, :, 2:], out=across)
+            np.minimum(pad[:, :-2, 1:-1], pad[:, 2:, 1:-1], out=sides)
+            np.minimum(sides, across[:, 1:-1], out=sides)
+            np.minimum(across[:, :-2], across[:, 2:], out=corners)
+            np.add(sides, edge[0], out=sides)
+            np.add(corners, corner[0], out=corners)
+            np.minimum(out, sides, out=out)
+            np.minimum(out, corners, out=out)
+            return out
+        for dy, dx in _OFFS:
+            if dy or dx:
+                view = pad[:, 1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
+                np.add(view, c[1 + dy, 1 + dx], out=sides)
+                np.minimum(out, sides, out=out)
+        return out
 
 
 def _predecessors(pad: np.ndarray, steps: np.ndarray, back: np.ndarray) -> np.ndarray:
@@ -473,7 +509,8 @@ def _layer_costs(
     (:attr:`RetrackConfig.away_cost`)."""
     n_r = walks.shape[1]
     acc = np.zeros((n_r, *grid.shape), np.float32)
-    pad = np.empty((n_r, grid.shape[0] + 2, grid.shape[1] + 2), np.float32)
+    relax = _Relaxation(acc.shape)
+    pad = relax.pad
     out = np.zeros(walks.shape)
     frac = np.zeros((n_r, 2))
     total = 0.0
@@ -496,7 +533,7 @@ def _layer_costs(
                 pad[r, 1:-1, 1:-1] = acc[r].min()
             else:
                 _shift_into(pad[r], acc[r], int(whole[r, 1]), int(whole[r, 0]))
-        acc = _relax_padded(pad, steps)
+        acc = relax(steps)  # acc is the relaxation's buffer: its layers were copied to pad
         if turn_cost is not None:
             turn = np.minimum(np.roll(acc, 1, axis=0), np.roll(acc, -1, axis=0))
             np.minimum(acc, turn + np.float32(turn_cost), out=acc)
