@@ -345,19 +345,11 @@ def _slices(d: int, n: int) -> tuple[slice, slice]:
     return (slice(0, n - d), slice(d, n)) if d >= 0 else (slice(-d, n), slice(0, n + d))
 
 
-def _whole_cells(frac: np.ndarray, move: complex, cell: float) -> tuple[int, int]:
-    """The whole cells (x, y) of ``move`` plus the fraction carried in ``frac`` (updated in
-    place: what is left over is carried to the next frame)."""
-    frac += (move.real / cell, move.imag / cell)
-    sx, sy = int(round(frac[0])), int(round(frac[1]))
-    frac -= (sx, sy)
-    return sx, sy
-
-
-def _whole_cells_all(frac: np.ndarray, moves: np.ndarray, cell: float) -> np.ndarray:
-    """:func:`_whole_cells` for every layer at once (``frac`` (layers, 2), ``moves`` complex
-    (layers,)), the same numbers: the whole cells (layers, 2: x, y); a layer whose move is
-    NaN restarts (its fraction set to 0, its cells 0)."""
+def _whole_cells(frac: np.ndarray, moves: np.ndarray, cell: float) -> np.ndarray:
+    """The whole cells (layers, 2: x, y) of each layer's ``moves`` (complex, (layers,)) plus
+    the fraction carried in ``frac`` ((layers, 2), updated in place: what is left over is
+    carried to the next frame); a layer whose move is NaN restarts (its fraction set to 0,
+    its cells 0)."""
     ok = ~np.isnan(moves)
     frac[~ok] = 0.0
     frac[ok, 0] += moves[ok].real / cell
@@ -526,7 +518,7 @@ def _layer_costs(
             after = np.minimum(after, (acc + doors).min(axis=(1, 2))) + away
         # each layer shifted by its whole cells, straight into the relaxation's padded buffer
         restart = np.isnan(walks[k])
-        whole = _whole_cells_all(frac, walks[k], grid.cell)
+        whole = _whole_cells(frac, walks[k], grid.cell)
         pad.fill(_BIG)
         for r in range(n_r):
             if restart[r]:
@@ -574,7 +566,7 @@ def _viterbi_path(
     back = np.zeros((n, *grid.shape), np.int8)
     pad = np.empty((grid.shape[0] + 2, grid.shape[1] + 2), np.float32)
     shifts = np.zeros((n, 2), int)
-    frac = np.zeros(2)
+    frac = np.zeros((1, 2))
     restart: dict[int, tuple[int, int]] = {}
     left = np.full(n, -1, np.int64)  # out of view after the visit from k: the cell left at k-1
     before, after = np.float32(0.0 if visit is not None else _BIG), _BIG
@@ -600,7 +592,7 @@ def _viterbi_path(
             acc[:] = min(float(acc.flat[j]), come)
             back[k] = -1
         else:
-            sx, sy = _whole_cells(frac, uk, grid.cell)
+            sx, sy = (int(c) for c in _whole_cells(frac, np.array([uk]), grid.cell)[0])
             shifts[k] = (sy, sx)
             pad.fill(_BIG)
             _shift_into(pad, acc, sy, sx)
