@@ -242,3 +242,17 @@ def test_ev_match_on_a_log_without_e_scenarios(
         "/ev/e",
     )
     assert not out.exists()
+
+
+def test_simulate_vm_with_a_bad_trajectory_row_is_one_line_and_writes_nothing(
+    tmp_path: Path,
+) -> None:
+    scene = tmp_path / "scene.txt"
+    scene.write_text("0\t1\t0.5\t2.0\n10\t1\t0.7\t2.0\n20\t1\t0,9\t2.0\n")
+    out = tmp_path / "vm.mcap"
+    _one_line_error(
+        ["simulate", "vm", "--out", str(out), "--trajectories", str(scene), "--duration", "5"],
+        str(scene),
+        "row 3: x_m '0,9' is not a finite number",
+    )
+    assert not out.exists()

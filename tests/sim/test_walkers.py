@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+import pytest
 from scipy.spatial import cKDTree
 
-from trackctl.sim.walkers import random_waypoint, random_waypoint_crowd
+from trackctl.errors import InputError
+from trackctl.sim.walkers import load_trajectories_csv, random_waypoint, random_waypoint_crowd
 
 SIZE = (20.0, 15.0)
 
@@ -43,3 +47,64 @@ def test_crowd_walkers_walk_stay_inside_and_are_deterministic() -> None:
         speed = np.linalg.norm(t1.velocity(), axis=1)
         assert 0.3 < np.median(speed) < 1.6  # walking pace, pauses included
         assert np.max(speed) < 1.3 * 1.5 + 1e-6
+
+
+def _eth_ucy_rows(step: int, sep: str = "\t") -> str:
+    """Two people annotated every 0.4 s: one walks 0.5 m per annotation along x, the other
+    misses an annotation (a double step, which must not be read as the frame step)."""
+    rows = [f"{k * step}{sep}1.0{sep}{0.5 * k}{sep}2.0" for k in range(20)]
+    rows += [f"{k * step}{sep}2.0{sep}1.0{sep}{0.5 * k}" for k in range(0, 20) if k != 7]
+    return "\n".join(rows) + "\n"
+
+
+@pytest.mark.parametrize("step", [10, 6, 1])
+def test_eth_ucy_frames_are_read_at_their_own_step_and_keep_true_speeds(
+    tmp_path: Path, step: int
+) -> None:
+    path = tmp_path / "scene.txt"
+    path.write_text(_eth_ucy_rows(step))
+    walkers = {t.person: t for t in load_trajectories_csv(path, dt_s=0.1)}
+    assert sorted(walkers) == ["1", "2"]
+    for t in walkers.values():
+        speed = np.linalg.norm(np.diff(t.xy, axis=0), axis=1) / t.dt_s
+        np.testing.assert_allclose(speed, 0.5 / 0.4, rtol=1e-9)
+        assert t.t0_s == 0.0
+        assert len(t.xy) == 77  # 19 annotations of 0.4 s on a 0.1 s grid
+
+
+def test_eth_ucy_text_separated_by_commas_or_spaces_reads_the_same(tmp_path: Path) -> None:
+    tabs, commas = tmp_path / "tabs.txt", tmp_path / "commas.txt"
+    tabs.write_text(_eth_ucy_rows(10))
+    commas.write_text(_eth_ucy_rows(10, sep=","))
+    a, b = load_trajectories_csv(tabs), load_trajectories_csv(commas)
+    assert [t.person for t in a] == [t.person for t in b]
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x.xy, y.xy)
+
+
+def test_eth_obsmat_columns_are_frame_id_x_z_y(tmp_path: Path) -> None:
+    path = tmp_path / "obsmat.txt"
+    rows = [f"{6 * k:.7e} 1.0 {0.5 * k:.7e} 0.0 3.0 1.25 0.0 0.0" for k in range(10)]
+    path.write_text("\n".join(rows) + "\n")
+    (t,) = load_trajectories_csv(path, dt_s=0.4)
+    np.testing.assert_allclose(t.xy[:, 0], 0.5 * np.arange(10))
+    np.testing.assert_allclose(t.xy[:, 1], 3.0)
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("0\t1\t0.5\t2.0\n10\t1\tabc\t2.0\n", "row 2: x_m 'abc' is not a finite number"),
+        ("0\t1\t0.5\t2.0\n10\t1\tnan\t2.0\n", "row 2: x_m 'nan' is not a finite number"),
+        ("0\t1\t0.5\n10\t1\t0.6\n", "3 columns"),
+    ],
+)
+def test_bad_eth_ucy_text_is_one_error_naming_file_and_row(
+    tmp_path: Path, text: str, expected: str
+) -> None:
+    path = tmp_path / "bad.txt"
+    path.write_text(text)
+    with pytest.raises(InputError) as err:
+        load_trajectories_csv(path)
+    assert str(path) in str(err.value)
+    assert expected in str(err.value)

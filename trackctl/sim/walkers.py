@@ -166,9 +166,19 @@ def random_waypoint_crowd(
     return [Trajectory(p, 0.0, dt_s, out[:, i].copy()) for i, p in enumerate(people)]
 
 
+ETH_UCY_PERIOD_S = 0.4
+"""ETH/UCY scenes are annotated at 2.5 Hz whatever their video's frame rate: frame numbers step
+by 10 in the UCY scenes and ``biwi_hotel`` (25 fps video), by 6 in ``biwi_eth`` (15 fps)."""
+
+
 def load_trajectories_csv(path: str | Path, dt_s: float = 0.05) -> list[Trajectory]:
-    """Trajectories from a ``t_s,id,x_m,y_m`` CSV (or ETH/UCY ``frame id x y`` text, frames of
-    0.04 s), resampled to ``dt_s`` by linear interpolation."""
+    """Trajectories from a ``t_s,id,x_m,y_m`` CSV, or ETH/UCY text resampled to ``dt_s`` by
+    linear interpolation.
+
+    ETH/UCY text is ``frame id x y`` (tabs, spaces or commas), or the ETH ``obsmat.txt`` layout
+    ``frame id x z y vx vz vy``. Its annotations are 0.4 s apart, and the frame step between them
+    is read from the file (the most common step between a person's consecutive frames), so a
+    scene whose video ran at another rate keeps its true walking speeds."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such trajectories file")
@@ -180,8 +190,9 @@ def load_trajectories_csv(path: str | Path, dt_s: float = 0.05) -> list[Trajecto
         if missing:
             raise InputError(f"{path}: trajectories CSV lacks column(s) {', '.join(missing)}")
     else:
-        df = pd.read_csv(path, sep=r"\s+", header=None, names=["frame", "id", "x_m", "y_m"])
-        df["t_s"] = df["frame"] / 10.0 * 0.4
+        df = _read_eth_ucy(path, sep="," if "," in first else r"\s+")
+        step = _annotation_step(df)
+        df["t_s"] = df["frame"] / step * ETH_UCY_PERIOD_S
     out = []
     for pid, g in df.groupby("id", sort=True):
         g = g.sort_values("t_s")
@@ -194,6 +205,44 @@ def load_trajectories_csv(path: str | Path, dt_s: float = 0.05) -> list[Trajecto
     if not out:
         raise InputError(f"{path}: no trajectory with two or more points")
     return out
+
+
+def _read_eth_ucy(path: Path, sep: str) -> pd.DataFrame:
+    """``frame id x y`` rows (4 columns, or 8 of ETH's ``obsmat.txt``), every value a number."""
+    raw = pd.read_csv(path, sep=sep, header=None, dtype=str, keep_default_na=False)
+    columns = {4: (0, 1, 2, 3), 8: (0, 1, 2, 4)}.get(raw.shape[1])
+    if columns is None:
+        raise InputError(
+            f"{path}: {raw.shape[1]} columns; ETH/UCY trajectories have 4 (frame id x y) "
+            "or 8 (obsmat: frame id x z y vx vz vy)"
+        )
+    df = raw.iloc[:, list(columns)].copy()
+    df.columns = ["frame", "id", "x_m", "y_m"]
+    for name in ("frame", "x_m", "y_m"):
+        values = pd.to_numeric(df[name], errors="coerce")
+        bad = values.isna() | ~np.isfinite(values.to_numpy(float, na_value=np.nan))
+        if bad.any():
+            row = int(np.flatnonzero(bad.to_numpy())[0])
+            raise InputError(
+                f"{path}: row {row + 1}: {name} {df[name].iloc[row]!r} is not a finite number"
+            )
+        df[name] = values.astype(float)
+    ids = pd.to_numeric(df["id"], errors="coerce")
+    if ids.notna().all():  # ETH/UCY ids are numbers; any other id is kept as written
+        df["id"] = ids.astype(float)
+    return df
+
+
+def _annotation_step(df: pd.DataFrame) -> float:
+    """Frames between consecutive annotations: the most common step between a person's
+    consecutive frames (a person missing from an annotation makes a double step, which is
+    rarer). 10 when no person has two frames."""
+    steps = df.sort_values(["id", "frame"]).groupby("id")["frame"].diff().to_numpy(float)
+    steps = steps[np.isfinite(steps) & (steps > 0)]
+    if steps.size == 0:
+        return 10.0
+    values, counts = np.unique(np.round(steps, 6), return_counts=True)
+    return float(values[np.argmax(counts)])
 
 
 def _person_id(pid: object) -> str:
