@@ -14,6 +14,7 @@ sys.path.insert(0, str(BENCH))
 
 import vm_compare  # noqa: E402
 import vm_paper  # noqa: E402
+import vm_realistic  # noqa: E402
 
 from trackctl.sim.walkers import load_trajectories_csv  # noqa: E402
 
@@ -112,3 +113,18 @@ def test_a_phone_name_on_a_non_user_is_a_false_positive() -> None:
     data.carriers["ghost"] = "02:00:00:00:00:09"  # a phone whose carrier is never in the truth
     assert vm_compare.score(data, _run(hyp_ok, identified=True)).mota == 1.0
     assert vm_compare.score(data, _run(hyp, identified=True)).mota == pytest.approx(0.5)
+
+
+def test_carriers_of_a_real_scene_are_its_longest_walkers_or_the_next_ones(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "scene.csv"
+    rows = ["t_s,id,x_m,y_m"]
+    for person in range(12):  # person p walks p + 1 metres in 10 s, person 0 after 20 s only
+        start = 20.0 if person == 0 else 0.0
+        rows += [f"{start + t},{person},{(person + 1) * t / 10},0" for t in (0.0, 10.0)]
+    path.write_text("\n".join(rows) + "\n")
+    first = vm_realistic._longest_walkers(path, until_s=15.0)
+    assert first == ("11", "10", "9", "8", "7")
+    assert vm_realistic._longest_walkers(path, 15.0, rank=5) == ("6", "5", "4", "3", "2")
+    assert vm_realistic._longest_walkers(path, 15.0, k=10)[5:] == ("6", "5", "4", "3", "2")
