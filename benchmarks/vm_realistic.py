@@ -35,7 +35,7 @@ import numpy as np
 from trackctl.logs import LogReader
 from trackctl.processing import run_processors
 from trackctl.sim.vm import VmScenario, simulate_vm
-from trackctl.sim.walkers import load_trajectories_csv
+from trackctl.sim.walkers import load_trajectories_csv, longest_walkers
 from trackctl.vmtrack import VmTrackConfig, VmTrackProcessor
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "pedestrians"
@@ -45,11 +45,7 @@ def _longest_walkers(path: Path, until_s: float, k: int = 5, rank: int = 0) -> t
     """The ``k`` people of the scene who walk farthest before ``until_s`` (the log's end: in
     `biwi_hotel`, 722 s long, the longest walkers overall all come after 300 s), after the
     ``rank`` who walk farther still."""
-    length = {}
-    for t in load_trajectories_csv(path):
-        xy = t.xy[t.t_s <= until_s]
-        length[t.person] = float(np.nansum(np.linalg.norm(np.diff(xy, axis=0), axis=1)))
-    return tuple(sorted(length, key=lambda p: -length[p])[rank : rank + k])
+    return longest_walkers(load_trajectories_csv(path), until_s, k, rank)
 
 
 def _clock_error(m: Mapping[str, object], out: Path) -> float | None:

@@ -136,3 +136,25 @@ def test_always_on_phones_are_heard_out_of_view_and_fainter(tmp_path: Path) -> N
         m.log_time_ns / 1e9 for m in LogReader(paper).messages(["/rssi"]) if m.message.readings
     ]
     assert times and min(times) >= 19 and max(times) <= 41
+
+
+def test_trajectories_without_phones_give_phones_to_the_users_who_walk_farthest(
+    tmp_path: Path,
+) -> None:
+    scene = tmp_path / "scene.csv"
+    rows = ["t_s,id,x_m,y_m"]
+    for person, metres in (("a", 2.0), ("b", 8.0), ("c", 5.0), ("d", 1.0)):
+        rows += [f"{t},{person},{metres * t / 10},{1 + ord(person) % 4}" for t in (0.0, 10.0)]
+    scene.write_text("\n".join(rows) + "\n")
+
+    def carriers(cfg: VmScenario) -> set[str]:
+        out = tmp_path / "vm.mcap"
+        simulate_vm(str(out), cfg)
+        named = set()
+        for m in LogReader(out).messages(["/ground_truth"]):
+            named |= {(e.entity_id, e.electronic_id) for e in m.message.entities}
+        return {person for person, mid in named if mid}
+
+    base = VmScenario(trajectories=str(scene), users=2, duration_s=8.0, seed=1)
+    assert carriers(base) == {"b", "c"}
+    assert carriers(VmScenario(**{**_fields(base), "phones": ("d",)})) == {"d"}

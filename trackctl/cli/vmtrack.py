@@ -141,7 +141,8 @@ def simulate_vm(
     phones: Annotated[
         str | None,
         typer.Option(
-            help="With --trajectories: ids of the people who carry a phone, comma-separated."
+            help="With --trajectories: ids of the people who carry a phone, comma-separated "
+            "(default: the --users who walk farthest in the log)."
         ),
     ] = None,
     frames: Annotated[

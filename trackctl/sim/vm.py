@@ -57,6 +57,7 @@ from trackctl.sim.walkers import (
     SocialForce,
     Trajectory,
     load_trajectories_csv,
+    longest_walkers,
     random_waypoint,
     random_waypoint_crowd,
 )
@@ -285,7 +286,11 @@ def _people(
         for p in cfg.phones:
             if p not in known:
                 raise InputError(f"--phones: no trajectory with id {p!r} in {cfg.trajectories}")
-        phones = {p: mac_of(i) for i, p in enumerate(cfg.phones)}
+        carriers = cfg.phones
+        if not carriers:  # the ``users`` who walk farthest in the log carry phones
+            t_end = max(float(t.t_s[-1]) for t in trajs)
+            carriers = longest_walkers(trajs, min(cfg.duration_s, t_end), cfg.users)
+        phones = {p: mac_of(i) for i, p in enumerate(carriers)}
         return trajs, phones
     names = [
         f"u{i}" if i < cfg.users else f"n{i - cfg.users}" for i in range(cfg.users + cfg.nonusers)

@@ -11,7 +11,13 @@ import pandas as pd
 
 from trackctl.errors import InputError
 
-__all__ = ["Trajectory", "random_waypoint", "random_waypoint_crowd", "load_trajectories_csv"]
+__all__ = [
+    "Trajectory",
+    "random_waypoint",
+    "random_waypoint_crowd",
+    "load_trajectories_csv",
+    "longest_walkers",
+]
 
 
 @dataclass(frozen=True)
@@ -243,6 +249,18 @@ def _annotation_step(df: pd.DataFrame) -> float:
         return 10.0
     values, counts = np.unique(np.round(steps, 6), return_counts=True)
     return float(values[np.argmax(counts)])
+
+
+def longest_walkers(
+    trajs: list[Trajectory], until_s: float, k: int, rank: int = 0
+) -> tuple[str, ...]:
+    """The ``k`` people who walk farthest before ``until_s``, after the ``rank`` who walk
+    farther still (equal distances keep the order of ``trajs``)."""
+    length = {}
+    for t in trajs:
+        xy = t.xy[t.t_s <= until_s]
+        length[t.person] = float(np.nansum(np.linalg.norm(np.diff(xy, axis=0), axis=1)))
+    return tuple(sorted(length, key=lambda p: -length[p])[rank : rank + k])
 
 
 def _person_id(pid: object) -> str:
