@@ -68,6 +68,9 @@ def test_report_estimates_each_phones_clock_offset(lobby: tuple[dict[str, object
     # and for another alignment, nearly as cheap, that put the carrier elsewhere
     ambiguous = [m[f"ambiguous_s/{k.rpartition('/')[0]}"] for k in truth]
     assert all(a is not None and 0.0 <= float(a) <= LOBBY.duration_s for a in ambiguous)
+    # and published at the middle of a group whose every member fits the phone
+    grouped = [m[f"grouped_s/{k.rpartition('/')[0]}"] for k in truth]
+    assert all(g is not None and 0.0 <= float(g) <= LOBBY.duration_s for g in grouped)
 
 
 def test_no_phone_on_two_tracks_in_the_papers_setting(tmp_path: Path) -> None:

@@ -31,6 +31,7 @@ from trackctl.vmtrack.retrack import (
     _refit,
     _relax,
     _search,
+    _settle_disputes,
     _shared,
     _step_costs,
     _viterbi_path,
@@ -624,6 +625,45 @@ def test_a_path_another_alignment_fits_as_well_is_not_published(twin):
     )
     none.alternatives["m"] = follow.alternatives["m"]
     assert none.settle("m", found, None).xy == found.xy
+
+
+_XY = st.tuples(st.floats(-5, 5), st.floats(-5, 5))
+
+
+@given(
+    st.dictionaries(st.integers(0, 30), _XY, max_size=12),
+    st.lists(st.dictionaries(st.integers(0, 30), _XY, max_size=12), max_size=4),
+    st.floats(0.2, 2.0),
+)
+def test_a_settled_frame_is_within_the_gate_of_every_place_a_path_puts_the_carrier(
+    xy, others, gate
+):
+    out, grouped, disputed = _settle_disputes(xy, others, gate)
+    assert set(out) | disputed == set(xy) and not set(out) & disputed
+    assert grouped <= set(out)
+    for k, p in out.items():
+        hyps = np.array([xy[k]] + [o[k] for o in others if k in o])
+        assert np.all(np.hypot(*(hyps - p).T) <= gate + 1e-9)
+        if k not in grouped:
+            assert p == xy[k]  # the path's own place when every other agrees with it
+    for k in disputed:
+        hyps = np.array([xy[k]] + [o[k] for o in others if k in o])
+        assert np.any(np.hypot(*(hyps - hyps.mean(axis=0)).T) > gate)
+
+
+def test_a_group_walking_together_is_published_at_its_middle_a_crowd_is_not():
+    path = {0: (0.0, 0.0), 1: (1.0, 0.0), 2: (2.0, 0.0)}
+    beside = {0: (0.0, 1.4), 1: (1.0, 1.4), 2: (2.0, 3.0)}  # 1.4 m beside, then 3 m away
+    out, grouped, disputed = _settle_disputes(path, [beside], gate_m=1.0)
+    assert out == {0: (0.0, 0.7), 1: (1.0, 0.7)} and grouped == {0, 1} and disputed == {2}
+    # a third place between them: the middle of all three; 1.4 m the other way: a crowd
+    out, grouped, _ = _settle_disputes(path, [beside, {0: (0.0, 0.9)}], gate_m=1.0)
+    assert out[0] == pytest.approx((0.0, 2.3 / 3)) and 0 in grouped
+    out, grouped, disputed = _settle_disputes(path, [beside, {0: (0.0, -1.4)}], gate_m=1.0)
+    assert 0 not in out and 0 in disputed
+    # a path that does not publish a frame has no say in it; paths within the gate agree
+    out, grouped, disputed = _settle_disputes(path, [{1: (1.0, 0.5)}], gate_m=1.0)
+    assert out == path and not grouped and not disputed
 
 
 def _pair_scene(seed: int):

@@ -685,6 +685,7 @@ def _identity_metrics(
         pt = retracked.get(mid) if retracked else None
         out[f"withheld_s/{mid}"] = round(pt.withheld_s, 1) if pt else None
         out[f"ambiguous_s/{mid}"] = round(pt.ambiguous_s, 1) if pt else None
+        out[f"grouped_s/{mid}"] = round(pt.grouped_s, 1) if pt else None
     return out
 
 

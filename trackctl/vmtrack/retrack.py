@@ -167,7 +167,9 @@ class RetrackConfig:
     """A phone's path is weighed against the other alignments its search found (up to
     ``ambiguity_candidates``, each refined): where one whose path costs at most this more (or
     less) puts the carrier more than ``gate_m`` away, the frame is ambiguous and is not
-    published (:meth:`_Follower.settle`; ``ambiguous_s/<MID>`` in the report). In a dense
+    published (:meth:`_Follower.settle`; ``ambiguous_s/<MID>`` in the report), unless one
+    place, the middle of them all, is within ``gate_m`` of each (a group walking together:
+    published there, ``grouped_s/<MID>``). In a dense
     group the walker beside or behind the carrier fits a phone with another clock offset and
     yaw nearly as well (`students001` seed 2: eight alignments within 8 of each other, three
     of them on the carrier); publishing the cheapest would be a guess. On the 10-person lobby
@@ -212,6 +214,9 @@ class PhoneTrack:
     ambiguous_s: float = 0.0
     """Seconds not published because another alignment nearly as cheap puts the carrier
     elsewhere (:attr:`RetrackConfig.ambiguity_margin`)."""
+    grouped_s: float = 0.0
+    """Seconds published at the middle of the places where alignments nearly as cheap put the
+    carrier, all within ``gate_m`` of it (a group walking together)."""
 
 
 class Retracked(dict[str, PhoneTrack]):
@@ -1405,28 +1410,54 @@ class _Follower:
     def settle(self, mid: str, found: PhoneTrack, radio: RadioEvidence | None) -> PhoneTrack:
         """``found`` without the frames where another alignment of its last search, refined,
         costs at most ``ambiguity_margin`` more (or less) and puts the carrier more than
-        ``gate_m`` away (``ambiguous_s`` counts them). Frames the other does not publish are
-        not in dispute: it did not see the carrier there."""
+        ``gate_m`` away (``ambiguous_s`` counts them), unless the middle of all those places
+        is within ``gate_m`` of each: the frame is then published there (``grouped_s``).
+        Frames the other does not publish are not in dispute: it did not see the carrier
+        there."""
         cfg = self.cfg
         alternatives = self.alternatives.get(mid)
         if cfg.ambiguity_margin is None or not alternatives:
             return found
         best = self.cost(mid, found, radio)
-        disputed: set[int] = set()
+        others = []
         for lag, a in alternatives:
             other = self(mid, lag, a, False, radio)
-            if other is None or self.cost(mid, other, radio) - best > cfg.ambiguity_margin:
-                continue
-            for k, p in found.xy.items():
-                q = other.xy.get(k)
-                if q is not None and np.hypot(p[0] - q[0], p[1] - q[1]) > cfg.gate_m:
-                    disputed.add(k)
-        if not disputed:
+            if other is not None and self.cost(mid, other, radio) - best <= cfg.ambiguity_margin:
+                others.append(other.xy)
+        xy, grouped, disputed = _settle_disputes(found.xy, others, cfg.gate_m)
+        if not disputed and not grouped:
             return found
-        xy = {k: v for k, v in found.xy.items() if k not in disputed}
         return replace(
             found,
             xy=xy,
             seen=found.seen - disputed,
             ambiguous_s=found.ambiguous_s + len(disputed) * self.dt,
+            grouped_s=found.grouped_s + len(grouped) * self.dt,
         )
+
+
+def _settle_disputes(
+    xy: dict[int, tuple[float, float]], others: list[dict[int, tuple[float, float]]], gate_m: float
+) -> tuple[dict[int, tuple[float, float]], set[int], set[int]]:
+    """Where the paths ``others`` (as cheap, or nearly) put the carrier more than ``gate_m``
+    from ``xy``: the frame's position becomes the middle of all of them when that is within
+    ``gate_m`` of each (a group walking together: whoever of them carries the phone, it is
+    there), and the frame is disputed otherwise. Returns the positions, the frames moved to
+    their middle and the disputed frames (not in the positions). A path that does not publish a
+    frame has no say in it."""
+    out: dict[int, tuple[float, float]] = {}
+    grouped: set[int] = set()
+    disputed: set[int] = set()
+    for k, p in xy.items():
+        hyps = [p] + [o[k] for o in others if k in o]
+        pts = np.asarray(hyps, float)
+        if np.all(np.hypot(*(pts[1:] - pts[0]).T) <= gate_m):
+            out[k] = p
+            continue
+        mid = pts.mean(axis=0)
+        if np.all(np.hypot(*(pts - mid).T) <= gate_m):
+            out[k] = (float(mid[0]), float(mid[1]))
+            grouped.add(k)
+        else:
+            disputed.add(k)
+    return out, grouped, disputed
