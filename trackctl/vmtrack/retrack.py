@@ -1427,10 +1427,12 @@ class _Follower:
         xy, grouped, disputed = _settle_disputes(found.xy, others, cfg.gate_m)
         if not disputed and not grouped:
             return found
+        # the middle of a group is on no one's detections: not seen (one person, one phone
+        # does not take two phones of a group, each at its middle, for two on one person)
         return replace(
             found,
             xy=xy,
-            seen=found.seen - disputed,
+            seen=found.seen - disputed - grouped,
             ambiguous_s=found.ambiguous_s + len(disputed) * self.dt,
             grouped_s=found.grouped_s + len(grouped) * self.dt,
         )
