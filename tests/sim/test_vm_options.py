@@ -7,6 +7,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 from typer.testing import CliRunner
 
 from trackctl.cli.main import app
@@ -158,3 +159,22 @@ def test_trajectories_without_phones_give_phones_to_the_users_who_walk_farthest(
     base = VmScenario(trajectories=str(scene), users=2, duration_s=8.0, seed=1)
     assert carriers(base) == {"b", "c"}
     assert carriers(VmScenario(**{**_fields(base), "phones": ("d",)})) == {"d"}
+
+
+def test_a_scene_whose_annotations_start_late_is_the_same_log(tmp_path: Path) -> None:
+    # ETH/UCY frames numbered from 10000 (a split of a longer recording) make the log the frames
+    # numbered from 0 make, message for message, not 400 s of nobody
+    rows = [(f, p, 0.5 + 0.05 * f + p, 2.0 + 0.3 * p) for p in (1, 2, 3) for f in range(0, 300, 10)]
+    logs = []
+    for start in (0, 10000):
+        scene = tmp_path / f"scene{start}.txt"
+        scene.write_text("".join(f"{f + start}\t{p}\t{x}\t{y}\n" for f, p, x, y in rows))
+        out = tmp_path / f"vm{start}.mcap"
+        simulate_vm(str(out), VmScenario(trajectories=str(scene), users=1, duration_s=20, seed=3))
+        with out.open("rb") as f:
+            logs.append(
+                [(c.topic, m.log_time, m.data) for _, c, m in make_reader(f).iter_messages()]
+            )
+    assert logs[0] == logs[1]
+    first = next(LogReader(tmp_path / "vm10000.mcap").messages(["/ground_truth"]))
+    assert first.log_time_ns == 0 and len(first.message.entities) == 3

@@ -136,7 +136,10 @@ def simulate_vm(
     det_noise: Annotated[float, typer.Option(help="Mean ground error of detections, m.")] = 0.35,
     trajectories: Annotated[
         Path | None,
-        typer.Option(help="Drive people by a t_s,id,x_m,y_m CSV (or ETH/UCY text) instead."),
+        typer.Option(
+            help="Drive people by a t_s,id,x_m,y_m CSV (or ETH/UCY text) instead; the log "
+            "starts at its first annotation."
+        ),
     ] = None,
     phones: Annotated[
         str | None,

@@ -184,7 +184,8 @@ def load_trajectories_csv(path: str | Path, dt_s: float = 0.05) -> list[Trajecto
     ETH/UCY text is ``frame id x y`` (tabs, spaces or commas), or the ETH ``obsmat.txt`` layout
     ``frame id x z y vx vz vy``. Its annotations are 0.4 s apart, and the frame step between them
     is read from the file (the most common step between a person's consecutive frames), so a
-    scene whose video ran at another rate keeps its true walking speeds."""
+    scene whose video ran at another rate keeps its true walking speeds; times count from the
+    first annotated frame."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such trajectories file")
@@ -198,7 +199,8 @@ def load_trajectories_csv(path: str | Path, dt_s: float = 0.05) -> list[Trajecto
     else:
         df = _read_eth_ucy(path, sep="," if "," in first else r"\s+")
         step = _annotation_step(df)
-        df["t_s"] = df["frame"] / step * ETH_UCY_PERIOD_S
+        # frame numbers are an index into a video: times count from the first annotation
+        df["t_s"] = (df["frame"] - df["frame"].min()) / step * ETH_UCY_PERIOD_S
     out = []
     for pid, g in df.groupby("id", sort=True):
         g = g.sort_values("t_s")
