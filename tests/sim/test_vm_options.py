@@ -178,3 +178,18 @@ def test_a_scene_whose_annotations_start_late_is_the_same_log(tmp_path: Path) ->
     assert logs[0] == logs[1]
     first = next(LogReader(tmp_path / "vm10000.mcap").messages(["/ground_truth"]))
     assert first.log_time_ns == 0 and len(first.message.entities) == 3
+
+
+def test_a_csv_scene_starts_at_its_first_row(tmp_path: Path) -> None:
+    # t_s from 1000 s (a clock of the recording): the log starts with the first person
+    rows = ["t_s,id,x_m,y_m"] + [f"{1000 + k / 2},p,{k * 0.3},2.0" for k in range(41)]
+    rows += [f"{1005 + k / 2},q,6.0,{k * 0.1}" for k in range(21)]
+    csv = tmp_path / "late.csv"
+    csv.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "vm.mcap"
+    simulate_vm(str(out), VmScenario(trajectories=str(csv), phones=("p",), duration_s=60, seed=1))
+    seen = {}
+    for m in LogReader(out).messages(["/ground_truth"]):
+        for e in m.message.entities:
+            seen.setdefault(e.entity_id, m.log_time_ns / 1e9)
+    assert seen["p"] == 0.0 and seen["q"] == pytest.approx(5.0, abs=0.34)
