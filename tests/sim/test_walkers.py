@@ -97,6 +97,8 @@ def test_eth_obsmat_columns_are_frame_id_x_z_y(tmp_path: Path) -> None:
         ("0\t1\t0.5\t2.0\n10\t1\tabc\t2.0\n", "row 2: x_m 'abc' is not a finite number"),
         ("0\t1\t0.5\t2.0\n10\t1\tnan\t2.0\n", "row 2: x_m 'nan' is not a finite number"),
         ("0\t1\t0.5\n10\t1\t0.6\n", "3 columns"),
+        ("t_s,id,x_m,y_m\n0,p,1,1\nabc,p,2,2\n", "row 2: t_s 'abc' is not a finite number"),
+        ("t_s,id,x_m,y_m\n0,p,1,1\n1,p,,2\n", "row 2: x_m '' is not a finite number"),
     ],
 )
 def test_bad_eth_ucy_text_is_one_error_naming_file_and_row(
@@ -108,3 +110,14 @@ def test_bad_eth_ucy_text_is_one_error_naming_file_and_row(
         load_trajectories_csv(path)
     assert str(path) in str(err.value)
     assert expected in str(err.value)
+
+
+def test_a_csv_keeps_its_ids_and_counts_time_from_its_first_row(tmp_path: Path) -> None:
+    path = tmp_path / "scene.csv"
+    path.write_text("t_s,id,x_m,y_m\n1000,7,0,0\n1002,7,2,0\n1001,alice,1,1\n1003,alice,1,3\n")
+    got = {t.person: t for t in load_trajectories_csv(path)}
+    assert set(got) == {"7", "alice"}
+    assert got["7"].t0_s == 0.0 and got["alice"].t0_s == 1.0
+    assert np.allclose(got["7"].at(1.0), [1.0, 0.0]) and np.allclose(
+        got["alice"].at(2.0), [1.0, 2.0]
+    )

@@ -281,12 +281,7 @@ def _people(
     cfg: VmScenario, rng: np.random.Generator, size: tuple[float, float]
 ) -> tuple[list[Trajectory], dict[str, str]]:
     if cfg.trajectories:
-        trajs = load_trajectories_csv(cfg.trajectories)
-        # the log starts with the scene's first annotation: a file whose frames start late
-        # (`biwi_eth` at frame 780, a split of a longer recording) is not an empty log
-        first = min(t.t0_s for t in trajs)
-        if first != 0.0:
-            trajs = [replace(t, t0_s=t.t0_s - first) for t in trajs]
+        trajs = load_trajectories_csv(cfg.trajectories)  # times from the first annotation
         known = {t.person for t in trajs}
         for p in cfg.phones:
             if p not in known:

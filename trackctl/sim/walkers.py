@@ -184,18 +184,21 @@ def load_trajectories_csv(path: str | Path, dt_s: float = 0.05) -> list[Trajecto
     ETH/UCY text is ``frame id x y`` (tabs, spaces or commas), or the ETH ``obsmat.txt`` layout
     ``frame id x z y vx vz vy``. Its annotations are 0.4 s apart, and the frame step between them
     is read from the file (the most common step between a person's consecutive frames), so a
-    scene whose video ran at another rate keeps its true walking speeds; times count from the
-    first annotated frame."""
+    scene whose video ran at another rate keeps its true walking speeds. Times count from the
+    first annotation (a CSV's first ``t_s``, ETH/UCY's first frame): a file whose frames start
+    late (`biwi_eth` at frame 780, a split of a longer recording) is not an empty scene."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such trajectories file")
     text = path.read_text()
     first = text.lstrip().split("\n", 1)[0]
     if first.startswith("t_s"):
-        df = pd.read_csv(path)
+        df = pd.read_csv(path, dtype=str, keep_default_na=False)
         missing = [c for c in ("t_s", "id", "x_m", "y_m") if c not in df.columns]
         if missing:
             raise InputError(f"{path}: trajectories CSV lacks column(s) {', '.join(missing)}")
+        _typed(df, ("t_s", "x_m", "y_m"), path)
+        df["t_s"] = df["t_s"] - df["t_s"].min()
     else:
         df = _read_eth_ucy(path, sep="," if "," in first else r"\s+")
         step = _annotation_step(df)
@@ -226,7 +229,15 @@ def _read_eth_ucy(path: Path, sep: str) -> pd.DataFrame:
         )
     df = raw.iloc[:, list(columns)].copy()
     df.columns = ["frame", "id", "x_m", "y_m"]
-    for name in ("frame", "x_m", "y_m"):
+    _typed(df, ("frame", "x_m", "y_m"), path)
+    return df
+
+
+def _typed(df: pd.DataFrame, names: tuple[str, ...], path: Path) -> None:
+    """Text rows typed in place: columns ``names`` as floats (the first value that is not a
+    finite number is an error naming the file, the data row from 1 and the column), and the ids
+    as numbers when they all are (ETH/UCY's are; any other id is kept as written)."""
+    for name in names:
         values = pd.to_numeric(df[name], errors="coerce")
         bad = values.isna() | ~np.isfinite(values.to_numpy(float, na_value=np.nan))
         if bad.any():
@@ -236,9 +247,8 @@ def _read_eth_ucy(path: Path, sep: str) -> pd.DataFrame:
             )
         df[name] = values.astype(float)
     ids = pd.to_numeric(df["id"], errors="coerce")
-    if ids.notna().all():  # ETH/UCY ids are numbers; any other id is kept as written
+    if ids.notna().all():
         df["id"] = ids.astype(float)
-    return df
 
 
 def _annotation_step(df: pd.DataFrame) -> float:
