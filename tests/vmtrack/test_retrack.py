@@ -719,3 +719,47 @@ def test_a_pair_walking_side_by_side_has_one_phone_each():
     on_two = [m for m in out if len(out[m].xy) > 0.8 * n and _on(out[m].xy, two, one) > 0.9]
     assert len(on_one) == 1 and len(on_two) == 1
     assert _shared(points, out, int(CFG.min_stretch_s * FPS), CFG.gate_m) is None
+
+
+def _staircase_scene(seed: int):
+    """A carrier walking east at 1.2 m/s with a turn every 10 s, and strangers walking north
+    at 1.2 m/s, each for 2 s, each 0.5 m east of the one before (detections at 0.1 m): a phone
+    read 90 deg off rides them from one to the next, sideways at 0.25 m/s about its walk."""
+    rng = np.random.default_rng(seed)
+    n = int(40 * FPS)
+    t = np.arange(n) / FPS
+    frame_t = (t * 1e9).astype(np.int64)
+    heading = np.radians(np.where((t // 10) % 2 == 1, 40.0, -20.0))
+    steps = 1.2 / FPS * np.column_stack([np.cos(heading), np.sin(heading)])
+    carrier = np.array([2.0, 6.0]) + np.cumsum(steps, axis=0) - steps[0]
+    points = []
+    for k in range(n):
+        pts = [carrier[k]]
+        i = int(t[k] // 2)
+        for j in (i - 1, i, i + 1):  # each stranger is seen a little before and after their turn
+            if j >= 0:
+                pts.append((20.0 + 0.5 * j, 4.0 + 1.2 * t[k]))
+        points.append(np.array(pts) + rng.normal(0, 0.1, (len(pts), 2)))
+    return frame_t, points, carrier
+
+
+@pytest.mark.parametrize("sigma", [0.1, None])
+def test_the_cheapest_refined_alignment_becomes_the_path(sigma):
+    frame_t, points, carrier = _staircase_scene(3)
+    n = len(frame_t)
+    phone = _phone(carrier, frame_t, 0.0)
+    cfg = RetrackConfig(settle_walk_sigma_mps=sigma)
+    grid = _Grid(points, cfg.cell_m).with_visits(points, cfg)
+    follow = _Follower(frame_t, points, {"m": phone}, grid, AlignConfig(), cfg, False)
+    # the search's path: the phone read 90 deg off, onto the strangers
+    ride = follow("m", 0.0, np.full(n, 1j), False, None)
+    assert ride is not None and _share_on(ride.xy, carrier, n) < 0.1
+    follow.alternatives["m"] = [(0.0, np.ones(n, complex))]
+    settled = follow.settle("m", ride, None)
+    if sigma is None:  # the search's path is kept
+        assert settled.xy.keys() <= ride.xy.keys()
+        assert _share_on(settled.xy, carrier, n) < 0.1
+    else:
+        assert _share_on(settled.xy, carrier, n) > 0.9
+        assert settled.ambiguous_s == 0.0
+        assert settled.lag_s == 0.0 and np.allclose(settled.a, 1.0, atol=0.02)

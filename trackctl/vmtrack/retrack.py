@@ -171,9 +171,20 @@ class RetrackConfig:
     place, the middle of them all, is within ``gate_m`` of each (a group walking together:
     published there, ``grouped_s/<MID>``). In a dense
     group the walker beside or behind the carrier fits a phone with another clock offset and
-    yaw nearly as well (`students001` seed 2: eight alignments within 8 of each other, three
-    of them on the carrier); publishing the cheapest would be a guess. On the 10-person lobby
-    the nearest alternative that moves a path costs 50 more. None: no alternatives weighed."""
+    yaw nearly as well (`students001` seed 2, weighed at 0.2 m/sqrt(s): eight alignments within
+    8 of each other, three of them on the carrier); publishing the cheapest would be a guess.
+    On the 10-person lobby the nearest alternative that moves a path costs 50 more. None: no
+    alternatives weighed."""
+    settle_walk_sigma_mps: float | None = 0.1
+    """The random walk under which a phone's refined alignments are weighed against each
+    other (:meth:`_Follower.settle`); the cheapest becomes the phone's path. The paths are
+    found under ``walk_sigma_mps``, loose enough for an alignment the search has only roughly
+    (its yaw and scale grids' steps); once refined, the walk's residual is the dead reckoning's
+    own: about 5 % of the step length and 3 deg of heading at 1.3 m/s, 0.1 m/sqrt(s). A path
+    riding strangers in a crowd moves sideways from one to the next, which a loose walk
+    forgives. On the saved `students001` runs, weighing at 0.2 leaves seed 2's phone 05 on
+    strangers (the true alignments 6-10 dearer); at 0.1 they are 24-30 cheaper. None: weighed
+    under ``walk_sigma_mps``, and the search's path is kept."""
     exclusive: bool = True
     """One person carries one phone: two phones whose paths share detections for
     ``min_stretch_s`` or more are settled jointly, the one that loses least without them
@@ -1320,6 +1331,11 @@ class _Follower:
         self.acfg, self.cfg, self.aligned = acfg, cfg, aligned
         self.dt = float(np.median(np.diff(frame_t))) / 1e9
         self.steps = _step_costs(grid.cell, self.dt, cfg)
+        self.settle_steps = (
+            self.steps
+            if cfg.settle_walk_sigma_mps is None
+            else _step_costs(grid.cell, self.dt, cfg, cfg.settle_walk_sigma_mps)
+        )
         self.emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
         self.space: tuple[_Grid, list[np.ndarray | float]] | None = None
         self.walks = {mid: dead_reckoned(phones[mid]) for mid in sorted(phones)}
@@ -1397,33 +1413,42 @@ class _Follower:
         velocity = np.column_stack([u.real, u.imag]) / self.dt
         return PhoneTrack(xy, seen, velocity, lag, a, withheld)
 
-    def cost(self, mid: str, found: PhoneTrack, radio: RadioEvidence | None) -> float:
+    def cost(
+        self,
+        mid: str,
+        found: PhoneTrack,
+        radio: RadioEvidence | None,
+        steps: np.ndarray | None = None,
+    ) -> float:
         """The cost of the cheapest path under ``found``'s alignment (paths of two alignments
-        of one phone compare)."""
+        of one phone compare), with the random walk's ``steps`` (None: the paths')."""
         u = _displacements(self.frame_t, self.walks[mid], found.lag_s, found.a)
         phone_em, visit = _with_radio(radio, mid, self.grid, self._frames(mid)[1])
-        costs = _layer_costs(
-            self.grid, phone_em, u[:, None], self.steps, visit=visit, absolute=True
-        )
+        steps = self.steps if steps is None else steps
+        costs = _layer_costs(self.grid, phone_em, u[:, None], steps, visit=visit, absolute=True)
         return float(costs[-1, 0])
 
     def settle(self, mid: str, found: PhoneTrack, radio: RadioEvidence | None) -> PhoneTrack:
-        """``found`` without the frames where another alignment of its last search, refined,
-        costs at most ``ambiguity_margin`` more (or less) and puts the carrier more than
-        ``gate_m`` away (``ambiguous_s`` counts them), unless the middle of all those places
-        is within ``gate_m`` of each: the frame is then published there (``grouped_s``).
-        Frames the other does not publish are not in dispute: it did not see the carrier
-        there."""
+        """The cheapest of ``found`` and the other alignments of its last search, each
+        refined, weighed under ``settle_walk_sigma_mps`` (``found`` when that is None), without
+        the frames where another costs at most ``ambiguity_margin`` more and puts the carrier
+        more than ``gate_m`` away (``ambiguous_s`` counts them), unless the middle of all those
+        places is within ``gate_m`` of each: the frame is then published there
+        (``grouped_s``). Frames the other does not publish are not in dispute: it did not see
+        the carrier there."""
         cfg = self.cfg
         alternatives = self.alternatives.get(mid)
         if cfg.ambiguity_margin is None or not alternatives:
             return found
-        best = self.cost(mid, found, radio)
-        others = []
+        adopt = cfg.settle_walk_sigma_mps is not None
+        weighed = [(self.cost(mid, found, radio, self.settle_steps), found)]
         for lag, a in alternatives:
             other = self(mid, lag, a, False, radio)
-            if other is not None and self.cost(mid, other, radio) - best <= cfg.ambiguity_margin:
-                others.append(other.xy)
+            if other is not None:
+                weighed.append((self.cost(mid, other, radio, self.settle_steps), other))
+        # the first of equals: the search's own path
+        best, found = min(weighed, key=lambda w: w[0]) if adopt else weighed[0]
+        others = [o.xy for c, o in weighed if o is not found and c - best <= cfg.ambiguity_margin]
         xy, grouped, disputed = _settle_disputes(found.xy, others, cfg.gate_m)
         if not disputed and not grouped:
             return found
