@@ -11,6 +11,38 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, Phase, settings
+
+# Hypothesis: the same verdict on every run by default ("ci": examples derived from each test's
+# own code, no example database); `pytest --hypothesis-profile explore` searches afresh with ten
+# times the examples (and remembers what it finds in .hypothesis/) for developers hunting bugs.
+# A test states its budget as @settings(max_examples=examples(N)): N under "ci", 10 N under
+# "explore".
+settings.register_profile(
+    "ci",
+    derandomize=True,
+    database=None,
+    max_examples=100,
+    deadline=None,
+    print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.register_profile(
+    "explore",
+    derandomize=False,
+    max_examples=1000,
+    deadline=None,
+    phases=tuple(Phase),
+    print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
+def examples(n: int) -> int:
+    """A property test's example budget: ``n`` (fixed, CI), ten times that when exploring."""
+    return n * 10 if settings.get_current_profile_name() == "explore" else n
+
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE_LOG = ROOT / "sample_logs" / "demo.mcap"
@@ -49,14 +81,28 @@ def trackctl_exe() -> list[str]:
     return [found] if found else [sys.executable, "-m", "trackctl.cli.main"]
 
 
+SUBPROCESS_TIMEOUT_S = 900.0
+"""How long a trackctl child may run before the test fails: generous, since a loaded CI
+machine may run it many times slower than a quiet one; the test fails on it, never on speed."""
+
+
 def run_cli(
-    *args: str, input: bytes | None = None, timeout: float = 120, check: bool = False
+    *args: str,
+    input: bytes | None = None,
+    timeout: float = SUBPROCESS_TIMEOUT_S,
+    check: bool = False,
 ) -> subprocess.CompletedProcess[bytes]:
-    """Run trackctl as a real subprocess."""
+    """Run trackctl as a real subprocess; a child that hangs fails the test with its stderr."""
     env = dict(os.environ, COLUMNS="200")
-    proc = subprocess.run(
-        [*trackctl_exe(), *args], input=input, capture_output=True, timeout=timeout, env=env
-    )
+    try:
+        proc = subprocess.run(
+            [*trackctl_exe(), *args], input=input, capture_output=True, timeout=timeout, env=env
+        )
+    except subprocess.TimeoutExpired as err:
+        stderr = (err.stderr or b"").decode(errors="replace")[-4000:]
+        raise AssertionError(
+            f"trackctl {' '.join(args)} still running after {timeout:.0f} s; stderr:\n{stderr}"
+        ) from None
     if check and proc.returncode != 0:
         raise AssertionError(
             f"trackctl {' '.join(args)} exited {proc.returncode}: {proc.stderr.decode()}"

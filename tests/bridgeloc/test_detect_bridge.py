@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.conftest import examples
 from trackctl.bridgeloc.bridge import (
     CameraGeometry,
     bridge_lstsq,
@@ -91,7 +92,7 @@ def test_order_corners_square_and_diamond() -> None:
     assert placement is Placement.DIAMOND and np.allclose(ordered[0], [30, 0])
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=examples(50), deadline=None)
 @given(st.floats(-5, 5), st.floats(-5, 5), st.floats(-math.pi, math.pi), st.integers(2, 8))
 def test_bridge_lstsq_recovers_pose(x: float, y: float, yaw: float, m: int) -> None:
     rng = np.random.default_rng(m)

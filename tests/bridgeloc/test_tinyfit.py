@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.conftest import examples
 from trackctl.bridgeloc.detect import DetectorConfig, detect_tags
 from trackctl.bridgeloc.tags import Mount, Placement, tag_texture
 from trackctl.bridgeloc.tinyfit import fit_tiny_tag
@@ -82,7 +83,7 @@ def _synthetic(centre: tuple[float, float], side: float, angle: float, code, n: 
     return np.clip(img + noise, 0, 255).astype(np.uint8)
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=examples(25), deadline=None)
 @given(
     cx=st.floats(25.0, 35.0),
     cy=st.floats(25.0, 35.0),

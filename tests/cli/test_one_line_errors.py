@@ -230,7 +230,9 @@ def test_output_directory_not_writable_in_process(
     assert not out.exists()
 
 
-@pytest.mark.parametrize("engine", ["local", "spark"])
+@pytest.mark.parametrize(
+    "engine", ["local", pytest.param("spark", marks=pytest.mark.xdist_group("spark"))]
+)
 def test_ev_match_on_a_log_without_e_scenarios(
     sample_log: Path, tmp_path: Path, engine: str
 ) -> None:

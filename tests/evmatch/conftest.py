@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.cache import simulated
 from trackctl.sim.ev import EvScenario, simulate_ev
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -23,14 +24,13 @@ def ev_sample() -> Path:
 
 
 @pytest.fixture(scope="session")
-def small_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def small_log() -> Path:
     """150 people, 5 x 5 cells, 15 windows, 30% without a phone, 5% missed VIDs."""
-    path = tmp_path_factory.mktemp("ev") / "small.mcap"
-    simulate_ev(
-        str(path),
+    return simulated(
+        "ev-small.mcap",
+        simulate_ev,
         EvScenario(people=150, area_m=500, duration_s=900, eid_miss=0.3, vid_miss=0.05, seed=11),
     )
-    return path
 
 
 @pytest.fixture(scope="session")

@@ -7,12 +7,16 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 from typer.testing import CliRunner
 
 from trackctl.cli.main import app
 from trackctl.evmatch import Algorithm, EvMatchConfig, LocalEngine, SparkEngine, match_log
 from trackctl.logs import topics
 from trackctl.logs.reader import LogReader
+
+# one worker holds the Spark session (a JVM and seconds of start-up): every Spark test runs there
+pytestmark = pytest.mark.xdist_group("spark")
 
 
 def test_split_step_is_identical(spark_session: object) -> None:

@@ -19,6 +19,10 @@ import pytest
 from tests.conftest import run_cli
 from trackctl.logs import LogReader, topics
 
+# a master and a worker JVM on top of the engine tests' local session (test_spark.py): the
+# engine's equality with the local one is checked there on every run, a real cluster on demand
+pytestmark = pytest.mark.slow
+
 
 def _free_port() -> int:
     with socket.socket() as s:

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tests.conftest import ROOT, shared_file
+from tests.conftest import ROOT, examples, shared_file
 from trackctl.geometry.calib import (
     TsaiCamera,
     camera_geometry,
@@ -69,7 +69,7 @@ def test_pets_tsai_xml_imports_within_a_pixel_of_the_converted_yaml() -> None:
     assert camera_geometry(imported.model).height_m == pytest.approx(7.07, abs=0.01)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=examples(40), deadline=None)
 @given(
     kappa=st.floats(-0.02, 0.02),
     focal=st.floats(3.0, 12.0),
@@ -118,7 +118,7 @@ def test_pets_floor_points_reproduce_the_published_floor_projection() -> None:
     assert np.linalg.norm(a - b, axis=1)[ok].max() < 0.2
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=examples(30), deadline=None)
 @given(
     x=st.floats(-5, 5),
     y=st.floats(-5, 5),

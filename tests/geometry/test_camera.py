@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.conftest import examples
 from trackctl.geometry import PinholeCamera, look_at
 from trackctl.logs.messages import CameraModel
 
@@ -18,7 +19,7 @@ def _camera(eye: tuple[float, float, float], dist: tuple[float, ...] = (0.0,) * 
     )
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(
     x=st.floats(2.0, 9.0),
     y=st.floats(1.0, 8.0),

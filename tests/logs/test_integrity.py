@@ -11,6 +11,7 @@ import json
 import random
 import struct
 from collections import Counter
+from functools import cache
 from pathlib import Path
 
 import pytest
@@ -23,6 +24,11 @@ from trackctl.logs.writer import LogWriter
 
 SAMPLES = sorted((ROOT / "sample_logs").glob("*.mcap"))
 FUZZ_CASES = 510
+"""Mutants in the whole campaign (``pytest -m slow``); the default run takes a fifth of them
+(102, the same mutants every run, each sample alike), in shards the workers share."""
+FUZZ_SHARDS = 6
+DEFAULT_CASES = [c for c in range(FUZZ_CASES) if c % 25 in (0, 6, 12, 18, 24)]
+"""Case ``c`` mutates sample ``c % 5``: these residues take each sample equally often."""
 
 
 def _middle_chunk(path: Path) -> tuple[int, int]:
@@ -150,6 +156,7 @@ def _mutate(data: bytes, rng: random.Random) -> tuple[str, bytes]:
     return kind, bytes(out)
 
 
+@cache
 def _original_lines() -> dict[Path, set[str]]:
     runner = CliRunner()
     out = {}
@@ -160,15 +167,16 @@ def _original_lines() -> dict[Path, set[str]]:
     return out
 
 
-@pytest.mark.slow
-def test_fuzz_mutated_logs_never_crash_or_change_a_message(tmp_path: Path) -> None:
-    rng = random.Random(20261126)
+def _fuzz(cases: list[int], tmp_path: Path) -> None:
+    """Each case mutates one sample (its own seeded mutator: a case is the same mutant whichever
+    shard runs it) and runs info, replay and (every third case) the check processor on it."""
     runner = CliRunner()
     originals = _original_lines()
     contents = {s: s.read_bytes() for s in SAMPLES}
     codes: Counter[tuple[str, int]] = Counter()
     kinds: Counter[str] = Counter()
-    for case in range(FUZZ_CASES):
+    for case in cases:
+        rng = random.Random(f"20261126/{case}")
         sample = SAMPLES[case % len(SAMPLES)]
         kind, data = _mutate(contents[sample], rng)
         kinds[kind] += 1
@@ -178,7 +186,7 @@ def test_fuzz_mutated_logs_never_crash_or_change_a_message(tmp_path: Path) -> No
             ["info", str(bad), "--json"],
             ["replay", str(bad), "--speed", "0"],
         ]
-        if case % 5 == 0:  # the check processor copies the log: every fifth case keeps it quick
+        if case % 3 == 0:  # the check processor copies the log: a third of the cases run it
             commands.append(["process", str(bad), "--with", "check", "--json"])
         for args in commands:
             res = runner.invoke(app, args)
@@ -194,8 +202,24 @@ def test_fuzz_mutated_logs_never_crash_or_change_a_message(tmp_path: Path) -> No
                 assert not changed, f"{where} emitted a changed message: {sorted(changed)[0][:200]}"
         bad.unlink()
     exits = ", ".join(f"{cmd} exit {code}: {n}" for (cmd, code), n in sorted(codes.items()))
-    print(f"\nfuzz: {FUZZ_CASES} mutated logs ({dict(kinds)}), 0 tracebacks, 0 changed messages")
+    print(f"\nfuzz: {len(cases)} mutated logs ({dict(kinds)}), 0 tracebacks, 0 changed messages")
     print(f"fuzz: {exits}")
+
+
+@pytest.mark.parametrize("shard", range(FUZZ_SHARDS))
+def test_fuzz_mutated_logs_never_crash_or_change_a_message(shard: int, tmp_path: Path) -> None:
+    """A fifth of the campaign's mutants, a shard of them per test."""
+    _fuzz(DEFAULT_CASES[shard::FUZZ_SHARDS], tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("shard", range(FUZZ_SHARDS))
+def test_fuzz_campaign_mutated_logs_never_crash_or_change_a_message(
+    shard: int, tmp_path: Path
+) -> None:
+    """The whole campaign: the mutants the default run leaves out."""
+    rest = [c for c in range(FUZZ_CASES) if c not in DEFAULT_CASES]
+    _fuzz(rest[shard::FUZZ_SHARDS], tmp_path)
 
 
 def test_info_uses_the_summary_without_reading_any_chunk(

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tests.conftest import SHARED_DATA, shared_file
+from tests.conftest import SHARED_DATA, examples, shared_file
 from trackctl.pdr.steps import detect_steps
 
 G = 9.80665
@@ -57,7 +57,7 @@ def test_synthetic_walk_counts_steps_and_stands_still(rate: float) -> None:
     assert not ((res.step_times_s < 9.0) | (res.step_times_s > 71.0)).any()
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=examples(25), deadline=None)
 @given(
     cadence=st.floats(1.4, 2.3),
     rate=st.sampled_from([5.0, 10.0, 20.0, 50.0, 100.0, 200.0]),

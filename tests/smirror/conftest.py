@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.cache import cached_value, simulated
 from trackctl.logs import LogReader
 from trackctl.sim.smirror import SmirrorScenario, simulate_smirror
 from trackctl.smirror import Mode, SmirrorConfig, SmirrorResult, run_detailed
@@ -17,15 +18,16 @@ SHORT = SmirrorScenario(
 
 
 @pytest.fixture(scope="session")
-def smirror_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("smirror") / "short.mcap"
-    simulate_smirror(str(path), SHORT)
-    return path
+def smirror_log() -> Path:
+    return simulated("smirror-short.mcap", simulate_smirror, SHORT)
 
 
 def _run(log: Path, cfg: SmirrorConfig) -> tuple[dict, SmirrorResult]:
-    report, res = run_detailed(LogReader(log), None, cfg)
-    return dict(report.metrics), res
+    def compute() -> tuple[dict, SmirrorResult]:
+        report, res = run_detailed(LogReader(log), None, cfg)
+        return dict(report.metrics), res
+
+    return cached_value("smirror-run", compute, str(log), cfg)
 
 
 @pytest.fixture(scope="session")

@@ -8,6 +8,7 @@ import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from tests.conftest import examples
 from trackctl.vmtrack.align import AlignConfig, Alignment, PairEvidence, lag_grid
 from trackctl.vmtrack.identify import IdentifyConfig, _viterbi, visual_velocity
 
@@ -23,7 +24,7 @@ def _walk(n: int, seed: int) -> np.ndarray:
     return speed * np.exp(1j * heading)
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=examples(30), deadline=None)
 @given(
     yaw=st.floats(-math.pi, math.pi),
     scale=st.floats(0.75, 1.25),

@@ -8,6 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.conftest import examples
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.sim.render import PersonLook, draw_shadow, floor_image, render_frame
 from trackctl.sim.vm import _cameras
@@ -87,7 +88,7 @@ def test_empty_scene_has_no_detection(scene) -> None:
     assert len(boxes) == 0
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=examples(40), deadline=None)
 @given(x=st.floats(0.5, 5.5), y=st.floats(0.5, 4.5), radius=st.floats(0.1, 1.0))
 def test_predicted_region_contains_the_person_image(
     scene, x: float, y: float, radius: float

@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
 
+from tests.conftest import examples
 from trackctl.logs.messages import RssiReading, RssiScan, Vec3
 from trackctl.vmtrack.align import AlignConfig
 from trackctl.vmtrack.identify import dead_reckoned
@@ -101,7 +102,7 @@ def _share_on(xy: dict[int, tuple[float, float]], walk: np.ndarray, n: int) -> f
     return sum(math.dist(p, walk[k]) < 1.0 for k, p in xy.items()) / n
 
 
-@settings(max_examples=25, deadline=None)
+@settings(max_examples=examples(25), deadline=None)
 @given(
     st.lists(st.tuples(st.floats(0, 10), st.floats(0, 8)), min_size=1, max_size=6),
     st.tuples(st.floats(0, 10), st.floats(0, 8)),
@@ -118,7 +119,7 @@ def test_emission_is_the_distance_to_the_nearest_detection(pts, probe):
     assert abs(got - d) <= grid.cell * math.sqrt(2) / 2 + 1e-6
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=examples(30), deadline=None)
 @given(
     st.integers(1, 3),
     st.integers(1, 7),
@@ -140,7 +141,7 @@ def test_relax_is_grey_erosion_bit_for_bit(layers, rows, cols, seed, steps, by_l
     assert np.array_equal(_relax(acc, costs), want)
 
 
-@settings(max_examples=30, deadline=None)
+@settings(max_examples=examples(30), deadline=None)
 @given(st.integers(1, 7), st.integers(1, 7), st.integers(0, 2**32 - 1))
 def test_predecessors_are_argmin_over_the_shifted_copies_bit_for_bit(rows, cols, seed):
     rng = np.random.default_rng(seed)
@@ -166,7 +167,7 @@ def test_predecessors_are_argmin_over_the_shifted_copies_bit_for_bit(rows, cols,
     assert np.array_equal(best, np.min(np.stack(stack), axis=0))
 
 
-@settings(max_examples=50, deadline=None)
+@settings(max_examples=examples(50), deadline=None)
 @given(
     st.lists(
         st.lists(

@@ -6,6 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.conftest import examples
 from trackctl.vmtrack.tracker import merge_detections, merge_with_covariance
 
 
@@ -50,7 +51,7 @@ people = st.lists(
 )
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150), deadline=None)
 @given(people, st.integers(0, 2**31 - 1))
 def test_merge_equals_the_global_nearest_first_definition(crowd, seed) -> None:  # type: ignore[no-untyped-def]
     rng = np.random.default_rng(seed)

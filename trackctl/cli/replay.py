@@ -6,6 +6,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Iterable
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
@@ -18,7 +19,7 @@ from rich.table import Table
 from trackctl.cli.common import check_topics, check_window, split_csv, stderr
 from trackctl.errors import InputError
 from trackctl.logs.jsonl import attachment_line, metadata_line
-from trackctl.logs.reader import LogReader
+from trackctl.logs.reader import LogReader, RawMessage
 from trackctl.logs.replay import RateMeter, UdpSink, parse_host_port, replay_jsonl
 
 
@@ -34,6 +35,34 @@ def _table(meter: RateMeter, title: str) -> Table:
     for topic, schema, count, rate, last in meter.rows():
         table.add_row(topic, schema, str(count), f"{rate:.1f}", f"{last / 1e9:.3f}")
     return table
+
+
+def _write_jsonl(
+    reader: LogReader,
+    stream: Iterable[tuple[RawMessage, str]],
+    records: bool,
+    sink: UdpSink | None,
+    paced: bool,
+) -> int:
+    """JSON lines on stdout (after the metadata and attachment records with ``records``), each
+    also sent to ``sink``; paced lines are flushed one by one. Returns the messages written."""
+    write = sys.stdout.write
+    if records:
+        for name, md in reader.metadata().items():
+            write(metadata_line(name, md) + "\n")
+        for name, (media_type, data) in reader.attachments().items():
+            write(attachment_line(name, media_type, data) + "\n")
+    n = 0
+    for _, line in stream:
+        write(line)
+        write("\n")
+        if paced:  # each line leaves when its time comes, not a buffer later
+            sys.stdout.flush()
+        if sink is not None:
+            sink.send(line)
+        n += 1
+    sys.stdout.flush()
+    return n
 
 
 def replay(
@@ -88,19 +117,7 @@ def replay(
     n = 0
     try:
         if fmt is Format.jsonl:
-            write = sys.stdout.write
-            if records:
-                for name, md in reader.metadata().items():
-                    write(metadata_line(name, md) + "\n")
-                for name, (media_type, data) in reader.attachments().items():
-                    write(attachment_line(name, media_type, data) + "\n")
-            for _, line in stream:
-                write(line)
-                write("\n")
-                if sink is not None:
-                    sink.send(line)
-                n += 1
-            sys.stdout.flush()
+            n = _write_jsonl(reader, stream, records, sink, paced=speed > 0)
         else:
             meter = RateMeter()
             console = Console()
