@@ -118,7 +118,9 @@ def test_info_and_replay_decode_cdr(bag: Path) -> None:
     mcap = next(bag.glob("*.mcap"))
     info = run_cli("info", str(mcap), check=True)
     assert b"nav_msgs/msg/Odometry" in info.stdout and b"cdr" in info.stdout
-    out = run_cli("replay", str(mcap), "--format", "jsonl", "--topics", "/r1/odom", check=True)
+    out = run_cli(
+        "replay", str(mcap), "--speed", "0", "--format", "jsonl", "--topics", "/r1/odom", check=True
+    )
     first = json.loads(out.stdout.splitlines()[1])
     assert first["schema"] == "nav_msgs/msg/Odometry"
     assert first["message"]["header"]["frame_id"] == "odom"

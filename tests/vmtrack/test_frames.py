@@ -10,6 +10,7 @@ import pytest
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from typer.testing import CliRunner
 
+from tests.cache import simulated
 from tests.conftest import ROOT, run_cli
 from tests.logcompare import assert_same_log
 from tests.logs.test_plain_readers import assert_plain_decodable
@@ -20,6 +21,7 @@ from trackctl.sim.vm import VmScenario, simulate_vm
 from trackctl.vmtrack import FrameConfig, VmTrackConfig, VmTrackProcessor
 from trackctl.vmtrack.frames import detections_topic
 from trackctl.vmtrack.pipeline import SCENE_TOPIC, TRACKS_TOPIC
+from trackctl.vmtrack.retrack import RetrackConfig
 
 VM_SAMPLE = ROOT / "sample_logs" / "vm-office.mcap"
 SAMPLE_SCENARIO = VmScenario(
@@ -27,14 +29,13 @@ SAMPLE_SCENARIO = VmScenario(
 )
 
 
-@pytest.fixture(scope="module")
-def frames_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("vmf") / "frames.mcap"
-    simulate_vm(
-        str(path),
+@pytest.fixture(scope="session")
+def frames_log() -> Path:
+    return simulated(
+        "frames.mcap",
+        simulate_vm,
         VmScenario(field="office", users=2, nonusers=0, duration_s=40, seed=4, frames=True),
     )
-    return path
 
 
 def test_frames_log_has_images_and_no_simulated_detections(frames_log: Path) -> None:
@@ -95,6 +96,7 @@ def test_plot_draws_the_papers_figures(tmp_path: Path) -> None:
             str(tmp_path / "o.mcap"),
             "--plot",
             str(tmp_path / "fig"),
+            "--no-retrack",  # the figures, not the re-tracking (the main job's test runs that)
             "-q",
         ],
     )
@@ -105,7 +107,8 @@ def test_plot_draws_the_papers_figures(tmp_path: Path) -> None:
 
 
 def test_full_search_mode_searches_every_frame_whole(frames_log: Path, tmp_path: Path) -> None:
-    cfg = VmTrackConfig(frames=FrameConfig(predicted=False))
+    # the detector's searches (re-tracking, which searches no frame, is left out)
+    cfg = VmTrackConfig(frames=FrameConfig(predicted=False), retrack=RetrackConfig(enabled=False))
     (rep,) = run_processors(frames_log, tmp_path / "o.mcap", [VmTrackProcessor(cfg)])
     assert rep.metrics["region_searches"] == 0
     assert rep.metrics["full_searches"] == 240

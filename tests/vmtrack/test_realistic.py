@@ -91,7 +91,8 @@ def test_report_estimates_each_phones_clock_offset(lobby: tuple[dict[str, object
 
 
 def test_no_phone_on_two_tracks_in_the_papers_setting() -> None:
-    m, out = _cached_run(replace(LOBBY, duration_s=60, preset="paper"), "paper")
+    # 30 s of the lobby: IDF1 0.993 (60 s: the same mechanisms, twice the run)
+    m, out = _cached_run(replace(LOBBY, duration_s=30, preset="paper"), "paper")
     assert assert_one_track_per_phone(out) == m["frames"]
     assert m["idf1"] >= 0.9
 
