@@ -205,3 +205,20 @@ def recorded(
     )
     """A log recorded from every file source (IMU, RSSI, odometry, video + calibration)."""
     return out
+
+
+def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
+    """``-n auto``: one worker more than the cores this process may use. Many tests wait on a
+    child (a trackctl subprocess, Spark's JVM, a paced replay, a signal) and leave their core
+    idle; a spare worker fills it."""
+    return len(os.sched_getaffinity(0)) + 1
+
+
+HEAVY_FIRST = ("tests/vmtrack/", "tests/evmatch/test_spark.py")
+"""Where the longest tests live: scheduled first, so that the run does not end on one worker
+finishing a long test while the others are idle."""
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Heavy folders first (a stable sort: the same order on every worker, as xdist needs)."""
+    items.sort(key=lambda item: not item.nodeid.startswith(HEAVY_FIRST))
