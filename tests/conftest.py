@@ -220,5 +220,24 @@ finishing a long test while the others are idle."""
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Heavy folders first (a stable sort: the same order on every worker, as xdist needs)."""
+    """Heavy folders first (a stable sort: the same order on every worker, as xdist needs), and
+    on a worker under ``--dist loadgroup``, each ``xdist_group`` named in the node id.
+
+    pytest-xdist 3.8 names the group by setting ``item._nodeid``, which pytest 9.2 no longer
+    reads (node ids are structured, ``item._id``): each worker then took its share of the Spark
+    tests and started a JVM of its own. This names the group where pytest 9.2 reads it, unless
+    xdist's own hook already did.
+    """
     items.sort(key=lambda item: not item.nodeid.startswith(HEAVY_FIRST))
+    if not getattr(config.option, "loadgroup", False):
+        return
+    for item in items:
+        groups = sorted({str(m.args[0]) for m in item.iter_markers("xdist_group") if m.args})
+        if not groups or "@" in item.nodeid:
+            continue
+        grouped = f"{item.nodeid}@{'_'.join(groups)}"
+        node_id = getattr(item, "_id", None)
+        if node_id is not None and hasattr(type(node_id), "parse"):
+            item._id = type(node_id).parse(grouped)  # type: ignore[attr-defined]
+        else:
+            item._nodeid = grouped

@@ -236,6 +236,9 @@ def test_a_carry_change_the_phone_missed_is_followed():
     assert _share_on(second, people[1], n - n // 2 - 31) > 0.9
 
 
+# -m slow: two 72 m walks, the largest grid here (a minute on one core); by default the pair
+# tests below keep two carriers side by side on one phone each
+@pytest.mark.slow
 def test_each_phone_stays_on_its_carrier_where_they_cross():
     # two carriers walk at each other on lines 0.6 m apart and pass; what tells their phones
     # apart (their yaws unknown) is what each walk does: one stops for 6 s, the other turns
@@ -432,6 +435,9 @@ def _scans(frame_t: np.ndarray, walk: np.ndarray, heard: np.ndarray, seed: int):
     return out
 
 
+# -m slow: two re-trackings of 90 s (40 s on one core); by default the RSSI evidence's part in
+# the path is checked by test_a_straight_walk_is_published_on_the_evidence_of_the_phones_rssi
+@pytest.mark.slow
 def test_a_stranger_in_view_while_no_ap_hears_the_phone_is_not_its_carrier():
     # the phone is on for 90 s; its carrier is in view for the last 30 s only. From 10 s to
     # 50 s a stranger in the room walks as the phone does then (the same turns and stops):
@@ -534,6 +540,10 @@ def test_a_yaw_change_the_phone_saw_is_not_charged():
     assert _yaw_changes_cost(a, CFG, free) == 0.0
 
 
+# -m slow: 90 s, three phones (a minute on one core); by default the fit is checked on the office
+# log's run (test_vmtrack.py::test_each_aps_path_loss_is_fitted_and_reported), whose APs are the
+# prior's model, so only this test shows the fit moving away from the prior
+@pytest.mark.slow
 def test_each_aps_calibration_is_fitted_where_the_paths_put_the_carriers():
     # the site's AP is 10 dB louder at 1 m than the processor's default model, with a steeper
     # exponent; the re-tracking learns both from the carriers it followed
