@@ -223,6 +223,9 @@ def test_unknown_yaw_clock_and_step_are_found(yaw):
     assert abs(np.median(np.abs(a)) - 0.85) <= 0.1
 
 
+# -m slow (20 s on one core); by default a carry change the phone saw is followed by identify
+# (test_identify.py::test_a_carry_change_starts_a_new_alignment_at_once)
+@pytest.mark.slow
 def test_a_carry_change_the_phone_missed_is_followed():
     frame_t, points, people = _scene(3, seconds=150)
     n = len(frame_t)
@@ -502,6 +505,9 @@ def test_a_straight_walk_is_published_on_the_evidence_of_the_phones_rssi():
     assert against.sum() < 0 and not xy
 
 
+# -m slow (25 s on one core); by default test_a_yaw_change_the_phone_saw_is_not_charged checks
+# the yaw search's side of it
+@pytest.mark.slow
 def test_a_carry_change_the_phone_saw_is_searched_as_two_steady_yaws():
     frame_t, points, people = _scene(16, seconds=120)
     n = len(frame_t)
