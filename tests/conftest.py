@@ -186,25 +186,30 @@ def sample_log() -> Path:
 def recorded(
     tmp_path: Path, imu_csv: Path, rssi_csv: Path, odom_csv: Path, video_mp4: Path, calib_yaml: Path
 ) -> Path:
-    out = tmp_path / "r.mcap"
-    run_cli(
-        "record",
-        str(out),
-        "--imu",
-        f"phone1={imu_csv}",
-        "--rssi",
-        str(rssi_csv),
-        "--odom",
-        f"robot1={odom_csv}",
-        "--video",
-        f"cam0={video_mp4}",
-        "--calib",
-        f"cam0={calib_yaml}",
-        "--quiet",
-        check=True,
-    )
-    """A log recorded from every file source (IMU, RSSI, odometry, video + calibration)."""
-    return out
+    """A log recorded from every file source (IMU, RSSI, odometry, video + calibration), by a
+    real ``trackctl record``: built once per code version and shared (read-only) by its tests."""
+    from tests.cache import cached_file
+
+    def record(out: Path) -> None:
+        run_cli(
+            "record",
+            str(out),
+            "--imu",
+            f"phone1={imu_csv}",
+            "--rssi",
+            str(rssi_csv),
+            "--odom",
+            f"robot1={odom_csv}",
+            "--video",
+            f"cam0={video_mp4}",
+            "--calib",
+            f"cam0={calib_yaml}",
+            "--quiet",
+            check=True,
+        )
+
+    # the sources are this file's fixtures: its bytes are part of the key
+    return cached_file("recorded.mcap", record, Path(__file__).read_bytes())
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
