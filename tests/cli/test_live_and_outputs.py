@@ -11,12 +11,13 @@ import socket
 import stat
 import subprocess
 import time
+import warnings
 from pathlib import Path
 
 import pytest
 
-from tests.conftest import run_cli, trackctl_exe
-from trackctl.errors import OutputError
+from tests.conftest import SUBPROCESS_TIMEOUT_S, run_cli, trackctl_exe
+from trackctl.errors import OutputError, TrackctlError
 from trackctl.logs import LogReader
 from trackctl.logs.writer import LogWriter
 
@@ -119,6 +120,25 @@ def test_udp_bad_datagrams_are_rejected_naming_the_sender(tmp_path: Path) -> Non
     assert LogReader(out).topics()["/phone/p1/imu"].count == 6
 
 
+def _wait_durable(
+    partial: Path, topic: str, n: int, timeout_s: float = SUBPROCESS_TIMEOUT_S
+) -> None:
+    """Until ``partial`` (a recording in progress) reads back ``n`` messages on ``topic``."""
+    deadline = time.monotonic() + timeout_s
+    count = 0
+    while time.monotonic() < deadline:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # a partial file is truncated by nature
+                count = sum(1 for _ in LogReader(partial).raw([topic]))
+        except (OSError, TrackctlError):
+            count = 0  # not created yet, or not one whole record yet
+        if count >= n:
+            return
+        time.sleep(0.2)
+    raise AssertionError(f"{partial}: {count} of {n} messages on disk after {timeout_s:.0f} s")
+
+
 def test_kill_9_loses_at_most_the_last_second_and_recover_finishes(tmp_path: Path) -> None:
     out = tmp_path / "live.mcap"
     proc = subprocess.Popen(
@@ -135,7 +155,9 @@ def test_kill_9_loses_at_most_the_last_second_and_recover_finishes(tmp_path: Pat
             if t % 100 == 0:
                 time.sleep(0.05)
         sender.close()
-        time.sleep(2.0)  # > one flush period after the last datagram
+        # the recorder flushes about once a second: wait until the partial file holds every
+        # message (however slow a loaded machine is), then kill it with no chance to clean up
+        _wait_durable(tmp_path / "live.mcap.partial", "/phone/p1/imu", n)
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)
     finally:
