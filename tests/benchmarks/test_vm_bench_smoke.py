@@ -79,6 +79,7 @@ def test_parallel_lines_walk_opposite_ways(tmp_path: Path) -> None:
     assert np.abs(va).max() == pytest.approx(1.0, abs=0.05)
 
 
+@pytest.mark.slow  # a whole benchmark run, if a tiny one (12 s on one core)
 def test_vm_compare_runs_end_to_end(capsys: pytest.CaptureFixture[str]) -> None:
     # the paper's phones, 40 s: the pipeline assumes nothing about how phones are carried, so
     # a phone is named over windows of 16 s of walking (20 s logs are a coin toss either way:

@@ -20,7 +20,8 @@ from trackctl.vmtrack.pipeline import TRACKS_TOPIC
 LOBBY = VmScenario(field="lobby", users=5, nonusers=3, duration_s=30, seed=2)
 """Five carriers (each phone at a random carry yaw of its own) and three people without a
 phone, 30 s: IDF1 0.967, every phone's clock found within 0.13 s (median).
-``test_realistic_lobby_of_150_s`` runs 150 s of it under ``-m slow``."""
+Longer lobbies are benchmark rows: ``python benchmarks/vm_realistic.py`` (300 s, three seeds,
+with 35 more people, carry offsets 0-180 deg and clock offsets)."""
 
 
 def _run(tmp: Path, scenario: VmScenario, name: str) -> tuple[dict[str, object], Path]:
@@ -59,12 +60,6 @@ def _identifies_phone_carriers(m: dict[str, object], out: Path) -> None:
 
 def test_realistic_lobby_identifies_phone_carriers(lobby: tuple[dict[str, object], Path]) -> None:
     _identifies_phone_carriers(*lobby)
-
-
-@pytest.mark.slow
-def test_realistic_lobby_of_150_s(tmp_path: Path) -> None:
-    """The same on 150 s of the lobby (the default run's scene until it was cut to 30 s)."""
-    _identifies_phone_carriers(*_run(tmp_path, replace(LOBBY, duration_s=150), "lobby150"))
 
 
 def test_report_estimates_each_phones_clock_offset(lobby: tuple[dict[str, object], Path]) -> None:
@@ -128,6 +123,7 @@ def test_paper_preset_keeps_the_papers_phones(tmp_path: Path) -> None:
         replace(LOBBY, preset="paper", carry_yaw_deg=45.0)
 
 
+@pytest.mark.slow  # a scene of its own (25 s on one core)
 def test_a_phone_whose_carrier_never_comes_into_view_is_placed_nowhere(tmp_path: Path) -> None:
     """Phones are on for the whole log, their carriers need not come into view at all (in
     `biwi_hotel` most of the day's walkers pass after the log ends): such a phone is published

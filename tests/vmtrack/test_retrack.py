@@ -210,7 +210,14 @@ def test_the_path_follows_the_phone_through_a_crowd():
     assert np.mean(err < 1.0) > 0.97
 
 
-@pytest.mark.parametrize("yaw", [0.0, 100.0, -150.0])
+@pytest.mark.parametrize(
+    "yaw",  # one yaw by default; the others under -m slow (7 s each on one core)
+    [
+        0.0,
+        pytest.param(100.0, marks=pytest.mark.slow),
+        pytest.param(-150.0, marks=pytest.mark.slow),
+    ],
+)
 def test_unknown_yaw_clock_and_step_are_found(yaw):
     frame_t, points, people = _scene(2)
     phone = _phone(people[3], frame_t, yaw, scale=0.85, lag_s=1.0)
@@ -284,6 +291,8 @@ def test_a_path_too_big_for_memory_is_skipped_with_a_warning():
     assert out == {}
 
 
+# -m slow: a re-tracking scene of its own (15-20 s on one core)
+@pytest.mark.slow
 def test_a_stranger_who_walks_straight_is_not_taken_for_an_unseen_carrier():
     # the carrier walks straight where no camera sees; a stranger walks straight in view at the
     # same pace. With the phone's yaw unknown, the stranger fits the phone's walk as well as the
@@ -307,6 +316,8 @@ def test_a_stranger_who_walks_straight_is_not_taken_for_an_unseen_carrier():
     assert _share_on(out["m"].xy, turned, n) > 0.8
 
 
+# -m slow: a re-tracking scene of its own (15-20 s on one core)
+@pytest.mark.slow
 def test_a_carrier_who_walks_out_of_view_is_still_found_in_it():
     # the carrier walks about the room among 7 others for 40 s, then leaves by a door and walks
     # on, straight, for a minute where no camera sees; the phone reports all along. Its yaw is
@@ -376,6 +387,8 @@ def _polyline(points: list[tuple[int, int]], n: int, speed: float = 1.2) -> np.n
     return np.vstack([walk, np.repeat(walk[-1:], max(n - len(walk), 0), axis=0)])[:n]
 
 
+# -m slow: a re-tracking scene of its own (15-20 s on one core)
+@pytest.mark.slow
 def test_one_visit_the_carriers_and_not_a_strangers_who_walked_like_the_phone_before():
     # the phone is on for 90 s; its carrier is in view from 45 s to 90 s, turning about the
     # room. From 15 s to 35 s, while the carrier is still out of view, a stranger in the room
