@@ -140,11 +140,11 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"{n:>7} {engine:>6} | {m['requested']:>6} {100 * m['accuracy']:>7.2f}% "
                 f"{m['unresolved']:>5} | {m['v_scenarios_read']:>7} {m['v_scenarios_total']:>7} "
-                f"{m['v_bytes_read'] / 1e6:>9.1f} | {m['seconds']:>7.1f} "
+                f"{m['v_bytes_read'] / 1e6:>9.1f} | {m['wall_s']:>7.1f} "
                 f"{m['wall_seconds']:>7.1f} {m['peak_rss_mb']:>7.0f} "
                 f"{jvm:>6}"
             )
-            print("#   stages:", {k: v for k, v in m.items() if k.startswith("seconds_")})
+            print("#   stages:", {k: v for k, v in m.items() if k.startswith("wall_s_")})
             out.unlink(missing_ok=True)
     if tmp is not None:
         tmp.cleanup()

@@ -167,7 +167,9 @@ def test_full_mode_without_ground_truth(tmp_path: Path) -> None:
         poses[name] = [(r.log_time_ns, bytes(r.data)) for r in LogReader(out).raw([POSE])]
     assert poses["with"] and poses["with"] == poses["without"]
     bare_metrics = reports["without"].metrics
-    assert bare_metrics["positions"] == 0 and bare_metrics["success_rate"] is None
+    # what needs the truth is null (not 0) and says why
+    assert bare_metrics["positions"] is None and bare_metrics["success_rate"] is None
+    assert reports["without"].unmeasured["positions"] == "the log has no /ground_truth"
     assert 0.5 < bare_metrics["pose_share"] <= 1.0 and 0.0 < bare_metrics["fix_share"] <= 1.0
     assert bare_metrics["tags_mapped"] == 6 and bare_metrics["tag0_infra_sightings"] >= 3
     assert bare_metrics["nis_per_dof_mean"] is not None and bare_metrics["nis_within_95"] > 0.5

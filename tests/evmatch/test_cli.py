@@ -26,7 +26,7 @@ ISSUE_KEYS = [
     "v_scenarios_read",
     "v_scenarios_total",
     "v_bytes_read",
-    "seconds",
+    "wall_s",
 ]
 
 

@@ -8,7 +8,15 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import SITE_HELP, load_site_file, parse_choice, print_json, stderr
+from trackctl.cli.common import (
+    SITE_HELP,
+    AllowUnmeasuredOption,
+    VerboseOption,
+    load_site_file,
+    parse_choice,
+    print_json,
+    stderr,
+)
 from trackctl.cli.process import figures_from_output, run_system
 
 bridgeloc_app = typer.Typer(
@@ -135,7 +143,9 @@ def eval_(
         str | None,
         typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "error_m_mean>0.32".'),
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    allow_unmeasured: AllowUnmeasuredOption = False,
+    verbose: VerboseOption = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
 ) -> None:
     """BridgeLoc: localize the robot by bridging infrastructure and robot camera views."""
     from trackctl.bridgeloc import BridgeLocConfig, BridgeLocProcessor, Mode, PoseMethod
@@ -163,6 +173,8 @@ def eval_(
         json_out=json_out,
         fail_if=fail_if,
         quiet=quiet,
+        allow_unmeasured=allow_unmeasured,
+        verbose=verbose,
         plot=draw,
         outputs_only=outputs_only,
     )

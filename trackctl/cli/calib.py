@@ -7,10 +7,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
-from trackctl.cli.common import TrackctlGroup, print_json, stderr
+from trackctl.cli.common import TrackctlGroup, console, print_json, stderr
 from trackctl.errors import InputError
 
 calib_app = typer.Typer(
@@ -46,7 +45,7 @@ def _show(summary: Mapping[str, object], problems: tuple[list[str], list[str]]) 
     table = Table(show_header=False, show_edge=False)
     for key, value in summary.items():
         table.add_row(key, str(value))
-    Console().print(table)
+    console().print(table)
     for w in problems[1]:
         stderr.print(f"[yellow]warning:[/] {w}", markup=True)
 

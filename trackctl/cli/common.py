@@ -10,7 +10,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from enum import Enum
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
@@ -21,16 +21,24 @@ from typer.core import TyperGroup
 from trackctl.errors import InputError, TrackctlError
 from trackctl.logs.messages import MetricReport
 from trackctl.logs.reader import LogReader
-from trackctl.metrics.report import failed_conditions, jsonable_metrics, parse_fail_if
+from trackctl.metrics.report import (
+    check_gate_keys,
+    failed_conditions,
+    jsonable_metrics,
+    parse_fail_if,
+)
 
 __all__ = [
     "TrackctlGroup",
+    "console",
     "stderr",
     "print_json",
     "progress",
     "split_csv",
     "apply_fail_if",
     "check_fail_if",
+    "AllowUnmeasuredOption",
+    "VerboseOption",
     "check_topics",
     "check_window",
     "report_dict",
@@ -42,7 +50,19 @@ __all__ = [
 EXIT_BAD_INPUT = 2
 EXIT_GATE = 1
 
-stderr = Console(stderr=True, highlight=False, soft_wrap=True)
+PIPE_WIDTH = 1000
+"""Line width for output that is not a terminal: tables are never cut at 80 columns there."""
+
+
+def console(*, err: bool = False, soft_wrap: bool = False) -> Console:
+    """A rich console on stdout (or stderr) that never cuts a table: a terminal's own width,
+    else :data:`PIPE_WIDTH` (a pipe, a file, a CI log)."""
+    probe = Console(stderr=err)
+    width = None if probe.is_terminal else PIPE_WIDTH
+    return Console(stderr=err, highlight=False, soft_wrap=soft_wrap, width=width)
+
+
+stderr = console(err=True, soft_wrap=True)
 
 
 def _show_warning(
@@ -178,6 +198,7 @@ def report_dict(report: MetricReport) -> dict[str, Any]:
         "t_ns": report.t_ns,
         "metrics": jsonable_metrics(report.metrics),
         "params": jsonable_metrics(report.params),
+        "unmeasured": dict(report.unmeasured),
     }
 
 
@@ -203,25 +224,48 @@ def check_topics(reader: LogReader, wanted: Sequence[str] | None) -> None:
             )
 
 
-def check_fail_if(expr: str | None) -> None:
-    """Raise InputError now, before any work, when ``--fail-if`` does not parse."""
+ALLOW_UNMEASURED_HELP = (
+    "Let a --fail-if condition on a metric the run could not measure (null: e.g. no "
+    "/ground_truth) pass instead of exiting 2."
+)
+
+
+AllowUnmeasuredOption = Annotated[
+    bool, typer.Option("--allow-unmeasured", help=ALLOW_UNMEASURED_HELP)
+]
+VerboseOption = Annotated[
+    bool,
+    typer.Option("--verbose", "-v", help="Print every figure of the report, not its headline."),
+]
+
+
+def check_fail_if(expr: str | None, processors: Sequence[str] = ()) -> None:
+    """Raise InputError now, before any work, when ``--fail-if`` does not parse or names a
+    metric none of ``processors`` reports."""
     if expr:
-        parse_fail_if(expr)
+        check_gate_keys(parse_fail_if(expr), processors)
 
 
-def apply_fail_if(expr: str | None, reports: Sequence[MetricReport]) -> None:
+def apply_fail_if(
+    expr: str | None, reports: Sequence[MetricReport], allow_unmeasured: bool = False
+) -> None:
     """Exit 1 (after printing why) when any ``--fail-if`` condition holds on the reports.
 
-    Keys are plain metric names (the last report that has it wins) or ``processor.metric``.
+    Keys are plain metric names (the last report that has it wins) or ``processor.metric``. A
+    condition on a null (unmeasured) metric raises an InputError (exit 2) naming the reason,
+    unless ``allow_unmeasured``.
     """
     if not expr:
         return
     conditions = parse_fail_if(expr)
     merged: dict[str, Any] = {}
+    why: dict[str, str] = {}
     for rep in reports:
         merged.update(rep.metrics)
         merged.update({f"{rep.processor}.{k}": v for k, v in rep.metrics.items()})
-    failed = failed_conditions(merged, conditions)
+        why.update(rep.unmeasured)
+        why.update({f"{rep.processor}.{k}": v for k, v in rep.unmeasured.items()})
+    failed = failed_conditions(merged, conditions, why, allow_unmeasured=allow_unmeasured)
     if failed:
         stderr.print("[red]fail-if:[/] " + "; ".join(failed), markup=True)
         raise typer.Exit(EXIT_GATE)

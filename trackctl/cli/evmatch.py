@@ -7,7 +7,13 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import parse_choice, print_json, stderr
+from trackctl.cli.common import (
+    AllowUnmeasuredOption,
+    VerboseOption,
+    parse_choice,
+    print_json,
+    stderr,
+)
 from trackctl.cli.process import figures_from_output, run_system
 
 
@@ -72,7 +78,9 @@ def ev_match(
         str | None,
         typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "accuracy<0.9".'),
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    allow_unmeasured: AllowUnmeasuredOption = False,
+    verbose: VerboseOption = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
 ) -> None:
     """EV-Matching: find the VID (person in video) of each EID (phone) reading little video."""
     from trackctl.errors import InputError
@@ -118,6 +126,8 @@ def ev_match(
         json_out=json_out,
         fail_if=fail_if,
         quiet=quiet,
+        allow_unmeasured=allow_unmeasured,
+        verbose=verbose,
         plot=draw,
         outputs_only=outputs_only,
     )

@@ -6,10 +6,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
-from trackctl.cli.common import print_json
+from trackctl.cli.common import console, print_json
 from trackctl.logs.info import log_info
 from trackctl.logs.reader import LogReader
 
@@ -23,8 +22,8 @@ def info(
     if json_out:
         print_json(data)
         return
-    console = Console()
-    console.print(
+    screen = console()
+    screen.print(
         f"[bold]{data['path']}[/]  {data['message_count']} messages, "
         f"{data['duration_s']:.3f} s  ({data['start_ns']} .. {data['end_ns']} ns)"
     )
@@ -33,9 +32,9 @@ def info(
         table.add_column(col, justify="right" if col in ("count", "rate Hz") else "left")
     for topic, t in data["topics"].items():
         table.add_row(topic, t["schema"], t["encoding"], str(t["count"]), f"{t['rate_hz']:.2f}")
-    console.print(table)
+    screen.print(table)
     for name, md in data["metadata"].items():
         shown = ", ".join(f"{k}={v}" for k, v in md.items() if k != "report")
-        console.print(f"metadata [bold]{name}[/]: {shown}", soft_wrap=True)
+        screen.print(f"metadata [bold]{name}[/]: {shown}", soft_wrap=True)
     for name, att in data["attachments"].items():
-        console.print(f"attachment [bold]{name}[/]: {att['media_type']}, {att['bytes']} bytes")
+        screen.print(f"attachment [bold]{name}[/]: {att['media_type']}, {att['bytes']} bytes")

@@ -7,12 +7,15 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from trackctl.cli.common import (
+    AllowUnmeasuredOption,
+    VerboseOption,
     apply_fail_if,
     check_fail_if,
+    console,
     print_json,
     progress,
     report_dict,
@@ -21,20 +24,46 @@ from trackctl.cli.common import (
 from trackctl.errors import InputError
 from trackctl.logs.messages import MetricReport
 from trackctl.logs.reader import LogReader
+from trackctl.logs.writer import write_text_atomic
+from trackctl.metrics.catalog import catalog
 from trackctl.metrics.report import jsonable_metrics, read_reports
 from trackctl.processing import Processor, get_processor, processors, run_processors
 
 
-def print_reports(reports: Sequence[MetricReport]) -> None:
-    """Human-readable tables of reports on stdout."""
-    console = Console()
+def _cell(value: object) -> str:
+    if value is None:
+        return "-"
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+def print_reports(
+    reports: Sequence[MetricReport], *, verbose: bool = False, out: Path | None = None
+) -> None:
+    """Reports on stdout for a person: per report its headline figures (every figure with
+    ``verbose``), which figures were not measured and why, and the file written."""
+    screen = console()
     for rep in reports:
+        cat = catalog(rep.processor)
+        keys = list(rep.metrics)
+        if cat is not None and cat.headline and not verbose:
+            keys = [k for k in cat.headline if k in rep.metrics]
         table = Table(title=f"{rep.processor}", show_edge=False, title_justify="left")
         table.add_column("metric")
         table.add_column("value", justify="right")
-        for key, value in rep.metrics.items():
-            table.add_row(key, f"{value:.4g}" if isinstance(value, float) else str(value))
-        console.print(table)
+        for key in keys:
+            table.add_row(escape(key), escape(_cell(rep.metrics[key])))
+        screen.print(table)
+        by_reason: dict[str, list[str]] = {}
+        for key, why in rep.unmeasured.items():
+            if verbose or key in keys:
+                by_reason.setdefault(why, []).append(key)
+        for why, names in by_reason.items():
+            screen.print(f"not measured ({escape(why)}): {escape(', '.join(names))}")
+        hidden = len(rep.metrics) - len(keys)
+        if hidden:
+            screen.print(f"{hidden} more figures: --verbose (or --json)")
+    if out is not None:
+        screen.print(f"wrote {escape(str(out))}")
 
 
 def process(
@@ -57,9 +86,14 @@ def process(
         str | None,
         typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "nonfinite_values>0".'),
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    allow_unmeasured: AllowUnmeasuredOption = False,
+    verbose: VerboseOption = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
 ) -> None:
-    """Run registered processors over a log; the output holds the input plus their results."""
+    """Run registered processors over a log; the output holds the input plus their results.
+
+    Example: trackctl process run.mcap --with check,dead-reckoning --out checked.mcap
+    """
     if list_:
         entries = processors()
         if json_out:
@@ -73,8 +107,8 @@ def process(
     names = split_csv(with_)
     if log is None or not names:
         raise InputError("process needs LOG and --with NAME (or --list to see processors)")
-    check_fail_if(fail_if)  # a typo fails before the run, not after it
     chain = [get_processor(name).factory() for name in names]
+    check_fail_if(fail_if, [p.name for p in chain])  # a typo fails before the run, not after
     with progress("processing", quiet) as bar:
         reports = run_processors(log, out, chain, bar, outputs_only=outputs_only)
     if json_out:
@@ -82,8 +116,8 @@ def process(
             {"out": None if out is None else str(out), "reports": [report_dict(r) for r in reports]}
         )
     else:
-        print_reports(reports)
-    apply_fail_if(fail_if, reports)
+        print_reports(reports, verbose=verbose, out=out)
+    apply_fail_if(fail_if, reports, allow_unmeasured)
 
 
 def report(
@@ -94,8 +128,13 @@ def report(
         str | None,
         typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "error_m_mean>0.5".'),
     ] = None,
+    allow_unmeasured: AllowUnmeasuredOption = False,
+    verbose: VerboseOption = False,
 ) -> None:
-    """Print the metric reports stored in a log."""
+    """Print the metric reports stored in a log.
+
+    Example: trackctl report tracked.mcap --fail-if "idf1<0.9" --csv report.csv
+    """
     reports = read_reports(LogReader(log))
     if not reports:
         raise InputError(
@@ -106,12 +145,13 @@ def report(
         import pandas as pd  # only for --csv
 
         rows = [{"processor": r.processor, "t_ns": r.t_ns, **dict(r.metrics)} for r in reports]
-        pd.DataFrame(rows).to_csv(csv, index=False)
+        # object columns: an integer stays 1242, not 1242.0 beside a report without it
+        write_text_atomic(csv, pd.DataFrame(rows, dtype=object).to_csv(index=False), [log])
     if json_out:
         print_json({"reports": [report_dict(r) for r in reports]})
     else:
-        print_reports(reports)
-    apply_fail_if(fail_if, reports)
+        print_reports(reports, verbose=verbose)
+    apply_fail_if(fail_if, reports, allow_unmeasured)
 
 
 def figures_from_output(
@@ -147,19 +187,21 @@ def run_system(
     quiet: bool,
     plot: Callable[[], object] | None = None,
     outputs_only: bool = False,
+    allow_unmeasured: bool = False,
+    verbose: bool = False,
 ) -> MetricReport:
     """What every system command does with its processor: run it over ``log`` into ``out``
     (progress bar on a TTY, atomic output; no ``out``: report only), draw its figures, print the
-    report (a table, or one JSON object of the metrics with ``--json``), then apply ``--fail-if``
-    (exit 1)."""
-    check_fail_if(fail_if)
+    report (its headline, or one JSON object of the metrics and ``unmeasured`` with ``--json``),
+    then apply ``--fail-if`` (exit 1; exit 2 on a metric that was not measured)."""
+    check_fail_if(fail_if, [processor.name])
     with progress(name, quiet) as bar:
         (report,) = run_processors(log, out, [processor], bar, outputs_only=outputs_only)
     if plot is not None:
         plot()
     if json_out:
-        print_json(jsonable_metrics(report.metrics))
+        print_json({**jsonable_metrics(report.metrics), "unmeasured": dict(report.unmeasured)})
     else:
-        print_reports([report])
-    apply_fail_if(fail_if, [report])
+        print_reports([report], verbose=verbose, out=out)
+    apply_fail_if(fail_if, [report], allow_unmeasured)
     return report

@@ -12,11 +12,10 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from trackctl.cli.common import check_topics, check_window, split_csv, stderr
+from trackctl.cli.common import check_topics, check_window, console, split_csv, stderr
 from trackctl.errors import InputError
 from trackctl.logs.jsonl import attachment_line, metadata_line
 from trackctl.logs.reader import LogReader, RawMessage
@@ -120,10 +119,10 @@ def replay(
             n = _write_jsonl(reader, stream, records, sink, paced=speed > 0)
         else:
             meter = RateMeter()
-            console = Console()
+            screen = console()
             last_draw = 0.0
             with Live(
-                _table(meter, str(log)), console=console, refresh_per_second=4, transient=False
+                _table(meter, str(log)), console=screen, refresh_per_second=4, transient=False
             ) as live:
                 for raw, line in stream:
                     meter.add(raw)

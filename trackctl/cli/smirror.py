@@ -9,6 +9,8 @@ import typer
 
 from trackctl.cli.common import (
     SITE_HELP,
+    AllowUnmeasuredOption,
+    VerboseOption,
     load_site_file,
     parse_choice,
     parse_pose,
@@ -66,7 +68,9 @@ def smirror(
         str | None,
         typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "error_m_mean>0.33".'),
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    allow_unmeasured: AllowUnmeasuredOption = False,
+    verbose: VerboseOption = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
 ) -> None:
     """S-Mirror: localize robots from their LEDs in node images, dead-reckoning in between."""
     from trackctl.errors import InputError
@@ -108,6 +112,8 @@ def smirror(
         json_out=json_out,
         fail_if=fail_if,
         quiet=quiet,
+        allow_unmeasured=allow_unmeasured,
+        verbose=verbose,
         plot=draw if plot is not None else None,
         outputs_only=outputs_only,
     )

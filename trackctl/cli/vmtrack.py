@@ -8,7 +8,13 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import parse_choice, print_json, stderr
+from trackctl.cli.common import (
+    AllowUnmeasuredOption,
+    VerboseOption,
+    parse_choice,
+    print_json,
+    stderr,
+)
 from trackctl.cli.process import figures_from_output, run_system
 
 
@@ -80,7 +86,9 @@ def vm_track(
         str | None,
         typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "error_m_mean>0.3".'),
     ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    allow_unmeasured: AllowUnmeasuredOption = False,
+    verbose: VerboseOption = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
 ) -> None:
     """VM-Tracking: identify and track people by fusing detections with phone motion sensors."""
     from trackctl.errors import InputError
@@ -116,6 +124,8 @@ def vm_track(
         json_out=json_out,
         fail_if=fail_if,
         quiet=quiet,
+        allow_unmeasured=allow_unmeasured,
+        verbose=verbose,
         plot=draw,
         outputs_only=outputs_only,
     )

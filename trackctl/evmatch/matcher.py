@@ -543,7 +543,7 @@ def match_ss(
         split_iterations=iterations,
         refine_rounds=rounds,
         distinguished=distinguished,
-        stage_seconds={"seconds_split": t1 - t0, "seconds_filter": t2 - t1},
+        stage_seconds={"wall_s_split": t1 - t0, "wall_s_filter": t2 - t1},
     )
 
 
@@ -737,5 +737,5 @@ def match_edp(
         split_iterations=0,
         refine_rounds=0,
         distinguished=0,
-        stage_seconds={"seconds_split": t1 - t0, "seconds_filter": t2 - t1},
+        stage_seconds={"wall_s_split": t1 - t0, "wall_s_filter": t2 - t1},
     )

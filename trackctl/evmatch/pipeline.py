@@ -95,7 +95,7 @@ def match_log(
         if vstore is not None:
             vstore.close()
     _warn_incomplete(reader, catalog, vstore, outcome)
-    stages = {"seconds_load_e": t1 - t0, **outcome.stage_seconds}
+    stages = {"wall_s_load_e": t1 - t0, **outcome.stage_seconds}
     return outcome, catalog, vstore, stages
 
 
@@ -161,7 +161,7 @@ def run(
         "v_scenarios_read": outcome.v_scenarios_read,
         "v_scenarios_total": v_total,
         "v_bytes_read": outcome.v_bytes_read,
-        "seconds": round(time.perf_counter() - started, 3),
+        "wall_s": round(time.perf_counter() - started, 3),
         "ambiguous": ambiguous,
         "precision": round(correct / matched, 4) if truth and matched else None,
         "v_scenarios_missing": len(vstore.missing),

@@ -313,9 +313,10 @@ def _type_schema(tp: Any) -> dict[str, Any]:  # noqa: C901 - one branch per kind
     if origin is tuple:
         return {"type": "array", "items": _type_schema(args[0])}
     if origin in (dict, Mapping) or tp in (dict, Mapping):
+        scalar = ["number", "string", "boolean", "null"]
         return {
             "type": "object",
-            "additionalProperties": {"type": ["number", "string", "boolean", "null"]},
+            "additionalProperties": {"type": "string" if args[1:] == (str,) else scalar},
         }
     if origin is typing.Literal:
         return {"type": "string", "enum": list(args)}

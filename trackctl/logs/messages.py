@@ -407,8 +407,11 @@ class MetricReport(JsonMessage):
     Attributes:
         t_ns: Log time the report refers to (the end of the processed span).
         processor: Registry name of the processor.
-        metrics: Figure name -> value; names carry units (error_m_mean, seconds).
+        metrics: Figure name -> value; names carry units (error_m_mean, wall_s); null when
+            the run could not measure it.
         params: Configuration of the run.
+        unmeasured: Figure name -> why it is null (e.g. ``idf1``: "the log has no
+            /ground_truth"); a gate on such a figure is an error, not a pass.
     """
 
     SCHEMA: ClassVar[str] = "trackctl.MetricReport"
@@ -419,6 +422,7 @@ class MetricReport(JsonMessage):
     processor: str
     metrics: Mapping[str, MetricValue] = field(default_factory=dict)
     params: Mapping[str, MetricValue] = field(default_factory=dict)
+    unmeasured: Mapping[str, str] = field(default_factory=dict)
 
 
 # -- EV-Matching (dissertation §3.2) -------------------------------------------------------------

@@ -18,7 +18,8 @@ import errno
 import fcntl
 import os
 import stat
-from collections.abc import Iterable, Mapping
+import tempfile
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
@@ -85,6 +86,32 @@ def check_output_path(path: str | os.PathLike[str]) -> Path:
     if not parent.is_dir():
         raise OutputError(f"{path}: folder {parent} does not exist")
     return target
+
+
+def write_text_atomic(
+    path: str | os.PathLike[str], text: str, inputs: Sequence[str | os.PathLike[str]] = ()
+) -> None:
+    """Write ``text`` to ``path`` through a temporary file beside it and a rename: a reader
+    sees the old file or the whole new one, never a half; ``path`` must not be an input.
+
+    Raises:
+        OutputError: ``path`` is one of ``inputs``, not a regular file or new path, or cannot be
+            written (a full disk, no permission); nothing is changed then.
+    """
+    target = check_output_path(path)
+    for src in inputs:
+        if os.path.realpath(src) == os.path.realpath(target):
+            raise OutputError(
+                f"{path}: is the input {src}; choose another output (nothing written)"
+            )
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
+            f.write(text)
+        os.replace(tmp, target)
+    except OSError as err:
+        Path(tmp).unlink(missing_ok=True)
+        raise OutputError(f"{path}: cannot write ({err.strerror}); nothing was changed") from err
 
 
 def partial_path(path: str | os.PathLike[str], suffix: str = PARTIAL_SUFFIX) -> Path:

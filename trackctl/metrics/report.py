@@ -6,13 +6,19 @@ import json
 import math
 import operator
 import re
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from trackctl.errors import InputError
 from trackctl.logs import topics
 from trackctl.logs.messages import MetricReport, MetricValue
 from trackctl.logs.reader import LogReader
+from trackctl.metrics.catalog import catalog
+
+
+class UnmeasuredGateError(InputError):
+    """A ``--fail-if`` condition names a metric the run could not measure (it came out null)."""
+
 
 __all__ = [
     "Condition",
@@ -22,6 +28,8 @@ __all__ = [
     "report_topic",
     "METADATA_PREFIX",
     "jsonable_metrics",
+    "check_gate_keys",
+    "UnmeasuredGateError",
 ]
 
 METADATA_PREFIX = "metrics/"
@@ -75,13 +83,42 @@ def parse_fail_if(expr: str) -> list[Condition]:
     return conditions
 
 
+def check_gate_keys(conditions: Iterable[Condition], processors: Sequence[str]) -> None:
+    """Raise InputError, before any work, when a condition names a metric none of
+    ``processors`` declares (``KEY`` or ``PROCESSOR.KEY``; see :mod:`trackctl.metrics.catalog`).
+
+    A processor that declares no metrics (a plug-in without a catalog) accepts any plain key:
+    its gates are checked against the report after the run.
+    """
+    cats = {p: catalog(p) for p in processors}
+    for cond in conditions:
+        head, dot, tail = cond.key.partition(".")
+        owners, key = ([head], tail) if dot and head in cats else (list(cats), cond.key)
+        declared = [c for c in (cats[p] for p in owners) if c is not None]
+        if len(declared) < len(owners) or any(c.declares(key) for c in declared):
+            continue
+        names = sorted({n for c in declared for n in c.names()})
+        raise InputError(
+            f"--fail-if: {' or '.join(owners)} reports no metric {key!r}; it reports: "
+            + ", ".join(names)
+        )
+
+
 def failed_conditions(
-    metrics: Mapping[str, MetricValue], conditions: Iterable[Condition]
+    metrics: Mapping[str, MetricValue],
+    conditions: Iterable[Condition],
+    unmeasured: Mapping[str, str] | None = None,
+    *,
+    allow_unmeasured: bool = False,
 ) -> list[str]:
     """The conditions that hold on ``metrics``, as ``key=value (cond)`` strings.
 
+    A condition on a metric that is null (unmeasured) is an error, not a pass: a gate must not
+    pass on nothing. With ``allow_unmeasured`` it is skipped instead.
+
     Raises:
         InputError: a condition names a metric the report does not have, or a non-numeric one.
+        UnmeasuredGateError: a condition names a null metric (and ``allow_unmeasured`` is off).
     """
     failed = []
     for cond in conditions:
@@ -91,6 +128,14 @@ def failed_conditions(
                 + ", ".join(sorted(metrics))
             )
         value = metrics[cond.key]
+        if value is None:
+            if allow_unmeasured:
+                continue
+            why = (unmeasured or {}).get(cond.key, "it came out null")
+            raise UnmeasuredGateError(
+                f"--fail-if {cond}: {cond.key} was not measured: {why} "
+                "(--allow-unmeasured skips such a condition)"
+            )
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise InputError(f"--fail-if: metric {cond.key!r} is {value!r}, not a number")
         if math.isnan(value) or cond.holds(float(value)):

@@ -117,7 +117,7 @@ class PdrProcessor:
                 stacklevel=2,
             )
         metrics["steps_total"] = total
-        metrics["seconds"] = round(seconds, 3)
+        metrics["duration_s"] = round(seconds, 3)
         return MetricReport(
             t_ns=reader.end_ns or 0,
             processor=self.name,
@@ -136,7 +136,7 @@ class PdrProcessor:
         res = detect_steps(t_s, acc, self.config.steps)
         secs = float(t_s[-1]) if len(t_s) else 0.0
         metrics[f"steps/{name}"] = res.steps
-        metrics[f"seconds/{name}"] = round(secs, 3)
+        metrics[f"duration_s/{name}"] = round(secs, 3)
         rate = 1.0 / float(np.median(np.diff(t_s))) if len(t_s) > 1 else 0.0
         metrics[f"imu_rate_hz/{name}"] = round(rate, 2)
         metrics[f"bad_samples/{name}"] = res.bad_samples

@@ -13,9 +13,10 @@ from pathlib import Path
 
 from trackctl.errors import OutputError
 from trackctl.logs.copy import copy_log
-from trackctl.logs.messages import MetricReport
+from trackctl.logs.messages import MetricReport, MetricValue
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter, check_output_path
+from trackctl.metrics.catalog import WALL_S, catalog
 from trackctl.metrics.report import METADATA_PREFIX, jsonable_metrics, report_topic
 from trackctl.processing.base import Processor, Progress
 
@@ -31,6 +32,18 @@ def store_report(writer: LogWriter, report: MetricReport) -> None:
     flat = {k: json.dumps(v) for k, v in clean.metrics.items()}
     flat["report"] = json.dumps(clean.to_json())
     writer.add_metadata(METADATA_PREFIX + report.processor, flat)
+
+
+def _settled(report: MetricReport, reader: LogReader, wall_s: float) -> MetricReport:
+    """The report with its processing time, and with every figure the input could not give
+    set to null and its reason beside it (unmeasured is null, never 0: metrics/catalog.py)."""
+    metrics: dict[str, MetricValue] = dict(report.metrics)
+    metrics.setdefault(WALL_S, wall_s)
+    unmeasured = dict(report.unmeasured)
+    cat = catalog(report.processor)
+    if cat is not None:
+        metrics, unmeasured = cat.settle(metrics, reader.topics(), unmeasured)
+    return replace(report, metrics=metrics, unmeasured=unmeasured)
 
 
 def _run_one(
@@ -53,9 +66,7 @@ def _run_one(
         )
         started = time.perf_counter()
         report = processor.run(reader, writer, progress)
-        metrics = dict(report.metrics)
-        metrics.setdefault("seconds", round(time.perf_counter() - started, 3))
-        report = replace(report, metrics=metrics)
+        report = _settled(report, reader, round(time.perf_counter() - started, 3))
         if reader.warnings:
             params = dict(report.params)
             params["input_warnings"] = len(reader.warnings)

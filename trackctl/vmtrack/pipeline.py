@@ -274,6 +274,7 @@ def run(
         t_ns=reader.end_ns or 0,
         processor="vm-track",
         metrics=metrics,
+        unmeasured=_unmeasured(metrics, cfg, inputs.mode),
         params={
             "mode": inputs.mode.value,
             "smooth": cfg.smooth,
@@ -286,6 +287,32 @@ def run(
             "pdr_sigma_mps": cfg.tracker.pdr_sigma_mps,
         },
     )
+
+
+_RETRACK_ONLY = ("withheld_s/", "ambiguous_s/", "grouped_s/")
+_BINDINGS = ("bindings", "checkpoint_bindings", "offline_bindings")
+
+
+def _unmeasured(
+    metrics: dict[str, float | int | str | None], cfg: VmTrackConfig, mode: Mode
+) -> dict[str, str]:
+    """Why figures the configuration leaves out are null (the log's own gaps, such as no
+    ground truth, are found by the runner from metrics/catalog.py). V-AF binds no phone: its
+    binding counts are set to null here."""
+    why: dict[str, str] = {}
+    if mode is Mode.V_AF:
+        for key in _BINDINGS:
+            if key in metrics:
+                metrics[key] = None
+                why[key] = "v-af binds no phone (visual only)"
+    if mode is Mode.V_AF or not cfg.retrack.enabled:
+        reason = (
+            "re-tracking is off (--no-retrack)" if mode is Mode.VM else "v-af re-tracks nothing"
+        )
+        why.update(
+            {k: reason for k, v in metrics.items() if k.startswith(_RETRACK_ONLY) and v is None}
+        )
+    return why
 
 
 class _Clock:
