@@ -21,7 +21,7 @@ def _raw(t_ns: int, topic: str = "/a") -> RawMessage:
         "json",
         t_ns,
         t_ns,
-        b'{"timestamp":{"sec":0,"nsec":0},"processor":"p","metrics":{},"params":{}}',
+        b'{"timestamp":{"sec":0,"nsec":0},"processor":"p","metrics":{},"params":{},"unmeasured":{}}',
     )
 
 

@@ -210,7 +210,11 @@ def test_a_log_without_ground_truth_still_reports_what_was_seen(
     assert proc.returncode == 0, proc.stderr.decode()
     out = run_cli("vm-track", str(stripped), "--mode", "v-af", "--json", check=True)
     obj = json.loads(out.stdout)
-    assert obj["idf1"] is None and obj["people"] == 0  # nothing to score against
+    # nothing to score against: what needs the truth is null (never a 0 a gate would pass on),
+    # each with its reason; v-af binds no phone
+    assert obj["idf1"] is None and obj["people"] is None and obj["id_switches"] is None
+    assert obj["unmeasured"]["id_switches"] == "the log has no /ground_truth"
+    assert obj["bindings"] is None and "v-af" in obj["unmeasured"]["bindings"]
     assert obj["detections_per_frame_mean"] > 0.5
     assert obj["detections_per_frame_max"] >= 1
     assert obj["tracks_started"] >= obj["tracks_published"] >= 1

@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import signal
 import sys
+import threading
+import time
 import warnings
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from enum import Enum
 from pathlib import Path
@@ -15,7 +19,14 @@ from typing import Annotated, Any, TypeVar
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+from rich.progress import Progress as RichProgress
 from typer.core import TyperGroup
 
 from trackctl.errors import InputError, TrackctlError
@@ -27,6 +38,7 @@ from trackctl.metrics.report import (
     jsonable_metrics,
     parse_fail_if,
 )
+from trackctl.progress import Progress
 
 __all__ = [
     "TrackctlGroup",
@@ -82,16 +94,42 @@ class TrackctlGroup(TyperGroup):
     def invoke(self, ctx: Any) -> Any:
         previous = warnings.showwarning
         warnings.showwarning = _show_warning
+        handlers = _stop_on_signals()
         try:
             return super().invoke(ctx)
         except TrackctlError as err:
             stderr.print(f"[red]error:[/] {escape(one_line(str(err)))}", markup=True)
             raise typer.Exit(EXIT_BAD_INPUT) from None
-        except KeyboardInterrupt:
-            stderr.print("interrupted")
-            raise typer.Exit(130) from None
+        except KeyboardInterrupt as err:
+            # every output is written to OUT.partial and renamed when complete: an interrupted
+            # run leaves its inputs and any earlier OUT as they were (a live recording, which
+            # keeps what it got, handles the signal itself and ends normally)
+            how = f"by {err.args[0]}" if isinstance(err, Stopped) else "(Ctrl-C)"
+            stderr.print(f"interrupted {how}: the unfinished output was removed, inputs untouched")
+            raise typer.Exit(128 + (err.args[1] if isinstance(err, Stopped) else 2)) from None
         finally:
             warnings.showwarning = previous
+            for signum, handler in handlers.items():
+                signal.signal(signum, handler)
+
+
+class Stopped(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised where the program is so that it unwinds as on Ctrl-C."""
+
+
+def _stop_on_signals() -> dict[int, Any]:
+    """SIGTERM and SIGHUP (a CI runner or a closed terminal stopping us) end a command as
+    Ctrl-C does; returns the handlers to put back (none off the main thread)."""
+
+    def stop(signum: int, frame: Any) -> None:
+        raise Stopped(signal.Signals(signum).name, signum)
+
+    previous: dict[int, Any] = {}
+    if threading.current_thread() is not threading.main_thread():
+        return previous
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        previous[signum] = signal.signal(signum, stop)
+    return previous
 
 
 def one_line(text: str) -> str:
@@ -158,28 +196,97 @@ def print_json(obj: Any) -> None:
 
 
 def show_progress(quiet: bool) -> bool:
-    """Progress bars only on an interactive terminal and without --quiet."""
-    return not quiet and stderr.is_terminal and sys.stdout.isatty()
+    """A progress bar on an interactive terminal (stderr) without --quiet."""
+    return not quiet and stderr.is_terminal
+
+
+HEARTBEAT_S = 10.0
+"""Seconds between progress lines when stderr is not a terminal (a CI log, a file);
+``TRACKCTL_PROGRESS_S`` overrides it."""
+
+
+def _heartbeat_s() -> float:
+    try:
+        value = float(os.environ.get("TRACKCTL_PROGRESS_S", HEARTBEAT_S))
+    except ValueError:
+        return HEARTBEAT_S
+    return value if math.isfinite(value) and value > 0 else HEARTBEAT_S
+
+
+class _State:
+    """The last ``(done, total, stage)`` reported, read by the bar or the heartbeat."""
+
+    def __init__(self, description: str) -> None:
+        self.description = description
+        self.done: int = 0
+        self.total: int | None = None
+        self.stage: str | None = "starting"
+        self.started = time.monotonic()
+
+    def __call__(self, done: int, total: int | None, stage: str | None = None) -> None:
+        self.done, self.total, self.stage = done, total, stage
+
+    def label(self) -> str:
+        return f"{self.description}: {self.stage}" if self.stage else self.description
+
+    def line(self) -> str:
+        elapsed = int(time.monotonic() - self.started)
+        if self.total:
+            count = f" {self.done}/{self.total} ({100 * self.done / self.total:.0f} %)"
+        else:
+            count = f" {self.done}" if self.done else ""
+        return f"{self.label()}{count}, {elapsed // 60}:{elapsed % 60:02d} elapsed"
 
 
 @contextmanager
-def progress(description: str, quiet: bool) -> Iterator[Callable[[int, int | None], None]]:
-    """A ``(done, total)`` callback drawing a rich progress bar on a TTY, or doing nothing."""
-    if not show_progress(quiet):
-        yield lambda done, total: None
-        return
-    with Progress(
+def progress(description: str, quiet: bool) -> Iterator[Progress]:
+    """A progress callback: a rich bar with its total and ETA when stderr is a terminal; else
+    one short line on stderr every :data:`HEARTBEAT_S` (stage, done/total, elapsed), also while
+    a stage reports nothing; nothing with ``quiet``."""
+    state = _State(description)
+    if quiet:
+        yield state
+    elif show_progress(quiet):
+        with _bar(state) as update:
+            yield update
+    else:
+        stop = threading.Event()
+
+        def beat() -> None:
+            while not stop.wait(_heartbeat_s()):
+                stderr.print(escape(state.line()))
+
+        thread = threading.Thread(target=beat, name="trackctl-progress", daemon=True)
+        thread.start()
+        try:
+            yield state
+        finally:
+            stop.set()
+            thread.join()
+
+
+@contextmanager
+def _bar(state: _State) -> Iterator[Progress]:
+    with RichProgress(
         TextColumn("{task.description}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
+        TextColumn("eta"),
+        TimeRemainingColumn(),
         console=stderr,
         transient=True,
     ) as bar:
-        task = bar.add_task(description, total=None)
+        task = bar.add_task(state.label(), total=None)
 
-        def update(done: int, total: int | None) -> None:
-            bar.update(task, completed=done, total=total)
+        drawn = [0.0]
+
+        def update(done: int, total: int | None, stage: str | None = None) -> None:
+            state(done, total, stage)
+            now = time.monotonic()
+            if now - drawn[0] >= 0.1:  # rich redraws at its own rate; this bounds the cost
+                drawn[0] = now
+                bar.update(task, completed=done, total=total, description=escape(state.label()))
 
         yield update
 

@@ -5,17 +5,16 @@ from __future__ import annotations
 import fcntl
 import fnmatch
 import os
-from collections.abc import Callable, Container
+from collections.abc import Container
 from dataclasses import dataclass
 from pathlib import Path
 
 from trackctl.errors import LogError, OutputError
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import PARTIAL_SUFFIX, LogWriter
+from trackctl.progress import Progress
 
 __all__ = ["copy_log", "filter_log", "FilterResult", "recover_log", "RecoverResult"]
-
-Progress = Callable[[int, int | None], None]
 
 
 def copy_log(
@@ -48,8 +47,8 @@ def copy_log(
             continue
         writer.write_raw(raw)
         n += 1
-        if progress is not None and n % 2000 == 0:
-            progress(n, total)
+        if progress is not None and n % 500 == 0:
+            progress(n, total, "copying the input")
     for name, data in reader.metadata().items():
         if name not in skip_metadata:
             writer.add_metadata(name, data)

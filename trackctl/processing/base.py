@@ -18,6 +18,7 @@ from trackctl.errors import UnknownProcessorError
 from trackctl.logs.messages import MetricReport
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
+from trackctl.progress import Progress
 
 __all__ = [
     "Processor",
@@ -29,9 +30,6 @@ __all__ = [
     "ENTRY_POINT_GROUP",
     "PluginWarning",
 ]
-
-Progress = Callable[[int, int | None], None]
-"""Progress callback: (done, total or None). Library code reports; the CLI draws."""
 
 
 class Processor(Protocol):

@@ -202,9 +202,11 @@ def _track_log(
     points: list[tuple[str, np.ndarray]] = []
     covs: list[np.ndarray] | None = None if detector is None else []
     search_full = True
-    for n_msgs, msg in enumerate(reader.messages(inputs.stream_topics(reader.topics())), 1):
-        if progress is not None and n_msgs % 2000 == 0:
-            progress(n_msgs, None)
+    stream = inputs.stream_topics(reader.topics())
+    total = sum(reader.topics()[t].count for t in stream)
+    for n_msgs, msg in enumerate(reader.messages(stream), 1):
+        if progress is not None and n_msgs % 50 == 0:
+            progress(n_msgs, total, "tracking")
         if msg.topic == topics.GROUND_TRUTH:
             truth[msg.log_time_ns] = msg.message
             continue
@@ -261,8 +263,10 @@ def run(
     if inputs.mode is Mode.VM:
         identity.finish()
     clock.lap("tracking")
+    progress = progress or _silent
+    progress(0, None, "smoothing")
     positions = _positions(online.frames, cfg.smooth, cfg.tracker)
-    report = _write_and_score(writer, online, positions, truth, phones, cfg, inputs.mode)
+    report = _write_and_score(writer, online, positions, truth, phones, cfg, inputs.mode, progress)
     clock.lap("smoothing")
     metrics = dict(report)
     metrics.update(_timing_metrics(clock, online, inputs.detector))
@@ -287,6 +291,10 @@ def run(
             "pdr_sigma_mps": cfg.tracker.pdr_sigma_mps,
         },
     )
+
+
+def _silent(done: int, total: int | None, stage: str | None = None) -> None:
+    """No progress to report to."""
 
 
 _RETRACK_ONLY = ("withheld_s/", "ambiguous_s/", "grouped_s/")
@@ -523,6 +531,7 @@ def _write_and_score(
     phones: dict[str, PhoneMotion],
     cfg: VmTrackConfig,
     mode: Mode,
+    progress: Progress,
 ) -> dict[str, float | int | str | None]:
     """Stages 4-5: write tracks and the 3-D scene per frame; score them against the ground
     truth when the log has it (metrics only: nothing above reads the truth)."""
@@ -543,6 +552,7 @@ def _write_and_score(
     t_start = frames[0].t_ns if frames else 0
     offline = mode is Mode.VM and cfg.identity is Identity.OFFLINE
     deaths = np.array(online.static_death_log, float).reshape(-1, 2)
+    progress(0, None, "stitching and identifying")
     plan = plan_publication(frames, positions, cfg.stitch, all_tracks=offline, static_deaths=deaths)
     ids = (
         identify(frames, plan, phones, cfg.align, cfg.identify, cfg.phones_aligned)
@@ -556,7 +566,15 @@ def _write_and_score(
         model = (cfg.rssi_at_1m_dbm, cfg.path_loss_exponent)
         radio = RadioEvidence(frame_t, online.rssi_log, model, cfg.retrack.radio)
         retracked = retrack(
-            frame_t, points, phones, ids.known, cfg.align, cfg.retrack, cfg.phones_aligned, radio
+            frame_t,
+            points,
+            phones,
+            ids.known,
+            cfg.align,
+            cfg.retrack,
+            cfg.phones_aligned,
+            radio,
+            progress,
         )
         _take_retrack_alignments(ids.alignments, retracked)
     published: dict[str, int] = {}
@@ -564,6 +582,7 @@ def _write_and_score(
     wrong_s = 0.0
     frame_s = (frames[-1].t_ns - frames[0].t_ns) / 1e9 / max(len(frames) - 1, 1) if frames else 0.0
     for k_fr, fr in enumerate(frames):
+        progress(k_fr, len(frames), "writing tracks")
         placed = (retracked, k_fr, cfg.retrack.gate_m) if retracked else None
         tracks = _frame_tracks(fr, plan, positions, ids, placed)
         hyp = {m.track_id: (m.position_m.x, m.position_m.y) for m in tracks}

@@ -52,6 +52,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
+from trackctl.progress import Progress
 from trackctl.vmtrack.align import AlignConfig, best_fit, lag_grid
 from trackctl.vmtrack.identify import dead_reckoned, visual_velocity
 from trackctl.vmtrack.motion import PhoneMotion
@@ -1164,6 +1165,7 @@ def retrack(
     cfg: RetrackConfig,
     aligned: bool = False,
     radio: RadioEvidence | None = None,
+    progress: Progress | None = None,
 ) -> Retracked:
     """Each phone's carrier re-tracked through the raw detections ``points`` (one (n, 2) array
     per frame at ``frame_t``). ``start``: a first clock offset and ``a`` per frame per phone (the
@@ -1191,7 +1193,9 @@ def retrack(
         )
         return out
     follow = _Follower(frame_t, points, phones, grid, acfg, cfg, aligned)
-    for mid, track in follow.walks.items():
+    for k, (mid, track) in enumerate(follow.walks.items()):
+        if progress is not None:
+            progress(k, len(follow.walks), "re-tracking phones")
         if len(track) < 2:
             continue
         # the nominal step (scale 1) to start: in a crowd the chains' scale is another
@@ -1202,6 +1206,8 @@ def retrack(
             out[mid] = got
     final = radio
     if radio and radio.cfg.enabled and radio.cfg.fit and out:
+        if progress is not None:
+            progress(0, None, "re-tracking phones under the fitted radio model")
         final = _calibrated_pass(follow, out, radio, frame_t, cfg)
     for mid, found in out.items():
         out[mid] = follow.settle(mid, found, final)
