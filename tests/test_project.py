@@ -8,9 +8,16 @@ from tests.conftest import ROOT
 def test_ci_runs_the_readme_test_command() -> None:
     readme = (ROOT / "README.md").read_text()
     ci = (ROOT / ".ci" / "run").read_text()
-    command = "pip install -c constraints.txt -e '.[dev]' && pytest -q"
+    command = (
+        "python3 -m venv .venv && .venv/bin/pip install -c constraints.txt -e '.[dev]' "
+        "&& .venv/bin/pytest -q"
+    )
     assert command in readme
     assert command in ci
+    # the venv's own pip and pytest: the command never installs into the system Python
+    assert "\npip install" not in readme and " pytest -q" not in readme.replace(
+        "/bin/pytest -q", ""
+    )
 
 
 def test_required_top_level_layout() -> None:

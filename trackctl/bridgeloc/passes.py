@@ -402,10 +402,12 @@ def map_tags(
     infra_period: dict[str, int] = {}
     last_t: dict[str, int] = {}
     n_msgs = 0
-    for msg in reader.messages([topics.image(c) for c in infra]):
+    wanted = [topics.image(c) for c in infra]
+    total = reader.count(wanted)
+    for msg in reader.messages(wanted):
         n_msgs += 1
-        if progress is not None and n_msgs % 200 == 0:
-            progress(n_msgs, None)
+        if progress is not None and n_msgs % 10 == 0:
+            progress(n_msgs, total, "mapping tags in the infrastructure frames")
         frame_id = msg.message.frame_id
         cam = frame_id if frame_id in infra else msg.topic.strip("/").split("/")[0]
         gray = _imdecode(msg.message.data)

@@ -55,10 +55,11 @@ def run(
     det_times: list[float] = []
     tag_map, icam, n_msgs = map_tags(reader, setup, cfg, writer, progress, det_times)
     robot_pass = RobotPass(reader, setup, cfg, tag_map, icam, writer)
+    total = n_msgs + reader.count(robot_pass.topics())
     for msg in reader.messages(robot_pass.topics()):
         n_msgs += 1
-        if progress is not None and n_msgs % 500 == 0:
-            progress(n_msgs, None)
+        if progress is not None and n_msgs % 10 == 0:
+            progress(n_msgs, total, "localizing the robot")
         robot_pass.on_message(msg.topic, msg.log_time_ns, msg.message, det_times)
     robot_pass.finish()
     metrics = _pass_metrics(robot_pass, setup, cfg)

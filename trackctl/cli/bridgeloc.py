@@ -48,7 +48,10 @@ def tags(
     ] = "a4",
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Enumerate unique tag sets (checked against Theorems 5 and 6) and print tag sheets."""
+    """Enumerate unique tag sets (checked against Theorems 5 and 6) and print tag sheets.
+
+    Example: trackctl bridgeloc tags --n 3 --family parity --out tags.pdf
+    """
     from trackctl.bridgeloc.sheets import write_sheet
     from trackctl.bridgeloc.tags import (
         MAX_ENUMERATION_N,
@@ -147,7 +150,10 @@ def eval_(
     verbose: VerboseOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
 ) -> None:
-    """BridgeLoc: localize the robot by bridging infrastructure and robot camera views."""
+    """BridgeLoc: localize the robot by bridging infrastructure and robot camera views.
+
+    Example: trackctl bridgeloc eval sample_logs/bridgeloc.mcap --out localized.mcap
+    """
     from trackctl.bridgeloc import BridgeLocConfig, BridgeLocProcessor, Mode, PoseMethod
 
     mode_value = parse_choice(Mode, mode, "--mode")
@@ -216,7 +222,10 @@ def simulate_bridgeloc(
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
-    """A robot among infrastructure cameras and wall tags, with rendered images (BridgeLoc)."""
+    """A robot among infrastructure cameras and wall tags, with rendered images (BridgeLoc).
+
+    Example: trackctl simulate bridgeloc --out bridgeloc.mcap --field lobby --tags 6 --duration 10
+    """
     from trackctl.sim.bridgeloc import BridgeLocScenario
     from trackctl.sim.bridgeloc import simulate_bridgeloc as simulate
 

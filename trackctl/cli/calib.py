@@ -70,7 +70,10 @@ def ground(
     ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Pose of a camera on the floor from >= 4 floor point pairs (cv2.solvePnP)."""
+    """Pose of a camera on the floor from >= 4 floor point pairs (cv2.solvePnP).
+
+    Example: trackctl calib ground cam0 --intrinsics intr.yaml --points floor.csv --out cam0.yaml
+    """
     import numpy as np
 
     from trackctl.geometry.calib import camera_problems, geometry_summary
@@ -125,7 +128,10 @@ def import_cmd(
     ] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Convert a calibration to trackctl's OpenCV YAML (metres, z up), with checks."""
+    """Convert a calibration to trackctl's OpenCV YAML (metres, z up), with checks.
+
+    Example: trackctl calib import view001.xml --out cam0.yaml
+    """
     import numpy as np
 
     from trackctl.geometry.calib import camera_problems, geometry_summary, with_pose
@@ -162,7 +168,10 @@ def check(
     units: Annotated[str | None, typer.Option(help=_UNITS_HELP)] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Where the camera is and looks, and what is implausible (exit 2 on an error)."""
+    """Where the camera is and looks, and what is implausible (exit 2 on an error).
+
+    Example: trackctl calib check cam0.yaml
+    """
     from trackctl.geometry.calib import camera_problems, geometry_summary
     from trackctl.ingest.calibration import read_calibration
     from trackctl.ingest.video import frame_size

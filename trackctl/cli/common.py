@@ -92,6 +92,7 @@ class TrackctlGroup(TyperGroup):
     """Root command group: the single place where :class:`TrackctlError` becomes exit code 2."""
 
     def invoke(self, ctx: Any) -> Any:
+        name_metavars(self)
         previous = warnings.showwarning
         warnings.showwarning = _show_warning
         handlers = _stop_on_signals()
@@ -111,6 +112,37 @@ class TrackctlGroup(TyperGroup):
             warnings.showwarning = previous
             for signum, handler in handlers.items():
                 signal.signal(signum, handler)
+
+
+_METAVARS = {"path": "FILE", "str": "TEXT", "int": "N", "float": "NUMBER"}
+_PATH_METAVARS = {"log": "LOG", "plot": "DIR", "out": "FILE", "site": "SITE.yaml"}
+
+
+def _no_type(ctx: Any) -> None:
+    return None
+
+
+def name_metavars(command: Any) -> None:
+    """Give every parameter of ``command`` and its subcommands that has none a metavar that
+    reads as a word in ``--help`` (``LOG``, ``FILE``, ``TEXT``, ``N``; Typer's default shows
+    Python types: ``<path>``, ``<list[str]>``, ``{log}``)."""
+    for param in command.params:
+        if param.metavar is not None or getattr(param, "is_flag", False):
+            continue
+        desc = getattr(param, "type_descriptor", None)
+        if desc is None or getattr(desc, "is_choice", False):
+            continue
+        if param.param_type_name == "argument":
+            param.metavar = (param.name or "value").upper()
+            param.display_type_rich = _no_type  # "LOG  Input MCAP log.", not "LOG <path> ..."
+        elif desc.is_path:
+            param.metavar = _PATH_METAVARS.get(param.name or "", "FILE")
+        elif desc.is_list:
+            param.metavar = "NAME[,NAME]"
+        else:
+            param.metavar = _METAVARS.get(param.bare_type(), "VALUE")
+    for sub in getattr(command, "commands", {}).values():
+        name_metavars(sub)
 
 
 class Stopped(KeyboardInterrupt):

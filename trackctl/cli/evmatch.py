@@ -82,7 +82,10 @@ def ev_match(
     verbose: VerboseOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
 ) -> None:
-    """EV-Matching: find the VID (person in video) of each EID (phone) reading little video."""
+    """EV-Matching: find the VID (person in video) of each EID (phone) reading little video.
+
+    Example: trackctl ev-match sample_logs/ev.mcap --out matched.mcap --json
+    """
     from trackctl.errors import InputError
     from trackctl.evmatch import Algorithm, EvMatchConfig, EvMatchProcessor, MatchParams
 
@@ -166,7 +169,10 @@ def simulate_ev(
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
-    """People under cell-level E-location and per-cell cameras (EV-Matching scenarios)."""
+    """People under cell-level E-location and per-cell cameras (EV-Matching scenarios).
+
+    Example: trackctl simulate ev --out ev.mcap --people 400 --duration 1200 --seed 0
+    """
     from trackctl.sim.ev import EvScenario
     from trackctl.sim.ev import simulate_ev as simulate
 

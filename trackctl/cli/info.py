@@ -17,7 +17,10 @@ def info(
     log: Annotated[Path, typer.Argument(help="MCAP log to describe.")],
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Topics, schemas, message counts, rates, time span and metadata of a log."""
+    """Topics, schemas, message counts, rates, time span and metadata of a log.
+
+    Example: trackctl info sample_logs/demo.mcap
+    """
     data = log_info(LogReader(log))
     if json_out:
         print_json(data)

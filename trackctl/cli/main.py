@@ -22,8 +22,9 @@ app = typer.Typer(
     name="trackctl",
     help="Offline indoor tracking and robot localization over MCAP sensor logs.",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,
 )
 
 

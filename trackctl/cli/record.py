@@ -146,7 +146,10 @@ def record(
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress or notes.")] = False,
 ) -> None:
-    """Ingest video, calibration, IMU/RSSI/odometry CSV or live JSON lines into an MCAP log."""
+    """Ingest video, calibration, IMU/RSSI/odometry CSV or live JSON lines into an MCAP log.
+
+    Example: trackctl record run.mcap --video cam0=walk.avi --calib cam0=cam0.yaml --imu p1=p1.csv
+    """
     # Imported here: OpenCV/pandas/SciPy cost ~0.5 s and other commands do not need them.
     from trackctl.geometry.calib import metres_per_unit
     from trackctl.ingest.record import (
@@ -278,7 +281,10 @@ def recover(
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No notes.")] = False,
 ) -> None:
-    """Finish an unfinished recording into a complete, indexed log (every readable message)."""
+    """Finish an unfinished recording into a complete, indexed log (every readable message).
+
+    Example: trackctl recover live.mcap.partial --out live.mcap
+    """
     from trackctl.logs.copy import recover_log
 
     result = recover_log(partial, out, keep=keep)
@@ -305,7 +311,10 @@ def filter_cmd(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No notes.")] = False,
 ) -> None:
     """Copy a log without some topics (metadata and attachments kept), e.g. drop the ground
-    truth or a camera to see how a processor copes."""
+    truth or a camera to see how a processor copes.
+
+    Example: trackctl filter run.mcap --out nogt.mcap --exclude /ground_truth
+    """
     from trackctl.logs.copy import filter_log
 
     result = filter_log(log, out, include=tuple(include or ()), exclude=tuple(exclude or ()))

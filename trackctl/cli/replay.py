@@ -101,7 +101,10 @@ def replay(
     ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No notes on stderr.")] = False,
 ) -> None:
-    """Play a log back in log-time order, paced or as fast as possible."""
+    """Play a log back in log-time order, paced or as fast as possible.
+
+    Example: trackctl replay run.mcap --topics /cam0/detections --speed 0 | head
+    """
     check_window(start, end)
     if not math.isfinite(speed) or speed < 0:
         raise InputError(f"--speed {speed}: expected a number >= 0 (0 = as fast as possible)")

@@ -20,7 +20,10 @@ def demo(
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
-    """A small office scene using every trackctl format (the shipped sample log)."""
+    """A small office scene using every trackctl format (the shipped sample log).
+
+    Example: trackctl simulate demo --out demo.mcap --seed 0 --duration 20
+    """
     from trackctl.sim.demo import DemoConfig, simulate_demo
 
     counts = simulate_demo(str(out), DemoConfig(duration_s=duration, seed=seed))

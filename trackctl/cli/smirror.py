@@ -72,7 +72,10 @@ def smirror(
     verbose: VerboseOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
 ) -> None:
-    """S-Mirror: localize robots from their LEDs in node images, dead-reckoning in between."""
+    """S-Mirror: localize robots from their LEDs in node images, dead-reckoning in between.
+
+    Example: trackctl smirror sample_logs/smirror.mcap --out localized.mcap
+    """
     from trackctl.errors import InputError
     from trackctl.smirror import Mode, SmirrorConfig, SmirrorProcessor
     from trackctl.smirror.link import LinkConfig
@@ -161,7 +164,10 @@ def simulate_smirror(
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
-    """Three rooms, three node cameras, a robot with LEDs and encoders patrolling (S-Mirror)."""
+    """Three rooms, three node cameras, a robot with LEDs and encoders patrolling (S-Mirror).
+
+    Example: trackctl simulate smirror --out smirror.mcap --duration 36 --seed 0
+    """
     from trackctl.errors import InputError
     from trackctl.sim.smirror import SmirrorScenario
     from trackctl.sim.smirror import simulate_smirror as simulate

@@ -90,7 +90,10 @@ def vm_track(
     verbose: VerboseOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
 ) -> None:
-    """VM-Tracking: identify and track people by fusing detections with phone motion sensors."""
+    """VM-Tracking: identify and track people by fusing detections with phone motion sensors.
+
+    Example: trackctl vm-track sample_logs/vm-office.mcap --out tracked.mcap --fail-if "idf1<0.9"
+    """
     from trackctl.errors import InputError
     from trackctl.vmtrack import FrameConfig, Mode, Source, VmTrackConfig, VmTrackProcessor
     from trackctl.vmtrack.radio import RadioConfig
@@ -208,7 +211,10 @@ def simulate_vm(
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
-    """People walking under calibrated cameras, some with phones (VM-Tracking scenarios)."""
+    """People walking under calibrated cameras, some with phones (VM-Tracking scenarios).
+
+    Example: trackctl simulate vm --out lobby.mcap --field lobby --users 5 --duration 60
+    """
     from trackctl.errors import InputError
     from trackctl.sim.vm import VmScenario
     from trackctl.sim.vm import simulate_vm as simulate

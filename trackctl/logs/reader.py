@@ -640,6 +640,11 @@ class LogReader:
         lasts = [t.last_ns for t in self.topics().values() if t.last_ns is not None]
         return max(lasts) if lasts else None
 
+    def count(self, topics: Iterable[str]) -> int:
+        """Messages on ``topics`` (from the summary; a topic the log lacks counts 0)."""
+        present = self.topics()
+        return sum(present[t].count for t in set(topics) if t in present)
+
     @property
     def message_count(self) -> int:
         """Total number of messages (readable ones, for a truncated log)."""

@@ -95,10 +95,11 @@ class PdrProcessor:
         if not imu_topics:
             reader.require(["/phone/<NAME>/imu"], self.name, "phone accelerometer samples")
         phones: dict[str, _Phone] = {}
+        total = reader.count(imu_topics)
         for n, msg in enumerate(reader.messages(imu_topics), 1):
             phones.setdefault(msg.topic.split("/")[2], _Phone()).add(msg.message)
-            if progress is not None and n % 20000 == 0:
-                progress(n, None)
+            if progress is not None and n % 5000 == 0:
+                progress(n, total, "reading the phones' IMU")
         metrics: dict[str, float | int | str | None] = {"phones": len(phones)}
         total = 0
         seconds = 0.0

@@ -69,9 +69,10 @@ def localize(
     site = load_site(reader, cfg)
     loc = Localizer(site, cfg, writer)
     images = set(site.image_topics)
+    total = reader.count(loc.wanted_topics())
     for count, msg in enumerate(_stream(reader, loc.wanted_topics(), images, loc.res), 1):
-        if progress is not None and count % 2000 == 0:
-            progress(count, None)
+        if progress is not None and count % 50 == 0:
+            progress(count, total, "localizing")
         loc.on_message(msg)
     return loc.finish()
 

@@ -203,7 +203,7 @@ def _track_log(
     covs: list[np.ndarray] | None = None if detector is None else []
     search_full = True
     stream = inputs.stream_topics(reader.topics())
-    total = sum(reader.topics()[t].count for t in stream)
+    total = reader.count(stream)
     for n_msgs, msg in enumerate(reader.messages(stream), 1):
         if progress is not None and n_msgs % 50 == 0:
             progress(n_msgs, total, "tracking")
