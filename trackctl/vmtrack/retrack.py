@@ -1206,9 +1206,7 @@ def retrack(
             out[mid] = got
     final = radio
     if radio and radio.cfg.enabled and radio.cfg.fit and out:
-        if progress is not None:
-            progress(0, None, "re-tracking phones under the fitted radio model")
-        final = _calibrated_pass(follow, out, radio, frame_t, cfg)
+        final = _calibrated_pass(follow, out, radio, frame_t, cfg, progress)
     for mid, found in out.items():
         out[mid] = follow.settle(mid, found, final)
     if cfg.exclusive:
@@ -1277,6 +1275,7 @@ def _calibrated_pass(
     radio: RadioEvidence,
     frame_t: np.ndarray,
     cfg: RetrackConfig,
+    progress: Progress | None = None,
 ) -> RadioEvidence:
     """The APs' calibration from where the first pass put the carriers (on detections), then
     each path again under it, twice: from the first pass's alignment (refitted, not searched)
@@ -1290,7 +1289,9 @@ def _calibrated_pass(
         {mid: (frame_t[ks], np.array([out[mid].xy[k] for k in ks])) for mid, ks in on.items()}
     )
     out.calibration = calibrated.model
-    for mid, first in list(out.items()):
+    for k, (mid, first) in enumerate(list(out.items())):
+        if progress is not None:
+            progress(k, len(out), "re-tracking phones under the fitted radio model")
         again = follow(mid, first.lag_s, first.a, False, calibrated)
         if not follow.aligned:
             searched = follow(mid, first.lag_s, first.a, True, calibrated)
