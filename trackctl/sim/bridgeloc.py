@@ -297,57 +297,89 @@ def office_layout(cfg: BridgeLocScenario) -> Layout:
     return Layout((6.0, 7.0), [cam], {}, [tag])
 
 
-def lobby_layout(cfg: BridgeLocScenario) -> Layout:
-    """The 14 x 8 m lobby: three cameras, an occluded corner for the top camera, wall tags."""
-    cams = [
+_LOBBY_SIZE = (14.0, 8.0)
+
+_WallSpot = tuple[float, float, float, float]
+"""A tag spot on a wall: x, y (m) and the wall's inward normal nx, ny."""
+
+
+def _lobby_cameras() -> list[CameraModel]:
+    """The lobby's three infrastructure cameras: two on the bottom wall, one on the top."""
+    return [
         _infra("cam0", (3.0, 0.2, 2.6), (3.0, 8.0, 0.0)),
         _infra("cam1", (11.0, 0.2, 2.6), (11.0, 8.0, 0.0)),
         _infra("cam2", (7.0, 7.8, 2.6), (7.0, 0.0, 0.0)),
     ]
-    # a corner of the building hides this triangle from the top camera (the paper's grey area)
-    occluded = {"cam2": np.array([[7.0, 3.5], [9.5, 1.0], [9.5, 3.5]], np.float32)}
-    rng = np.random.default_rng(cfg.seed + 7)
-    w, h = 14.0, 8.0
-    cand: list[tuple[float, float, float, float]] = []  # x, y, nx, ny
+
+
+def _wall_candidates(w: float, h: float) -> list[_WallSpot]:
+    """Spots every 0.5 m along the four walls, 1 m clear of the corners."""
+    cand: list[_WallSpot] = []
     for x in np.arange(1.0, w - 0.99, 0.5):
         cand += [(x, 0.0, 0.0, 1.0), (x, h, 0.0, -1.0)]
     for y in np.arange(1.0, h - 0.99, 0.5):
         cand += [(0.0, y, 1.0, 0.0), (w, y, -1.0, 0.0)]
-    pcams = [PinholeCamera(c) for c in cams]
-    ok = []
-    for x, y, nx, ny in cand:
-        ctr = np.array([x, y, 0.6])
-        for pc in pcams:
-            d = pc.position - ctr
-            dist = float(np.linalg.norm(d))
-            cos_inc = (d[0] * nx + d[1] * ny) / max(1e-9, math.hypot(d[0], d[1]))
-            px, front = pc.project(ctr[None])
-            inside = front[0] and 40 < px[0, 0] < 600 and 40 < px[0, 1] < 440
-            if inside and dist < 9.5 and cos_inc > 0.35:
-                ok.append((x, y, nx, ny))
-                break
-    if len(ok) < cfg.tags:
-        raise InputError(f"--tags {cfg.tags}: the lobby has only {len(ok)} usable wall spots")
-    # farthest-point sampling: spread tags over the walls
+    return cand
+
+
+def _sees_spot(pc: PinholeCamera, spot: _WallSpot) -> bool:
+    """Whether camera ``pc`` sees a tag at ``spot`` (0.6 m up) well: inside the image 40 px
+    clear of its border, nearer than 9.5 m, and not too oblique to the wall."""
+    x, y, nx, ny = spot
+    ctr = np.array([x, y, 0.6])
+    d = pc.position - ctr
+    dist = float(np.linalg.norm(d))
+    cos_inc = (d[0] * nx + d[1] * ny) / max(1e-9, math.hypot(d[0], d[1]))
+    px, front = pc.project(ctr[None])
+    inside = front[0] and 40 < px[0, 0] < 600 and 40 < px[0, 1] < 440
+    return bool(inside and dist < 9.5 and cos_inc > 0.35)
+
+
+def _spread(ok: list[_WallSpot], count: int, rng: np.random.Generator) -> list[int]:
+    """Farthest-point sampling of ``count`` of the spots ``ok`` (indices): spread tags over
+    the walls, from a random first spot."""
     pts = np.array([[c[0], c[1]] for c in ok])
     chosen = [int(rng.integers(len(ok)))]
-    while len(chosen) < cfg.tags:
+    while len(chosen) < count:
         d = np.min(np.linalg.norm(pts[:, None] - pts[chosen][None], axis=2), axis=1)
         chosen.append(int(np.argmax(d)))
+    return chosen
+
+
+def _lobby_tags(
+    cfg: BridgeLocScenario, spots: list[_WallSpot], rng: np.random.Generator
+) -> list[WallTag]:
+    """Tags at ``spots`` (in order), with symbols of a random permutation of the family.
+
+    Distinct patterns while the family has them, or a pool of cfg.patterns (tags far apart then
+    share one; the EKF picks the nearest candidate, Eq. 4.11); mounts alternate above/below,
+    and flip on the family's second round, so that up to twice its size no two tags are alike.
+    """
     symbols = _symbols(cfg.n, cfg.family)
     order = rng.permutation(len(symbols))
-    # distinct patterns while the family has them, or a pool of cfg.patterns (tags far apart
-    # then share one; the EKF picks the nearest candidate, Eq. 4.11); mounts alternate
-    # above/below, and flip on the family's second round, so that up to twice its size no two
-    # tags are alike
     pool = cfg.patterns or len(symbols)
     tags = []
-    for k, idx in enumerate(chosen):
-        x, y, nx, ny = ok[idx]
+    for k, (x, y, nx, ny) in enumerate(spots):
         code, placement = symbols[int(order[k % pool])]
         mount = Mount.ABOVE if (k + k // len(symbols)) % 2 == 0 else Mount.BELOW
         z = round(cfg.camera_height_m + (0.40 if mount is Mount.ABOVE else -0.28), 3)
         tags.append(WallTag(f"t{k}", code, placement, mount, (x, y, z), (nx, ny), cfg.tag_size_m))
+    return tags
+
+
+def lobby_layout(cfg: BridgeLocScenario) -> Layout:
+    """The 14 x 8 m lobby: three cameras, an occluded corner for the top camera, wall tags."""
+    cams = _lobby_cameras()
+    # a corner of the building hides this triangle from the top camera (the paper's grey area)
+    occluded = {"cam2": np.array([[7.0, 3.5], [9.5, 1.0], [9.5, 3.5]], np.float32)}
+    rng = np.random.default_rng(cfg.seed + 7)
+    w, h = _LOBBY_SIZE
+    pcams = [PinholeCamera(c) for c in cams]
+    ok = [s for s in _wall_candidates(w, h) if any(_sees_spot(pc, s) for pc in pcams)]
+    if len(ok) < cfg.tags:
+        raise InputError(f"--tags {cfg.tags}: the lobby has only {len(ok)} usable wall spots")
+    chosen = _spread(ok, cfg.tags, rng)
+    tags = _lobby_tags(cfg, [ok[idx] for idx in chosen], rng)
     return Layout((w, h), cams, occluded, tags)
 
 
@@ -776,68 +808,180 @@ def _vignette(model: CameraModel, strength: float) -> np.ndarray | None:
     return (1.0 - strength * r2).astype(np.float32)
 
 
-def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) -> dict[str, int]:
-    """Write a BridgeLoc scenario log to ``out``; returns message counts per topic."""
-    cfg = cfg or BridgeLocScenario()
-    rng = np.random.default_rng(cfg.seed)
+_WHEEL_BASE_M = 0.30
+_TICKS_PER_M = 2000.0
+
+_Event = tuple[int, int, str, object]
+"""A message to log: time (ns), priority among messages of that time, topic, message."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Route:
+    """The scene and the robot's true poses (K, 3) on the odometry grid."""
+
+    layout: Layout
+    poses: np.ndarray
+    spots: list[tuple[float, float]]
+    """Office test spots (distance m, angle deg) in visiting order; empty in the lobby."""
+    dt: float
+    """Odometry step (s)."""
+
+    def pose_at(self, t: float) -> tuple[float, float, float]:
+        """The pose of the odometry step nearest ``t``."""
+        k = min(len(self.poses) - 1, int(round(t / self.dt)))
+        return float(self.poses[k, 0]), float(self.poses[k, 1]), float(self.poses[k, 2])
+
+
+def _route(cfg: BridgeLocScenario, rng: np.random.Generator) -> _Route:
+    """The field's layout and the robot's drive: office test spots, or lobby waypoints (random
+    from ``rng``, or the CSV of ``cfg.path``) cut to ``duration_s``."""
+    spots: list[tuple[float, float]] = []
     if cfg.field == "office":
         layout = office_layout(cfg)
         wps, spots = _office_spots(layout)
         start = (float(wps[0][0]), float(wps[0][1]))
         wps = [(start[0], start[1], wps[0][2], 0.0), *wps]
         start_yaw = float(wps[0][2] or 0.0)
+        fast = 2.5  # the robot is driven quickly between test spots (only they are evaluated)
     else:
         layout = lobby_layout(cfg)
-        spots = []
         if cfg.path == "random":
             n_wp = int(cfg.duration_s * cfg.speed_mps / 2.0) + 4
             wps = _random_waypoints(rng, layout.size, n_wp)
         else:
             wps = _csv_waypoints(cfg.path)
         start_yaw = 0.0
+        fast = 1.0
     dt = 1.0 / cfg.odom_hz
-    # office: the robot is driven quickly between test spots (only the spots are evaluated)
-    fast = 2.5 if cfg.field == "office" else 1.0
     poses = _segments(wps, start_yaw, cfg.speed_mps * fast, cfg.turn_rps * fast, dt)
     if cfg.field == "lobby":
         poses = poses[: int(cfg.duration_s * cfg.odom_hz)]
-    duration = len(poses) * dt
-    rcam = robot_camera_model(cfg.camera_height_m)
-    base_from_cam = rcam.world_from_camera
-    assert base_from_cam is not None
-    renderers = {c.camera: _Renderer(c, rng, cfg) for c in layout.cameras}
-    rrend = _Renderer(rcam, rng, cfg)
-    backgrounds = {c.camera: _background(c, rng, False) for c in layout.cameras}
-    rbg = _background(rcam, rng, True)
-    # the realistic preset's models draw from their own stream: the paper preset's bytes stay
-    real = cfg.realism
-    rrng = np.random.default_rng([cfg.seed, 4_2])
-    posters = tuple(_posters(layout, real, rrng, cfg.field)) if real.posters else ()
-    lamps = tuple(_lamps(layout, real, rrng)) if real.lamps else ()
-    true_pose = {
+    return _Route(layout, poses, spots, dt)
+
+
+@dataclass(frozen=True, slots=True)
+class _Lighting:
+    """Per camera: vignetting and a slow lighting drift (period 40-120 s) around the nominal
+    exposure."""
+
+    drift: float
+    vignettes: dict[str, np.ndarray | None]
+    phase: dict[str, float]
+    period: dict[str, float]
+
+    def shade(self, camera: str, t: float) -> np.ndarray | None:
+        """The gain image of ``camera`` at ``t`` (None: no shading)."""
+        v = self.vignettes[camera]
+        if not self.drift and v is None:
+            return None
+        g = 1.0 + self.drift * math.sin(2 * math.pi * t / self.period[camera] + self.phase[camera])
+        return np.full((1, 1), g, np.float32) if v is None else np.float32(g) * v
+
+
+@dataclass(frozen=True, slots=True)
+class _Stage:
+    """What the frames are rendered from: the cameras (true poses), their renderers and
+    backgrounds, the clutter, the lighting and the robot's camera and tilt."""
+
+    cfg: BridgeLocScenario
+    route: _Route
+    rcam: CameraModel
+    rrend: _Renderer
+    rbg: np.ndarray
+    renderers: dict[str, _Renderer]
+    backgrounds: dict[str, np.ndarray]
+    posters: tuple[Poster, ...]
+    lamps: tuple[tuple[float, float, float], ...]
+    true_pose: dict[str, Transform]
+    true_mount: Transform
+    lighting: _Lighting
+    pitch: np.ndarray
+    roll: np.ndarray
+    """Robot pitch and roll (rad) per robot frame."""
+
+
+def _true_infra_poses(
+    layout: Layout, real: Realism, rrng: np.random.Generator
+) -> dict[str, Transform]:
+    """The infrastructure cameras' true poses: the calibrated ones off by the calibration error."""
+    return {
         c.camera: _perturbed(c.world_from_camera, rrng, real.infra_calib_deg, real.infra_calib_m)
         if real.infra_calib_deg or real.infra_calib_m
         else c.world_from_camera
         for c in layout.cameras
         if c.world_from_camera is not None
     }
+
+
+def _stage(
+    cfg: BridgeLocScenario, route: _Route, rcam: CameraModel, rng: np.random.Generator
+) -> _Stage:
+    """Renderers and backgrounds (from ``rng``), then the realistic preset's models, which draw
+    from their own stream so that the paper preset's bytes stay."""
+    layout = route.layout
+    base_from_cam = rcam.world_from_camera
+    assert base_from_cam is not None
+    renderers = {c.camera: _Renderer(c, rng, cfg) for c in layout.cameras}
+    rrend = _Renderer(rcam, rng, cfg)
+    backgrounds = {c.camera: _background(c, rng, False) for c in layout.cameras}
+    rbg = _background(rcam, rng, True)
+    real = cfg.realism
+    rrng = np.random.default_rng([cfg.seed, 4_2])
+    posters = tuple(_posters(layout, real, rrng, cfg.field)) if real.posters else ()
+    lamps = tuple(_lamps(layout, real, rrng)) if real.lamps else ()
+    true_pose = _true_infra_poses(layout, real, rrng)
     true_mount = (
         _perturbed(base_from_cam, rrng, real.mount_deg, 0.0) if real.mount_deg else base_from_cam
     )
-    vignettes = {c.camera: _vignette(c, real.vignetting) for c in [*layout.cameras, rcam]}
-    wheel_base, ticks_per_m = 0.30, 2000.0
-    counts: dict[str, int] = {}
-    events: list[tuple[int, int, str, object]] = []
-    # odometry: wheel travel from true pose increments, scale errors of +-1.5%, tick noise
+    all_cams = [*layout.cameras, rcam]
+    vignettes = {c.camera: _vignette(c, real.vignetting) for c in all_cams}
+    n_frames = len(_frame_times(route, cfg.robot_fps))
+    tilt_corr = max(1, int(round(0.5 * cfg.robot_fps)))
+    pitch = np.radians(_smooth_noise(rrng, n_frames, real.tilt_deg, tilt_corr))
+    roll = np.radians(_smooth_noise(rrng, n_frames, real.tilt_deg, tilt_corr))
+    phase = {c.camera: float(rrng.uniform(0, 2 * math.pi)) for c in all_cams}
+    period = {c.camera: float(rrng.uniform(40, 120)) for c in all_cams}
+    lighting = _Lighting(real.light_drift, vignettes, phase, period)
+    return _Stage(
+        cfg,
+        route,
+        rcam,
+        rrend,
+        rbg,
+        renderers,
+        backgrounds,
+        posters,
+        lamps,
+        true_pose,
+        true_mount,
+        lighting,
+        pitch,
+        roll,
+    )
+
+
+def _frame_times(route: _Route, fps: float) -> np.ndarray:
+    """Frame times (s) at ``fps`` over the drive."""
+    duration = len(route.poses) * route.dt
+    return np.arange(0.0, duration - 1e-9, 1.0 / fps)
+
+
+def _odometry_events(
+    route: _Route, cfg: BridgeLocScenario, rng: np.random.Generator
+) -> list[_Event]:
+    """Wheel odometry at every step: wheel travel from the true pose increments, scale errors
+    of +-1.5 %, tick noise."""
+    poses = route.poses
     dyaw = np.diff(np.unwrap(poses[:, 2]), prepend=poses[0, 2])
     ds = np.hypot(
         np.diff(poses[:, 0], prepend=poses[0, 0]), np.diff(poses[:, 1], prepend=poses[0, 1])
     )
-    travel_l, travel_r = _wheel_travel(ds, dyaw, wheel_base, real, cfg.seed)
-    left = np.cumsum(travel_l * ticks_per_m * 1.015 + rng.normal(0, 1.0, len(ds)))
-    right = np.cumsum(travel_r * ticks_per_m * 0.985 + rng.normal(0, 1.0, len(ds)))
+    travel_l, travel_r = _wheel_travel(ds, dyaw, _WHEEL_BASE_M, cfg.realism, cfg.seed)
+    left = np.cumsum(travel_l * _TICKS_PER_M * 1.015 + rng.normal(0, 1.0, len(ds)))
+    right = np.cumsum(travel_r * _TICKS_PER_M * 0.985 + rng.normal(0, 1.0, len(ds)))
+    events: list[_Event] = []
     for k in range(len(poses)):
-        t_ns = int(round(k * dt * S))
+        t_ns = int(round(k * route.dt * S))
         events.append(
             (
                 t_ns,
@@ -846,85 +990,91 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
                 WheelOdometry(t_ns, f"robot/{ROBOT}", int(left[k]), int(right[k])),
             )
         )
+    return events
 
-    def pose_at(t: float) -> tuple[float, float, float]:
-        k = min(len(poses) - 1, int(round(t / dt)))
-        return float(poses[k, 0]), float(poses[k, 1]), float(poses[k, 2])
 
-    robot_times = np.arange(0.0, duration - 1e-9, 1.0 / cfg.robot_fps)
-    infra_times = np.arange(0.0, duration - 1e-9, 1.0 / cfg.infra_fps)
-    tilt_corr = max(1, int(round(0.5 * cfg.robot_fps)))
-    pitch = np.radians(_smooth_noise(rrng, len(robot_times), real.tilt_deg, tilt_corr))
-    roll = np.radians(_smooth_noise(rrng, len(robot_times), real.tilt_deg, tilt_corr))
-    # lighting: a slow drift per camera (period 40-120 s) around the nominal exposure
-    phase = {c.camera: float(rrng.uniform(0, 2 * math.pi)) for c in [*layout.cameras, rcam]}
-    period = {c.camera: float(rrng.uniform(40, 120)) for c in [*layout.cameras, rcam]}
-
-    def shade(camera: str, t: float) -> np.ndarray | None:
-        v = vignettes[camera]
-        if not real.light_drift and v is None:
-            return None
-        g = 1.0 + real.light_drift * math.sin(2 * math.pi * t / period[camera] + phase[camera])
-        return np.full((1, 1), g, np.float32) if v is None else np.float32(g) * v
-
-    yaw_rate = np.gradient(np.unwrap(poses[:, 2]), dt)
-    for i, tk in enumerate(robot_times):
+def _robot_frame_events(st: _Stage) -> list[_Event]:
+    """The robot camera's frames (motion-smeared by its turning) and the ground truth."""
+    route, rcam, real = st.route, st.rcam, st.cfg.realism
+    yaw_rate = np.gradient(np.unwrap(route.poses[:, 2]), route.dt)
+    events: list[_Event] = []
+    for i, tk in enumerate(_frame_times(route, st.cfg.robot_fps)):
         t_ns = int(round(tk * S))
-        x, y, yaw = pose_at(tk)
+        x, y, yaw = route.pose_at(tk)
         ideal = render_view(
             rcam,
-            _compose(true_mount, x, y, yaw, float(pitch[i]), float(roll[i])),
-            layout.tags,
-            rbg,
-            rrend.texture,
-            posters=posters,
-            lamps=lamps,
-            shade=shade(ROBOT_CAMERA, float(tk)),
+            _compose(st.true_mount, x, y, yaw, float(st.pitch[i]), float(st.roll[i])),
+            route.layout.tags,
+            st.rbg,
+            st.rrend.texture,
+            posters=st.posters,
+            lamps=st.lamps,
+            shade=st.lighting.shade(ROBOT_CAMERA, float(tk)),
         )
-        k = min(len(poses) - 1, int(round(tk / dt)))
+        k = min(len(route.poses) - 1, int(round(tk / route.dt)))
         smear = abs(float(yaw_rate[k])) * real.exposure_s * rcam.fx_px
         events.append(
             (
                 t_ns,
                 1,
                 topics.image(ROBOT_CAMERA),
-                make_compressed_image(t_ns, ROBOT_CAMERA, rrend.finish(ideal, smear), "jpeg"),
+                make_compressed_image(t_ns, ROBOT_CAMERA, st.rrend.finish(ideal, smear), "jpeg"),
             )
         )
         ent = GroundTruthEntity(
             ROBOT, Vec3(x, y, 0.0), yaw_rad=float(math.atan2(math.sin(yaw), math.cos(yaw)))
         )
         events.append((t_ns, 3, topics.GROUND_TRUTH, GroundTruth(t_ns, (ent,))))
-    for tk in infra_times:
+    return events
+
+
+def _infra_frame(st: _Stage, cam: CameraModel, tk: float, t_ns: int) -> _Event:
+    """Infrastructure camera ``cam``'s frame at ``tk``: the robot drawn unless occluded."""
+    x, y, yaw = st.route.pose_at(tk)
+    occ = st.route.layout.occluded.get(cam.camera)
+    robot = None if occ is not None and _in_poly(occ, x, y) else (x, y, yaw)
+    ideal = render_view(
+        cam,
+        st.true_pose[cam.camera],
+        st.route.layout.tags,
+        st.backgrounds[cam.camera],
+        st.renderers[cam.camera].texture,
+        robot,
+        st.cfg.ir_height_m,
+        st.cfg.ir_range_m,
+        posters=st.posters,
+        lamps=st.lamps,
+        shade=st.lighting.shade(cam.camera, float(tk)),
+        ir_offset_m=st.cfg.realism.ir_offset_m,
+    )
+    jpeg = st.renderers[cam.camera].finish(ideal)
+    return (
+        t_ns,
+        2,
+        topics.image(cam.camera),
+        make_compressed_image(t_ns, cam.camera, jpeg, "jpeg"),
+    )
+
+
+def _infra_frame_events(st: _Stage) -> list[_Event]:
+    """Every infrastructure camera's frames, time by time."""
+    events: list[_Event] = []
+    for tk in _frame_times(st.route, st.cfg.infra_fps):
         t_ns = int(round(tk * S))
-        x, y, yaw = pose_at(tk)
-        for cam in layout.cameras:
-            occ = layout.occluded.get(cam.camera)
-            robot = None if occ is not None and _in_poly(occ, x, y) else (x, y, yaw)
-            ideal = render_view(
-                cam,
-                true_pose[cam.camera],
-                layout.tags,
-                backgrounds[cam.camera],
-                renderers[cam.camera].texture,
-                robot,
-                cfg.ir_height_m,
-                cfg.ir_range_m,
-                posters=posters,
-                lamps=lamps,
-                shade=shade(cam.camera, float(tk)),
-                ir_offset_m=real.ir_offset_m,
-            )
-            jpeg = renderers[cam.camera].finish(ideal)
-            events.append(
-                (
-                    t_ns,
-                    2,
-                    topics.image(cam.camera),
-                    make_compressed_image(t_ns, cam.camera, jpeg, "jpeg"),
-                )
-            )
-    events.sort(key=lambda e: (e[0], e[1]))
+        events.extend(_infra_frame(st, cam, tk, t_ns) for cam in st.route.layout.cameras)
+    return events
+
+
+def _write_log(
+    out: str | Path,
+    cfg: BridgeLocScenario,
+    route: _Route,
+    rcam: CameraModel,
+    events: list[_Event],
+) -> dict[str, int]:
+    """Metadata, camera models at 0, then ``events``; message counts per topic."""
+    layout = route.layout
+    counts: dict[str, int] = {}
     with LogWriter(str(out)) as w:
         meta = {
             "generator": "trackctl simulate bridgeloc",
@@ -940,11 +1090,12 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
             "border_ratio": "5.0",
             "ir_height_m": str(cfg.ir_height_m),
             "tags_truth": json.dumps([t.to_json() for t in layout.tags]),
-            "office_spots": json.dumps(spots),
+            "office_spots": json.dumps(route.spots),
         }
         w.add_metadata("bridgeloc", meta)
         w.add_metadata(
-            f"robot/{ROBOT}", {"ticks_per_m": str(ticks_per_m), "wheel_base_m": str(wheel_base)}
+            f"robot/{ROBOT}",
+            {"ticks_per_m": str(_TICKS_PER_M), "wheel_base_m": str(_WHEEL_BASE_M)},
         )
         for cam in [*layout.cameras, rcam]:
             w.write(topics.camera_model(cam.camera), cam, 0)
@@ -953,3 +1104,17 @@ def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) ->
             w.write(topic, msg, t_ns)
             counts[topic] = counts.get(topic, 0) + 1
     return counts
+
+
+def simulate_bridgeloc(out: str | Path, cfg: BridgeLocScenario | None = None) -> dict[str, int]:
+    """Write a BridgeLoc scenario log to ``out``; returns message counts per topic."""
+    cfg = cfg or BridgeLocScenario()
+    rng = np.random.default_rng(cfg.seed)
+    route = _route(cfg, rng)
+    rcam = robot_camera_model(cfg.camera_height_m)
+    st = _stage(cfg, route, rcam, rng)
+    events = _odometry_events(route, cfg, rng)
+    events += _robot_frame_events(st)
+    events += _infra_frame_events(st)
+    events.sort(key=lambda e: (e[0], e[1]))
+    return _write_log(out, cfg, route, rcam, events)

@@ -200,17 +200,30 @@ def _e_cells(cfg: EvScenario, pos: np.ndarray, rng: np.random.Generator, n_side:
     return np.where(drift, moved, ij)
 
 
-def simulate_ev(out: str, cfg: EvScenario | None = None) -> dict[str, int]:
-    """Write an EV-Matching scenario log to ``out``; returns messages per topic.
+class _CountingWriter:
+    """A log writer that counts the messages it writes per topic."""
 
-    Raises:
-        InputError: a parameter is out of range.
-    """
-    cfg = cfg or EvScenario()
-    rng = np.random.default_rng(cfg.seed)
+    def __init__(self, writer: LogWriter) -> None:
+        self.writer = writer
+        self.counts: dict[str, int] = {}
+
+    def put(self, topic: str, msg: object) -> None:
+        self.writer.write(topic, msg)
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+
+@dataclass(frozen=True, slots=True)
+class _Ids:
+    """Who carries a phone, and every person's EID and VID."""
+
+    has_phone: np.ndarray
+    eids: np.ndarray
+    vids: np.ndarray
+
+
+def _identities(cfg: EvScenario, rng: np.random.Generator) -> _Ids:
+    """Draw phone carriers, EIDs and VIDs; ``shared_eids`` pairs of carriers share one EID."""
     n = cfg.people
-    n_side = cfg.cells_per_side
-    n_cells = n_side * n_side
     has_phone = rng.random(n) >= cfg.eid_miss
     eid_codes = rng.permutation(n) + 1
     vid_codes = rng.permutation(n) + 1
@@ -222,108 +235,207 @@ def simulate_ev(out: str, cfg: EvScenario | None = None) -> dict[str, int]:
         k = min(cfg.shared_eids, len(carriers) // 2)
         pick = rng.choice(carriers, 2 * k, replace=False)
         eids[pick[k:]] = eids[pick[:k]]
+    return _Ids(has_phone, eids, vids)
+
+
+def _write_truth(out: _CountingWriter, walkers: _Walkers, ids: _Ids, n: int) -> None:
+    """The truth in messages of at most 10 000 people: a million-person city stays streamable."""
+    for first in range(0, n, GROUND_TRUTH_BATCH):
+        entities = tuple(
+            GroundTruthEntity(
+                entity_id=f"person{p:06d}",
+                position_m=Vec3(float(walkers.pos[p, 0]), float(walkers.pos[p, 1]), 0.0),
+                electronic_id=str(ids.eids[p]) if ids.has_phone[p] else None,
+                visual_id=str(ids.vids[p]),
+            )
+            for p in range(first, min(n, first + GROUND_TRUTH_BATCH))
+        )
+        out.put(topics.EV_GROUND_TRUTH, GroundTruth(0, entities))
+
+
+@dataclass(frozen=True, slots=True)
+class _WindowSamples:
+    """One window's samples: E keys (person * cells + cell) of heard samples, heard samples per
+    person, V keys and the positions they were seen at."""
+
+    e_keys: np.ndarray
+    heard: np.ndarray
+    v_keys: np.ndarray
+    v_pos: np.ndarray
+
+
+def _sample_window(
+    cfg: EvScenario,
+    walkers: _Walkers,
+    phone_idx: np.ndarray,
+    n_side: int,
+    rng: np.random.Generator,
+) -> _WindowSamples:
+    """Sample everyone ``samples_per_window`` times (video cell, E cell if heard), walking on."""
+    n = cfg.people
+    n_cells = n_side * n_side
+    e_keys = []
+    v_keys = []
+    v_pos = []
+    heard = np.zeros(n, np.int64)
+    for _ in range(cfg.samples_per_window):
+        ij = np.clip(np.floor(walkers.pos / cfg.cell_m).astype(np.int64), 0, n_side - 1)
+        v_keys.append(np.arange(n) * n_cells + ij[:, 1] * n_side + ij[:, 0])
+        v_pos.append(walkers.pos.copy())
+        eij = _e_cells(cfg, walkers.pos[phone_idx], rng, n_side)
+        keys = phone_idx * n_cells + eij[:, 1] * n_side + eij[:, 0]
+        if cfg.hear_s is not None:
+            on = rng.random(len(phone_idx)) < min(1.0, cfg.sample_s / cfg.hear_s)
+            keys = keys[on]
+            heard[phone_idx[on]] += 1
+        else:
+            heard[phone_idx] += 1
+        e_keys.append(keys)
+        walkers.step(cfg.sample_s)
+    return _WindowSamples(
+        np.concatenate(e_keys), heard, np.concatenate(v_keys), np.concatenate(v_pos)
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class _EWindow:
+    """A window's listed E entries (person, cell, vague?), sorted by cell then EID; entries of
+    cell c are ``order[bounds[c]:bounds[c + 1]]``."""
+
+    person: np.ndarray
+    vague: np.ndarray
+    order: np.ndarray
+    bounds: np.ndarray
+
+
+def _e_window(cfg: EvScenario, s: _WindowSamples, eids: np.ndarray, n_cells: int) -> _EWindow:
+    """E-scenarios: occurrence share per (person, cell) -> inclusive / vague / exclusive."""
+    ek, ecount = np.unique(s.e_keys, return_counts=True)
+    share = ecount / np.maximum(s.heard[ek // n_cells], 1)
+    listed = share >= cfg.vague_frac - 1e-12
+    ek, share = ek[listed], share[listed]
+    e_person, e_cell = ek // n_cells, ek % n_cells
+    e_vague = share < cfg.inclusive_frac - 1e-12
+    e_order = np.lexsort((eids[e_person], e_cell))
+    e_bounds = np.searchsorted(e_cell[e_order], np.arange(n_cells + 1))
+    return _EWindow(e_person, e_vague, e_order, e_bounds)
+
+
+@dataclass(frozen=True, slots=True)
+class _VWindow:
+    """A window's V detections (labelled person, mean position, frames), sorted by cell then
+    VID; detections of cell c are ``order[bounds[c]:bounds[c + 1]]``."""
+
+    person: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    frames: np.ndarray
+    order: np.ndarray
+    bounds: np.ndarray
+
+
+def _v_window(
+    cfg: EvScenario,
+    s: _WindowSamples,
+    vids: np.ndarray,
+    n_cells: int,
+    rng: np.random.Generator,
+) -> _VWindow:
+    """V-scenarios: every person seen in >= 1 frame, minus missed detections, relabelled by
+    re-identification errors."""
+    vk, vinv, vcount = np.unique(s.v_keys, return_inverse=True, return_counts=True)
+    vx = np.bincount(vinv, weights=s.v_pos[:, 0]) / vcount
+    vy = np.bincount(vinv, weights=s.v_pos[:, 1]) / vcount
+    keep = rng.random(vk.size) >= cfg.vid_miss
+    vk, vx, vy, vcount = vk[keep], vx[keep], vy[keep], vcount[keep]
+    v_person, v_cell = vk // n_cells, vk % n_cells
+    if cfg.reid_error > 0:
+        v_person = _reid_errors(cfg.reid_error, v_person, v_cell, cfg.people, rng)
+    v_order = np.lexsort((vids[v_person], v_cell))
+    v_bounds = np.searchsorted(v_cell[v_order], np.arange(n_cells + 1))
+    return _VWindow(v_person, vx, vy, vcount, v_order, v_bounds)
+
+
+@dataclass(frozen=True, slots=True)
+class _Window:
+    """What every message of one window shares."""
+
+    t_ns: int
+    window_ns: int
+    samples: int
+    names: list[str]
+    """Cell names, by cell index."""
+
+
+def _write_e(out: _CountingWriter, win: _Window, e: _EWindow, eids: np.ndarray) -> None:
+    """One EObservations message per cell (all on the E topic)."""
+    for c, name in enumerate(win.names):
+        sel = e.order[e.bounds[c] : e.bounds[c + 1]]
+        out.put(
+            topics.EV_E,
+            EObservations(
+                t_ns=win.t_ns,
+                window_ns=win.window_ns,
+                cell=name,
+                eids=tuple(eids[e.person[sel]].tolist()),
+                vague=tuple(e.vague[sel].tolist()),
+                samples=win.samples,
+            ),
+        )
+
+
+def _write_v(
+    out: _CountingWriter, win: _Window, v: _VWindow, vids: np.ndarray, v_topics: list[str]
+) -> None:
+    """One VScenario message per cell, each on its cell's topic."""
+    for c, name in enumerate(win.names):
+        sel = v.order[v.bounds[c] : v.bounds[c + 1]]
+        out.put(
+            v_topics[c],
+            VScenario(
+                t_ns=win.t_ns,
+                window_ns=win.window_ns,
+                cell=name,
+                vids=tuple(vids[v.person[sel]].tolist()),
+                # ground positions from video: decimetre resolution
+                x_m=tuple(np.round(v.x[sel], 1).tolist()),
+                y_m=tuple(np.round(v.y[sel], 1).tolist()),
+                frames=tuple(v.frames[sel].tolist()),
+            ),
+        )
+
+
+def simulate_ev(out: str, cfg: EvScenario | None = None) -> dict[str, int]:
+    """Write an EV-Matching scenario log to ``out``; returns messages per topic.
+
+    Raises:
+        InputError: a parameter is out of range.
+    """
+    cfg = cfg or EvScenario()
+    rng = np.random.default_rng(cfg.seed)
+    n_side = cfg.cells_per_side
+    n_cells = n_side * n_side
+    ids = _identities(cfg, rng)
     walkers = _Walkers(cfg, rng)
-    k_per_w = cfg.samples_per_window
     window_ns = int(round(cfg.window_s * NS_PER_S))
     names = [cell_name(i, j) for j in range(n_side) for i in range(n_side)]
     v_topics = [topics.ev_v(name) for name in names]
-    counts: dict[str, int] = {}
-
-    def put(w: LogWriter, topic: str, msg: object) -> None:
-        w.write(topic, msg)
-        counts[topic] = counts.get(topic, 0) + 1
-
     with LogWriter(out) as writer:
+        log = _CountingWriter(writer)
         writer.add_metadata("ev/scenario", {k: str(v) for k, v in asdict(cfg).items()})
-        # the truth in messages of at most 10 000 people: a million-person city stays streamable
-        for first in range(0, n, GROUND_TRUTH_BATCH):
-            entities = tuple(
-                GroundTruthEntity(
-                    entity_id=f"person{p:06d}",
-                    position_m=Vec3(float(walkers.pos[p, 0]), float(walkers.pos[p, 1]), 0.0),
-                    electronic_id=str(eids[p]) if has_phone[p] else None,
-                    visual_id=str(vids[p]),
-                )
-                for p in range(first, min(n, first + GROUND_TRUTH_BATCH))
-            )
-            put(writer, topics.EV_GROUND_TRUTH, GroundTruth(0, entities))
+        _write_truth(log, walkers, ids, cfg.people)
         writer.flush()
-        phone_idx = np.flatnonzero(has_phone)
+        phone_idx = np.flatnonzero(ids.has_phone)
         for w in range(cfg.windows):
-            t_ns = w * window_ns
-            e_keys = []
-            v_keys = []
-            v_pos = []
-            heard = np.zeros(n, np.int64)
-            for _ in range(k_per_w):
-                ij = np.clip(np.floor(walkers.pos / cfg.cell_m).astype(np.int64), 0, n_side - 1)
-                v_keys.append(np.arange(n) * n_cells + ij[:, 1] * n_side + ij[:, 0])
-                v_pos.append(walkers.pos.copy())
-                eij = _e_cells(cfg, walkers.pos[phone_idx], rng, n_side)
-                keys = phone_idx * n_cells + eij[:, 1] * n_side + eij[:, 0]
-                if cfg.hear_s is not None:
-                    on = rng.random(len(phone_idx)) < min(1.0, cfg.sample_s / cfg.hear_s)
-                    keys = keys[on]
-                    heard[phone_idx[on]] += 1
-                else:
-                    heard[phone_idx] += 1
-                e_keys.append(keys)
-                walkers.step(cfg.sample_s)
-            # E-scenarios: occurrence share per (person, cell) -> inclusive / vague / exclusive
-            ek, ecount = np.unique(np.concatenate(e_keys), return_counts=True)
-            share = ecount / np.maximum(heard[ek // n_cells], 1)
-            listed = share >= cfg.vague_frac - 1e-12
-            ek, share = ek[listed], share[listed]
-            e_person, e_cell = ek // n_cells, ek % n_cells
-            e_vague = share < cfg.inclusive_frac - 1e-12
-            # V-scenarios: every person seen in >= 1 frame, minus missed detections
-            allv = np.concatenate(v_keys)
-            vk, vinv, vcount = np.unique(allv, return_inverse=True, return_counts=True)
-            pos = np.concatenate(v_pos)
-            vx = np.bincount(vinv, weights=pos[:, 0]) / vcount
-            vy = np.bincount(vinv, weights=pos[:, 1]) / vcount
-            keep = rng.random(vk.size) >= cfg.vid_miss
-            vk, vx, vy, vcount = vk[keep], vx[keep], vy[keep], vcount[keep]
-            v_person, v_cell = vk // n_cells, vk % n_cells
-            if cfg.reid_error > 0:
-                v_person = _reid_errors(cfg.reid_error, v_person, v_cell, n, rng)
-            e_order = np.lexsort((eids[e_person], e_cell))
-            v_order = np.lexsort((vids[v_person], v_cell))
-            e_bounds = np.searchsorted(e_cell[e_order], np.arange(n_cells + 1))
-            v_bounds = np.searchsorted(v_cell[v_order], np.arange(n_cells + 1))
-            for c in range(n_cells):
-                sel = e_order[e_bounds[c] : e_bounds[c + 1]]
-                put(
-                    writer,
-                    topics.EV_E,
-                    EObservations(
-                        t_ns=t_ns,
-                        window_ns=window_ns,
-                        cell=names[c],
-                        eids=tuple(eids[e_person[sel]].tolist()),
-                        vague=tuple(e_vague[sel].tolist()),
-                        samples=k_per_w,
-                    ),
-                )
+            win = _Window(w * window_ns, window_ns, cfg.samples_per_window, names)
+            samples = _sample_window(cfg, walkers, phone_idx, n_side, rng)
+            e = _e_window(cfg, samples, ids.eids, n_cells)
+            v = _v_window(cfg, samples, ids.vids, n_cells, rng)
+            _write_e(log, win, e, ids.eids)
             writer.flush()  # E and V in separate chunks
-            for c in range(n_cells):
-                sel = v_order[v_bounds[c] : v_bounds[c + 1]]
-                put(
-                    writer,
-                    v_topics[c],
-                    VScenario(
-                        t_ns=t_ns,
-                        window_ns=window_ns,
-                        cell=names[c],
-                        vids=tuple(vids[v_person[sel]].tolist()),
-                        # ground positions from video: decimetre resolution
-                        x_m=tuple(np.round(vx[sel], 1).tolist()),
-                        y_m=tuple(np.round(vy[sel], 1).tolist()),
-                        frames=tuple(vcount[sel].tolist()),
-                    ),
-                )
+            _write_v(log, win, v, ids.vids, v_topics)
             writer.flush()
-    return counts
+    return log.counts
 
 
 def _reid_errors(

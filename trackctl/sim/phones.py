@@ -212,21 +212,20 @@ def _carry_yaw(carry: _Carry, rng: np.random.Generator, cfg: PhoneRealism) -> fl
     return float(rng.normal(0, math.radians(carry.yaw_sigma_deg)))
 
 
-def realistic_imu(
-    traj: Trajectory,
-    mac: str,
-    duration: float,
-    rng: np.random.Generator,
-    cfg: PhoneRealism,
-    site_yaw: float,
-) -> tuple[list[Imu], PhoneTruth, np.ndarray]:
-    """The IMU samples (phone clock stamps) of the phone carried along ``traj``, its truth,
-    and its carrier's whereabouts in view and out of it (:func:`_whereabouts`)."""
-    dt = 0.02
-    names = [c for c, _ in cfg.carries]
-    probs = np.array([p for _, p in cfg.carries], float)
-    probs /= probs.sum()
-    t, vel, xy = _walk_velocity(traj, duration, dt, rng, cfg.always_on)
+@dataclass(frozen=True, slots=True)
+class _Gait:
+    """The carrier's walk on the true time grid: speed, heading (held while standing), step
+    length, stride phase and horizontal acceleration."""
+
+    speed: np.ndarray
+    heading: np.ndarray
+    step_len: float
+    phase: np.ndarray
+    acc: np.ndarray
+
+
+def _gait(vel: np.ndarray, dt: float, rng: np.random.Generator, cfg: PhoneRealism) -> _Gait:
+    """Speed, heading, stride phase and acceleration of the walk ``vel``; draws the step length."""
     speed = np.linalg.norm(np.nan_to_num(vel), axis=1)
     heading = np.arctan2(np.nan_to_num(vel[:, 1]), np.nan_to_num(vel[:, 0]))
     for k in range(1, len(heading)):  # keep the last heading while standing
@@ -237,7 +236,28 @@ def realistic_imu(
     cadence = speed / (step_len * (0.75 + 0.25 * np.minimum(speed, 2.0) / 1.3))
     phase = 2 * math.pi * np.cumsum(cadence) * dt
     acc = np.gradient(np.nan_to_num(vel), dt, axis=0)
-    # carries: a segment per Poisson change
+    return _Gait(speed, heading, step_len, phase, acc)
+
+
+@dataclass(frozen=True, slots=True)
+class _CarryPlan:
+    """Where the phone is carried over the log: a segment per Poisson change."""
+
+    names: list[str]
+    """The carries of ``cfg.carries``; ``idx`` indexes this list."""
+    first: str
+    first_yaw: float
+    idx: np.ndarray
+    """Carry index per time-grid sample."""
+    yaw_off: np.ndarray
+    """Device-to-walk yaw per time-grid sample (rad)."""
+
+
+def _carry_plan(t: np.ndarray, rng: np.random.Generator, cfg: PhoneRealism) -> _CarryPlan:
+    """The first carry and its yaw, then a new carry (and yaw) at each Poisson change."""
+    names = [c for c, _ in cfg.carries]
+    probs = np.array([p for _, p in cfg.carries], float)
+    probs /= probs.sum()
     n = len(t)
     carry_idx = np.zeros(n, int)
     yaw_off = np.zeros(n)
@@ -253,63 +273,142 @@ def realistic_imu(
             next_change += rng.exponential(1 / rate)
         carry_idx[k] = names.index(cur)
         yaw_off[k] = cur_yaw
-    carries = [CARRIES[names[i]] for i in range(len(names))]
-    sway = np.radians([c.sway_deg for c in carries])[carry_idx] * np.sin(phase / 2)
-    bounce = np.array([c.bounce_mps2 for c in carries])[carry_idx]
-    bounce_amp = bounce * np.minimum(speed / 1.3, 1.5) ** 1.5
-    stride = np.array([c.stride for c in carries])[carry_idx]
+    return _CarryPlan(names, first, first_yaw, carry_idx, yaw_off)
+
+
+@dataclass(frozen=True, slots=True)
+class _DeviceMotion:
+    """The device's yaw in the rotation-vector frame, its rate, and the vertical specific force."""
+
+    yaw: np.ndarray
+    yaw_rate: np.ndarray
+    vert: np.ndarray
+
+
+def _device_motion(
+    gait: _Gait,
+    plan: _CarryPlan,
+    xy: np.ndarray,
+    site_yaw: float,
+    dt: float,
+    rng: np.random.Generator,
+    cfg: PhoneRealism,
+) -> _DeviceMotion:
+    """Heading plus carry yaw, sway, site rotation, magnetic disturbance and drift; bounce."""
+    carries = [CARRIES[name] for name in plan.names]
+    sway = np.radians([c.sway_deg for c in carries])[plan.idx] * np.sin(gait.phase / 2)
+    bounce = np.array([c.bounce_mps2 for c in carries])[plan.idx]
+    bounce_amp = bounce * np.minimum(gait.speed / 1.3, 1.5) ** 1.5
+    stride = np.array([c.stride for c in carries])[plan.idx]
     drift_sigma = math.radians(cfg.heading_drift_deg_per_sqrt_s) * math.sqrt(dt)
-    drift = np.cumsum(rng.normal(0, drift_sigma, n))
-    yaw_dev = heading + yaw_off + sway + site_yaw + _magnetic(xy, rng, cfg) + drift
+    drift = np.cumsum(rng.normal(0, drift_sigma, len(plan.idx)))
+    yaw_dev = gait.heading + plan.yaw_off + sway + site_yaw + _magnetic(xy, rng, cfg) + drift
     yaw_rate = np.gradient(np.unwrap(yaw_dev), dt)
-    vert = G + bounce_amp * (np.sin(phase) + stride * np.sin(phase / 2))
-    tilt_of = {
-        i: Rotation.from_euler(CARRIES[c].attitude[0], CARRIES[c].attitude[1], degrees=True)
-        for i, c in enumerate(names)
-    }
-    # true sample times of this phone's clock, jittered, some dropped
+    vert = G + bounce_amp * (np.sin(gait.phase) + stride * np.sin(gait.phase / 2))
+    return _DeviceMotion(yaw_dev, yaw_rate, vert)
+
+
+@dataclass(frozen=True, slots=True)
+class _PhoneClock:
+    """The phone's sampling: rate, clock offset and drift, its stamps and their true times."""
+
+    hz: float
+    offset: float
+    drift_ppm: float
+    stamps: np.ndarray
+    """Sample stamps on the phone's clock (s)."""
+    true_t: np.ndarray
+    """True (log) time of each stamp, jittered (s)."""
+    keep: np.ndarray
+    """Samples inside the log and not dropped."""
+
+
+def _phone_clock(
+    duration: float, t_end: float, rng: np.random.Generator, cfg: PhoneRealism
+) -> _PhoneClock:
+    """True sample times of this phone's clock, jittered, some dropped."""
     hz = float(rng.choice(cfg.imu_rates_hz))
     offset = float(rng.uniform(-cfg.clock_offset_s, cfg.clock_offset_s))
     drift_ppm = float(rng.uniform(-cfg.clock_drift_ppm, cfg.clock_drift_ppm))
     stamps = np.arange(0.0, duration, 1.0 / hz)
     true_t = (stamps - offset) / (1 + drift_ppm * 1e-6)
     true_t = true_t + rng.normal(0, cfg.jitter_ms / 1000.0, len(true_t))
-    keep = (true_t >= 0) & (true_t <= t[-1]) & (rng.random(len(true_t)) >= cfg.drop)
-    frame = f"phone/{mac}"
-    out: list[Imu] = []
-    gyro_bias = rng.normal(0, 0.01, 3)
-    noise_a = rng.normal(0, 0.15, (len(stamps), 3))
-    noise_g = rng.normal(0, 0.02, (len(stamps), 3))
-    sel = np.flatnonzero(keep)
-    ks = np.minimum(np.round(true_t[sel] / dt).astype(int), n - 1)
-    # device -> world: the carry's tilt, then the yaw about world z (vectorised by carry)
-    rot_m = np.empty((len(sel), 3, 3))
-    for i, tilt in tilt_of.items():
-        m = carry_idx[ks] == i
+    keep = (true_t >= 0) & (true_t <= t_end) & (rng.random(len(true_t)) >= cfg.drop)
+    return _PhoneClock(hz, offset, drift_ppm, stamps, true_t, keep)
+
+
+def _device_rotations(plan: _CarryPlan, ks: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """Device -> world matrices (len(ks), 3, 3) at grid samples ``ks``: the carry's tilt, then
+    the yaw about world z (vectorised by carry)."""
+    rot_m = np.empty((len(ks), 3, 3))
+    for i, name in enumerate(plan.names):
+        axis, deg = CARRIES[name].attitude
+        tilt = Rotation.from_euler(axis, deg, degrees=True)
+        m = plan.idx[ks] == i
         if m.any():
-            rot_m[m] = (Rotation.from_euler("z", yaw_dev[ks[m]][:, None]) * tilt).as_matrix()
-    f_world = np.column_stack([acc[ks, 0], acc[ks, 1], vert[ks]])
-    w_world = np.column_stack([np.zeros(len(ks)), np.zeros(len(ks)), yaw_rate[ks]])
+            rot_m[m] = (Rotation.from_euler("z", yaw[ks[m]][:, None]) * tilt).as_matrix()
+    return rot_m
+
+
+def _imu_messages(
+    frame: str,
+    gait: _Gait,
+    plan: _CarryPlan,
+    motion: _DeviceMotion,
+    clock: _PhoneClock,
+    dt: float,
+    rng: np.random.Generator,
+) -> list[Imu]:
+    """The kept samples as device-frame IMU messages (noise and gyro bias drawn here)."""
+    n = len(plan.idx)
+    gyro_bias = rng.normal(0, 0.01, 3)
+    noise_a = rng.normal(0, 0.15, (len(clock.stamps), 3))
+    noise_g = rng.normal(0, 0.02, (len(clock.stamps), 3))
+    sel = np.flatnonzero(clock.keep)
+    ks = np.minimum(np.round(clock.true_t[sel] / dt).astype(int), n - 1)
+    rot_m = _device_rotations(plan, ks, motion.yaw)
+    f_world = np.column_stack([gait.acc[ks, 0], gait.acc[ks, 1], motion.vert[ks]])
+    w_world = np.column_stack([np.zeros(len(ks)), np.zeros(len(ks)), motion.yaw_rate[ks]])
     f_dev = np.einsum("kji,kj->ki", rot_m, f_world) + noise_a[sel]
     gyro = np.einsum("kji,kj->ki", rot_m, w_world) + gyro_bias + noise_g[sel]
     quats = Rotation.from_matrix(rot_m).as_quat() if len(sel) else np.zeros((0, 4))
-    for r, j in enumerate(sel):
-        out.append(
-            Imu(
-                int(round(stamps[j] * S)),
-                frame,
-                Vec3(*map(float, f_dev[r])),
-                Vec3(*map(float, gyro[r])),
-                Quat(*map(float, quats[r])),
-            )
+    return [
+        Imu(
+            int(round(clock.stamps[j] * S)),
+            frame,
+            Vec3(*map(float, f_dev[r])),
+            Vec3(*map(float, gyro[r])),
+            Quat(*map(float, quats[r])),
         )
+        for r, j in enumerate(sel)
+    ]
+
+
+def realistic_imu(
+    traj: Trajectory,
+    mac: str,
+    duration: float,
+    rng: np.random.Generator,
+    cfg: PhoneRealism,
+    site_yaw: float,
+) -> tuple[list[Imu], PhoneTruth, np.ndarray]:
+    """The IMU samples (phone clock stamps) of the phone carried along ``traj``, its truth,
+    and its carrier's whereabouts in view and out of it (:func:`_whereabouts`)."""
+    dt = 0.02
+    t, vel, xy = _walk_velocity(traj, duration, dt, rng, cfg.always_on)
+    gait = _gait(vel, dt, rng, cfg)
+    plan = _carry_plan(t, rng, cfg)
+    motion = _device_motion(gait, plan, xy, site_yaw, dt, rng, cfg)
+    clock = _phone_clock(duration, float(t[-1]), rng, cfg)
+    out = _imu_messages(f"phone/{mac}", gait, plan, motion, clock, dt, rng)
+    yaw_offset = math.remainder(plan.first_yaw + site_yaw, 2 * math.pi)
     truth = PhoneTruth(
-        carry=first,
-        yaw_offset_deg=round(math.degrees(math.remainder(first_yaw + site_yaw, 2 * math.pi)), 2),
-        clock_offset_s=round(offset, 4),
-        clock_drift_ppm=round(drift_ppm, 2),
-        step_length_m=round(step_len, 3),
-        imu_hz=hz,
+        carry=plan.first,
+        yaw_offset_deg=round(math.degrees(yaw_offset), 2),
+        clock_offset_s=round(clock.offset, 4),
+        clock_drift_ppm=round(clock.drift_ppm, 2),
+        step_length_m=round(gait.step_len, 3),
+        imu_hz=clock.hz,
     )
     return out, truth, _whereabouts(t, vel, xy)
 

@@ -41,7 +41,7 @@ from trackctl.logs.messages import (
 from trackctl.logs.writer import LogWriter
 from trackctl.sim.lens import LensDistortion
 from trackctl.sim.smirror_render import FloorPlan, NodeRenderer, RobotShape, three_rooms
-from trackctl.sim.walkers import random_waypoint
+from trackctl.sim.walkers import Trajectory, random_waypoint
 
 __all__ = ["SmirrorScenario", "simulate_smirror", "PATHS", "HOME", "NODES", "path_length_m"]
 
@@ -316,27 +316,91 @@ def _fleet(
     return fleet
 
 
-def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, int]:
-    """Write an S-Mirror scenario log to ``out``; returns message counts per topic."""
-    cfg = cfg or SmirrorScenario()
-    rng = np.random.default_rng(cfg.seed)
-    plan = three_rooms()
+class _CountingWriter:
+    """A log writer that counts the messages it writes per topic."""
+
+    def __init__(self, writer: LogWriter) -> None:
+        self.writer = writer
+        self.counts: dict[str, int] = {}
+
+    def put(self, topic: str, msg: object, t_ns: int) -> None:
+        self.writer.write(topic, msg, t_ns)
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+
+@dataclass(frozen=True, slots=True)
+class _Patrol:
+    """r1's true poses and encoder ticks on the odometry grid, and its path start times (s),
+    cut to ``duration_s``."""
+
+    poses: np.ndarray
+    ticks: np.ndarray
+    starts: list[float]
+
+
+def _patrol(cfg: SmirrorScenario, rng: np.random.Generator) -> _Patrol:
+    """Drive r1 and count its encoders, cut after ``duration_s`` (at least two steps)."""
     poses, incs, starts = _drive(cfg)
     ticks = _odometry(cfg, incs, rng)
-    dt = 1.0 / cfg.odom_hz
     if cfg.duration_s is not None:
+        dt = 1.0 / cfg.odom_hz
         keep = max(2, int(cfg.duration_s * cfg.odom_hz))
-        poses, incs, ticks = poses[:keep], incs[:keep], ticks[:keep]
+        poses, ticks = poses[:keep], ticks[:keep]
         starts = [s for s in starts if s < keep * dt]
-    n = len(poses)
-    duration_s = n * dt
-    fleet = _fleet(cfg, poses, ticks, rng)
+    return _Patrol(poses, ticks, starts)
+
+
+@dataclass(frozen=True, slots=True)
+class _Scene:
+    """Everything the time loop draws and logs: the fleet, the people, the node cameras."""
+
+    dt: float
+    """Odometry step (s)."""
+    names: list[str]
+    """Robot names, r1 first, by fleet index."""
+    fleet: list[tuple[np.ndarray, np.ndarray]]
+    """(true poses, encoder ticks) of every robot on the odometry grid."""
+    shapes: list[RobotShape]
+    walkers: list[tuple[str, Trajectory, float, float]]
+    """(name, trajectory in its room, room origin x, y) of every person."""
+    shirts: list[tuple[int, int, int]]
+    true_models: list[CameraModel]
+    calib_models: list[CameraModel]
+    renderers: list[NodeRenderer]
+    lenses: list[LensDistortion]
+
+    @property
+    def n(self) -> int:
+        """Odometry steps in the log."""
+        return len(self.fleet[0][0])
+
+    def person_xy(self, k: int, t: float) -> np.ndarray:
+        """Where person ``k`` is at ``t`` (site frame)."""
+        _, trj, x0, y0 = self.walkers[k]
+        return trj.at(t)[0] + (x0, y0)
+
+    def robot_pose(self, k: int, t: float) -> np.ndarray:
+        """Robot ``k``'s true pose at ``t``, interpolated between odometry steps."""
+        n = self.n
+        f = min(t / self.dt, n - 1.0)
+        i = min(int(f), n - 2)
+        a = f - i
+        p_k = self.fleet[k][0]
+        return p_k[i] * (1 - a) + p_k[i + 1] * a
+
+
+def _scene(
+    cfg: SmirrorScenario, patrol: _Patrol, plan: FloorPlan, rng: np.random.Generator
+) -> _Scene:
+    """The fleet, node calibrations, people and renderers, drawn from ``rng`` in that order."""
+    dt = 1.0 / cfg.odom_hz
+    duration_s = len(patrol.poses) * dt
+    fleet = _fleet(cfg, patrol.poses, patrol.ticks, rng)
     names = [f"r{k + 1}" for k in range(cfg.robots)]
     shapes = [
         replace(RobotShape(), front_bgr=FLEET[k].front_bgr, back_bgr=FLEET[k].back_bgr)
         for k in range(cfg.robots)
     ]
-    shape = shapes[0]
     # calibration errors are drawn before the people, so logs with and without people differ in
     # nothing else (the occlusion experiment of Figs. 4.8-4.10)
     true_models = node_models(cfg)
@@ -348,98 +412,128 @@ def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, 
         for m in true_models
     ]
     lenses = [LensDistortion(m) for m in true_models]
-    shirts = _clothes(cfg)
-    counts: dict[str, int] = {}
+    return _Scene(
+        dt,
+        names,
+        fleet,
+        shapes,
+        walkers,
+        _clothes(cfg),
+        true_models,
+        calib_models,
+        renderers,
+        lenses,
+    )
 
-    def put(writer: LogWriter, topic: str, msg: object, t_ns: int) -> None:
-        writer.write(topic, msg, t_ns)
-        counts[topic] = counts.get(topic, 0) + 1
 
-    def person_xy(k: int, t: float) -> np.ndarray:
-        _, trj, x0, y0 = walkers[k]
-        return trj.at(t)[0] + (x0, y0)
+def _write_header(
+    log: _CountingWriter, cfg: SmirrorScenario, scene: _Scene, plan: FloorPlan, starts: list[float]
+) -> None:
+    """Scenario, robot, floor-plan and requester metadata; the nodes' calibrated models."""
+    w = log.writer
+    shape = scene.shapes[0]
+    w.add_metadata(
+        "scenario",
+        {
+            "generator": "trackctl simulate smirror",
+            "seed": cfg.seed,
+            "paths": cfg.paths,
+            "people": cfg.people,
+            "requesters": max(cfg.requesters, cfg.robots),
+            "robots": cfg.robots,
+            "fps": cfg.fps,
+            "path_start_s": json.dumps([round(s, 3) for s in starts]),
+            "path_length_m": json.dumps([round(path_length_m(k), 2) for k in range(cfg.paths)]),
+        },
+    )
+    for k, name in enumerate(scene.names):
+        robot_md: dict[str, object] = {
+            "ticks_per_m": cfg.ticks_per_m,
+            "wheel_base_m": cfg.wheel_base_m,
+            "led_height_m": shape.led_height_m,
+            "led_front_m": shape.led_front_m,
+            "led_back_m": shape.led_back_m,
+        }
+        if k > 0:  # r1's colours are the defaults
+            robot_md.update(front_hue=FLEET[k].front_hue, back_hue=FLEET[k].back_hue)
+        w.add_metadata(f"robot/{name}", robot_md)
+    w.add_metadata("smirror/floorplan", {"plan": json.dumps(plan.to_json())})
+    w.add_metadata("smirror/requesters", {"count": max(cfg.requesters, cfg.robots)})
+    for model in scene.calib_models:
+        log.put(topics.calibration(model.camera), to_foxglove_calibration(model), 0)
+        log.put(topics.camera_model(model.camera), model, 0)
 
-    def robot_pose(k: int, t: float) -> np.ndarray:
-        f = min(t / dt, n - 1.0)
-        i = min(int(f), n - 2)
-        a = f - i
-        p_k = fleet[k][0]
-        return p_k[i] * (1 - a) + p_k[i + 1] * a
 
-    with LogWriter(out) as w:
-        w.add_metadata(
-            "scenario",
-            {
-                "generator": "trackctl simulate smirror",
-                "seed": cfg.seed,
-                "paths": cfg.paths,
-                "people": cfg.people,
-                "requesters": max(cfg.requesters, cfg.robots),
-                "robots": cfg.robots,
-                "fps": cfg.fps,
-                "path_start_s": json.dumps([round(s, 3) for s in starts]),
-                "path_length_m": json.dumps([round(path_length_m(k), 2) for k in range(cfg.paths)]),
-            },
+def _write_frames(
+    log: _CountingWriter,
+    scene: _Scene,
+    tf: float,
+    rng: np.random.Generator,
+    jpeg_quality: int,
+) -> None:
+    """Every node's JPEG frame at ``tf`` (s)."""
+    tf_ns = int(round(tf * S))
+    people = [(scene.person_xy(k, tf), scene.shirts[k]) for k in range(len(scene.walkers))]
+    robots = [scene.robot_pose(k, tf) for k in range(len(scene.names))]
+    for model, ren, lens in zip(scene.true_models, scene.renderers, scene.lenses, strict=True):
+        img = lens.apply(ren.render(people, robots, scene.shapes, rng))
+        ok, buf = cv2.imencode(".jpg", img, [int(cv2.IMWRITE_JPEG_QUALITY), jpeg_quality])
+        assert ok
+        log.put(
+            topics.image(model.camera),
+            make_compressed_image(tf_ns, model.camera, buf.tobytes(), "jpeg"),
+            tf_ns,
         )
-        for k, name in enumerate(names):
-            robot_md: dict[str, object] = {
-                "ticks_per_m": cfg.ticks_per_m,
-                "wheel_base_m": cfg.wheel_base_m,
-                "led_height_m": shape.led_height_m,
-                "led_front_m": shape.led_front_m,
-                "led_back_m": shape.led_back_m,
-            }
-            if k > 0:  # r1's colours are the defaults
-                robot_md.update(front_hue=FLEET[k].front_hue, back_hue=FLEET[k].back_hue)
-            w.add_metadata(f"robot/{name}", robot_md)
-        w.add_metadata("smirror/floorplan", {"plan": json.dumps(plan.to_json())})
-        w.add_metadata("smirror/requesters", {"count": max(cfg.requesters, cfg.robots)})
-        for model in calib_models:
-            put(w, topics.calibration(model.camera), to_foxglove_calibration(model), 0)
-            put(w, topics.camera_model(model.camera), model, 0)
+
+
+def _write_odometry(log: _CountingWriter, scene: _Scene, i: int, t_ns: int) -> None:
+    """Every robot's encoder ticks at odometry step ``i``."""
+    for name, (_, t_k) in zip(scene.names, scene.fleet, strict=True):
+        log.put(
+            topics.odom(name),
+            WheelOdometry(t_ns, f"robot/{name}", int(t_k[i, 0]), int(t_k[i, 1])),
+            t_ns,
+        )
+
+
+def _write_truth(log: _CountingWriter, scene: _Scene, i: int, t_ns: int) -> None:
+    """The robots' true poses and the people's positions at odometry step ``i``."""
+    ents = []
+    for name, (p_k, _) in zip(scene.names, scene.fleet, strict=True):
+        x, y, yaw = p_k[i]
+        ents.append(GroundTruthEntity(name, Vec3(float(x), float(y), 0.0), float(yaw)))
+    for k in range(len(scene.walkers)):
+        p = scene.person_xy(k, i * scene.dt)
+        ents.append(
+            GroundTruthEntity(
+                scene.walkers[k][0], Vec3(round(float(p[0]), 4), round(float(p[1]), 4), 0.0)
+            )
+        )
+    log.put(topics.GROUND_TRUTH, GroundTruth(t_ns, tuple(ents)), t_ns)
+
+
+def simulate_smirror(out: str, cfg: SmirrorScenario | None = None) -> dict[str, int]:
+    """Write an S-Mirror scenario log to ``out``; returns message counts per topic."""
+    cfg = cfg or SmirrorScenario()
+    rng = np.random.default_rng(cfg.seed)
+    plan = three_rooms()
+    patrol = _patrol(cfg, rng)
+    scene = _scene(cfg, patrol, plan, rng)
+    n, dt = scene.n, scene.dt
+    with LogWriter(out) as w:
+        log = _CountingWriter(w)
+        _write_header(log, cfg, scene, plan, patrol.starts)
         frame_dt = 1.0 / cfg.fps
-        n_frames = int(duration_s / frame_dt)
+        n_frames = int(n * dt / frame_dt)
         # One pass over time: odometry every step, truth every 2nd, frames at the node rate.
         step_ns = int(round(dt * S))
         next_frame = 0
         for i in range(n):
             t_ns = i * step_ns
             while next_frame < n_frames and int(round(next_frame * frame_dt * S)) <= t_ns:
-                tf = next_frame * frame_dt
-                tf_ns = int(round(tf * S))
-                people = [(person_xy(k, tf), shirts[k]) for k in range(len(walkers))]
-                robots = [robot_pose(k, tf) for k in range(cfg.robots)]
-                for model, ren, lens in zip(true_models, renderers, lenses, strict=True):
-                    img = lens.apply(ren.render(people, robots, shapes, rng))
-                    ok, buf = cv2.imencode(
-                        ".jpg", img, [int(cv2.IMWRITE_JPEG_QUALITY), cfg.jpeg_quality]
-                    )
-                    assert ok
-                    put(
-                        w,
-                        topics.image(model.camera),
-                        make_compressed_image(tf_ns, model.camera, buf.tobytes(), "jpeg"),
-                        tf_ns,
-                    )
+                _write_frames(log, scene, next_frame * frame_dt, rng, cfg.jpeg_quality)
                 next_frame += 1
-            for name, (_, t_k) in zip(names, fleet, strict=True):
-                put(
-                    w,
-                    topics.odom(name),
-                    WheelOdometry(t_ns, f"robot/{name}", int(t_k[i, 0]), int(t_k[i, 1])),
-                    t_ns,
-                )
+            _write_odometry(log, scene, i, t_ns)
             if i % 2 == 0:
-                ents = []
-                for name, (p_k, _) in zip(names, fleet, strict=True):
-                    x, y, yaw = p_k[i]
-                    ents.append(GroundTruthEntity(name, Vec3(float(x), float(y), 0.0), float(yaw)))
-                for k in range(len(walkers)):
-                    p = person_xy(k, i * dt)
-                    ents.append(
-                        GroundTruthEntity(
-                            walkers[k][0], Vec3(round(float(p[0]), 4), round(float(p[1]), 4), 0.0)
-                        )
-                    )
-                put(w, topics.GROUND_TRUTH, GroundTruth(t_ns, tuple(ents)), t_ns)
-    return counts
+                _write_truth(log, scene, i, t_ns)
+    return log.counts
