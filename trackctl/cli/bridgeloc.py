@@ -9,12 +9,18 @@ from typing import Annotated
 import typer
 
 from trackctl.cli.common import (
-    SITE_HELP,
     AllowUnmeasuredOption,
+    JsonOption,
+    OutputsOnlyOption,
+    QuietOption,
+    SiteOption,
     VerboseOption,
+    fail_if_option,
     load_site_file,
+    out_option,
     parse_choice,
     print_json,
+    print_written,
     stderr,
 )
 from trackctl.cli.process import figures_from_output, run_system
@@ -46,7 +52,7 @@ def tags(
             "marks and a 1 cm glue overlap), or fit (one custom-size page per tag)."
         ),
     ] = "a4",
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
 ) -> None:
     """Enumerate unique tag sets (checked against Theorems 5 and 6) and print tag sheets.
 
@@ -94,16 +100,8 @@ def tags(
 @bridgeloc_app.command("eval")
 def eval_(
     log: Annotated[Path, typer.Argument(help="MCAP log: camera images + models, wheel odometry.")],
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            help="Output MCAP: input + /bridgeloc/pose + annotations (omit: report only)."
-        ),
-    ] = None,
-    outputs_only: Annotated[
-        bool,
-        typer.Option("--outputs-only", help="Write only what the run adds, not the input."),
-    ] = False,
+    out: Annotated[Path | None, out_option("input + /bridgeloc/pose + annotations")] = None,
+    outputs_only: OutputsOnlyOption = False,
     mode: Annotated[str, typer.Option(help="full (EKF), basic (bridging) or icam.")] = "full",
     pose: Annotated[
         str, typer.Option(help="Robot pose from bridged corners: lstsq (Eq. 4.9) or pnp.")
@@ -137,18 +135,15 @@ def eval_(
             "came after it); --no-smooth gives the causal filter's poses.",
         ),
     ] = True,
-    site: Annotated[Path | None, typer.Option(help=SITE_HELP)] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    site: SiteOption = None,
+    json_out: JsonOption = False,
     plot: Annotated[
         Path | None, typer.Option(help="Write figures (PNG) to this directory.")
     ] = None,
-    fail_if: Annotated[
-        str | None,
-        typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "error_m_mean>0.32".'),
-    ] = None,
+    fail_if: Annotated[str | None, fail_if_option("error_m_mean>0.32")] = None,
     allow_unmeasured: AllowUnmeasuredOption = False,
     verbose: VerboseOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """BridgeLoc: localize the robot by bridging infrastructure and robot camera views.
 
@@ -219,7 +214,7 @@ def simulate_bridgeloc(
             "(far apart tags share one, Eq. 4.11)."
         ),
     ] = 0,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
     """A robot among infrastructure cameras and wall tags, with rendered images (BridgeLoc).
@@ -243,7 +238,4 @@ def simulate_bridgeloc(
         patterns=patterns,
     )
     counts = simulate(str(out), cfg)
-    if json_out:
-        print_json({"out": str(out), "topics": counts})
-    elif not quiet:
-        stderr.print(f"wrote {sum(counts.values())} messages on {len(counts)} topics to {out}")
+    print_written(out, counts, json_out=json_out, quiet=quiet)

@@ -10,7 +10,7 @@ import sys
 import threading
 import time
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from enum import Enum
 from pathlib import Path
@@ -51,6 +51,13 @@ __all__ = [
     "check_fail_if",
     "AllowUnmeasuredOption",
     "VerboseOption",
+    "JsonOption",
+    "QuietOption",
+    "OutputsOnlyOption",
+    "SiteOption",
+    "out_option",
+    "fail_if_option",
+    "print_written",
     "check_topics",
     "check_window",
     "report_dict",
@@ -376,6 +383,32 @@ VerboseOption = Annotated[
     bool,
     typer.Option("--verbose", "-v", help="Print every figure of the report, not its headline."),
 ]
+JsonOption = Annotated[bool, typer.Option("--json", help="Print one JSON object.")]
+QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")]
+OutputsOnlyOption = Annotated[
+    bool, typer.Option("--outputs-only", help="Write only what the run adds, not the input.")
+]
+SiteOption = Annotated[Path | None, typer.Option(help=SITE_HELP)]
+
+
+def out_option(adds: str) -> Any:
+    """A system's ``--out``: ``out: Annotated[Path | None, out_option("input + ...")] = None``."""
+    return typer.Option("--out", help=f"Output MCAP: {adds} (omit: report only).")
+
+
+def fail_if_option(example: str) -> Any:
+    """A system's ``--fail-if`` with an example condition on one of its metrics."""
+    return typer.Option(
+        "--fail-if", help=f'Exit 1 when a metric crosses a threshold, e.g. "{example}".'
+    )
+
+
+def print_written(out: Path, counts: Mapping[str, int], *, json_out: bool, quiet: bool) -> None:
+    """What a simulator wrote: ``{"out", "topics"}`` with --json, else one line on stderr."""
+    if json_out:
+        print_json({"out": str(out), "topics": counts})
+    elif not quiet:
+        stderr.print(f"wrote {sum(counts.values())} messages on {len(counts)} topics to {out}")
 
 
 def check_fail_if(expr: str | None, processors: Sequence[str] = ()) -> None:

@@ -9,7 +9,12 @@ import typer
 
 from trackctl.cli.common import (
     AllowUnmeasuredOption,
+    JsonOption,
+    OutputsOnlyOption,
+    QuietOption,
     VerboseOption,
+    fail_if_option,
+    out_option,
     parse_choice,
     print_json,
     stderr,
@@ -34,16 +39,29 @@ def _read_eids(path: Path) -> tuple[str, ...]:
     return tuple(dict.fromkeys(eids))
 
 
+def _spark_conf(
+    engine: str, master: str | None, spark_conf: list[str] | None
+) -> tuple[tuple[str, str], ...]:
+    """``--spark-conf KEY=VALUE`` pairs, checked (``--master``/``--spark-conf`` need spark)."""
+    from trackctl.errors import InputError
+
+    if master is not None and engine != "spark":
+        raise InputError("--master is for --engine spark")
+    if spark_conf and engine != "spark":
+        raise InputError("--spark-conf is for --engine spark")
+    conf = []
+    for item in spark_conf or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip().startswith("spark."):
+            raise InputError(f"--spark-conf {item!r}: expected spark.KEY=VALUE")
+        conf.append((key.strip(), value.strip()))
+    return tuple(conf)
+
+
 def ev_match(
     log: Annotated[Path, typer.Argument(help="MCAP log with /ev/e and /ev/cell/<i>_<j>/v.")],
-    out: Annotated[
-        Path | None,
-        typer.Option(help="Output MCAP: input + /evmatch/matches + report (omit: report only)."),
-    ] = None,
-    outputs_only: Annotated[
-        bool,
-        typer.Option("--outputs-only", help="Write only what the run adds, not the input."),
-    ] = False,
+    out: Annotated[Path | None, out_option("input + /evmatch/matches + report")] = None,
+    outputs_only: OutputsOnlyOption = False,
     eids: Annotated[
         Path | None, typer.Option(help="File with the EIDs to match, one per line.")
     ] = None,
@@ -70,17 +88,14 @@ def ev_match(
     max_evidence: Annotated[
         int, typer.Option(help="Most evidence scenarios per EID before giving up.")
     ] = 12,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
     plot: Annotated[
         Path | None, typer.Option(help="Folder for figures (needs the plot extra).")
     ] = None,
-    fail_if: Annotated[
-        str | None,
-        typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "accuracy<0.9".'),
-    ] = None,
+    fail_if: Annotated[str | None, fail_if_option("accuracy<0.9")] = None,
     allow_unmeasured: AllowUnmeasuredOption = False,
     verbose: VerboseOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """EV-Matching: find the VID (person in video) of each EID (phone) reading little video.
 
@@ -94,16 +109,7 @@ def ev_match(
     algo = parse_choice(Algorithm, algorithm, "--algorithm")
     if engine not in ("local", "spark"):
         raise InputError(f"--engine {engine!r}: expected local or spark")
-    if master is not None and engine != "spark":
-        raise InputError("--master is for --engine spark")
-    if spark_conf and engine != "spark":
-        raise InputError("--spark-conf is for --engine spark")
-    conf = []
-    for item in spark_conf or []:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip().startswith("spark."):
-            raise InputError(f"--spark-conf {item!r}: expected spark.KEY=VALUE")
-        conf.append((key.strip(), value.strip()))
+    conf = _spark_conf(engine, master, spark_conf)
     if margin < 1 or max_evidence < 1:
         raise InputError("--margin and --max-evidence must be >= 1")
     requested = _read_eids(eids) if eids is not None else None
@@ -116,7 +122,7 @@ def ev_match(
         algorithm=algo,
         engine=engine,
         master=master,
-        spark_conf=tuple(conf),
+        spark_conf=conf,
         seed=seed,
         params=MatchParams(margin=margin, max_evidence=max_evidence),
     )
@@ -166,7 +172,7 @@ def simulate_ev(
         int, typer.Option(help="Pairs of people that carry one EID (cloned MAC, shared phone).")
     ] = 0,
     seed: Annotated[int, typer.Option(help="Random seed (same seed, same log).")] = 0,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
     """People under cell-level E-location and per-cell cameras (EV-Matching scenarios).

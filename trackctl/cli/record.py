@@ -2,18 +2,25 @@
 
 from __future__ import annotations
 
-import signal
-import sys
-from collections import Counter
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.markup import escape
 
-from trackctl.cli.common import load_site_file, one_line, print_json, progress, stderr
+from trackctl.cli.common import (
+    JsonOption,
+    load_site_file,
+    one_line,
+    print_json,
+    progress,
+    stderr,
+)
 from trackctl.errors import InputError
-from trackctl.logs.writer import COMPRESSIONS, LogWriter
+from trackctl.logs.writer import COMPRESSIONS
+
+if TYPE_CHECKING:
+    from trackctl.ingest.record import IngestSummary, RecordConfig
 
 
 def record(
@@ -143,7 +150,7 @@ def record(
     compression: Annotated[
         str, typer.Option(help=f"Chunk compression: {', '.join(COMPRESSIONS)}.")
     ] = "zstd",
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress or notes.")] = False,
 ) -> None:
     """Ingest video, calibration, IMU/RSSI/odometry CSV or live JSON lines into an MCAP log.
@@ -151,20 +158,67 @@ def record(
     Example: trackctl record run.mcap --video cam0=walk.avi --calib cam0=cam0.yaml --imu p1=p1.csv
     """
     # Imported here: OpenCV/pandas/SciPy cost ~0.5 s and other commands do not need them.
-    from trackctl.geometry.calib import metres_per_unit
-    from trackctl.ingest.record import (
-        RecordConfig,
-        StreamSource,
-        UdpSource,
-        parse_named,
-        record_files,
-        record_live,
-        write_site,
+    from trackctl.ingest.record import IngestPlan, ingest
+
+    files = _files_config(
+        imu=imu,
+        rssi=rssi,
+        odom=odom,
+        video=video,
+        calib=calib,
+        ros2=ros2,
+        ros2_map=ros2_map,
+        site=site,
+        fps=fps,
+        every=every,
+        rate=rate,
+        start=start,
+        end=end,
+        frame_times=frame_times,
+        calib_units=calib_units,
+        time_unit=time_unit,
+        video_start=video_start,
+        quiet=quiet or json_out,
     )
+    plan = IngestPlan(files=files, stdin=stdin, udp=udp, compression=compression)
+    summary = ingest(
+        plan,
+        out,
+        progress=lambda: progress("recording files", quiet),
+        on_reject=_warn_rejected,
+        on_live=lambda address: _announce_live(address, quiet),
+    )
+    _print_summary(summary, json_out=json_out, quiet=quiet)
+
+
+def _files_config(
+    *,
+    imu: list[str] | None,
+    rssi: list[Path] | None,
+    odom: list[str] | None,
+    video: list[str] | None,
+    calib: list[str] | None,
+    ros2: Path | None,
+    ros2_map: list[str] | None,
+    site: Path | None,
+    fps: float | None,
+    every: int,
+    rate: float | None,
+    start: float | None,
+    end: float | None,
+    frame_times: str | None,
+    calib_units: str | None,
+    time_unit: str,
+    video_start: float,
+    quiet: bool,
+) -> RecordConfig:
+    """The file sources of ``record``'s options (the ROS 2 plan printed unless quiet)."""
+    from trackctl.geometry.calib import metres_per_unit
+    from trackctl.ingest.record import RecordConfig, parse_named
     from trackctl.ingest.video import FrameSelection
 
-    plan = _ros2_plan(ros2, ros2_map, quiet or json_out)
-    cfg = RecordConfig(
+    plan = _ros2_plan(ros2, ros2_map, quiet)
+    return RecordConfig(
         site=site,
         site_records=load_site_file(site),
         ros2=ros2,
@@ -177,95 +231,51 @@ def record(
         fps=fps,
         video_start_s=video_start,
         selection=FrameSelection(every, rate, start, end),
-        frame_times=None
-        if frame_times is None
-        else "names"
-        if frame_times == "names"
-        else Path(frame_times),
+        frame_times=_frame_times(frame_times),
         calib_units=metres_per_unit(calib_units, "--calib-units"),
         time_unit=time_unit,
     )
-    if time_unit not in ("s", "ms", "us", "ns"):
-        raise InputError(f"--time-unit {time_unit!r}: expected s, ms, us or ns")
-    if stdin and udp is not None:
-        raise InputError("--stdin and --udp are exclusive; record one live source at a time")
-    if cfg.empty and not stdin and udp is None:
-        raise InputError(
-            "nothing to record: give --imu/--rssi/--odom/--video/--ros2, --stdin or --udp"
-        )
-    inputs = [
-        *cfg.imu.values(),
-        *cfg.rssi,
-        *cfg.odom.values(),
-        *cfg.video.values(),
-        *cfg.calib.values(),
-        *([ros2] if ros2 is not None else []),
-        *([site] if site is not None else []),
-    ]
-    counts: Counter[str] = Counter()
-    rejected = 0
-    interrupted = False
-    live_stats = None
-    source = None
-    if udp is not None:
-        source = UdpSource(udp)
-    # SIGTERM (a supervisor stopping us) ends a live recording like Ctrl-C: with a valid log.
-    # SIGINT too, explicitly: a shell starts background jobs with SIGINT ignored, and then
-    # `kill -INT` would not stop the recording.
-    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
-    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        # Live logs are written to OUT.partial, flushed every second and kept if the recorder
-        # dies: a recorder killed with SIGKILL loses at most the last second.
-        live = stdin or source is not None
-        chunk = 256 * 1024 if live else 1 << 20
-        with LogWriter(
-            out, inputs=inputs, compression=compression, chunk_size=chunk, keep_partial=live
-        ) as writer:
-            write_site(writer, cfg)
-            if not cfg.empty:
-                with progress("recording files", quiet) as bar:
-                    counts.update(record_files(writer, cfg, lambda n: bar(n, None)))
-            if stdin or source is not None:
 
-                def reject(msg: str) -> None:
-                    # always shown, --quiet included: a dropped message is a warning
-                    stderr.print(
-                        f"[yellow]warning:[/] rejected {escape(one_line(msg))}", markup=True
-                    )
 
-                # The ready line goes out even with --quiet: with --udp 0 it carries the port.
-                if source is not None:
-                    stderr.print(f"listening on udp {source.address[0]}:{source.address[1]}")
-                    stats = record_live(writer, source, reject, drain=source.drain)
-                else:
-                    if not quiet:
-                        stderr.print("recording JSON lines from stdin until EOF or Ctrl-C")
-                    stats = record_live(writer, StreamSource(sys.stdin.fileno()), reject)
-                counts.update(stats.counts)
-                rejected, interrupted = stats.rejected, stats.interrupted
-                live_stats = stats
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-        signal.signal(signal.SIGINT, previous_int)
-        if source is not None:
-            source.close()
-    summary = {
-        "out": str(out),
-        "topics": dict(sorted(counts.items())),
-        "messages": sum(counts.values()),
-        "rejected": rejected,
-        "metadata": live_stats.metadata if live_stats else 0,
-        "attachments": live_stats.attachments if live_stats else 0,
-        "interrupted": interrupted,
-    }
+def _frame_times(value: str | None) -> Path | str | None:
+    """``--frame-times``: a CSV file, ``"names"`` or nothing."""
+    if value is None or value == "names":
+        return value
+    return Path(value)
+
+
+def _warn_rejected(msg: str) -> None:
+    """A rejected live line: always shown, --quiet included (a dropped message is a warning)."""
+    stderr.print(f"[yellow]warning:[/] rejected {escape(one_line(msg))}", markup=True)
+
+
+def _announce_live(address: tuple[str, int] | None, quiet: bool) -> None:
+    """The ready line; with --udp even with --quiet, as it carries the port (--udp 0)."""
+    if address is not None:
+        stderr.print(f"listening on udp {address[0]}:{address[1]}")
+    elif not quiet:
+        stderr.print("recording JSON lines from stdin until EOF or Ctrl-C")
+
+
+def _print_summary(summary: IngestSummary, *, json_out: bool, quiet: bool) -> None:
+    """One JSON object, or one line on stderr (nothing with --quiet)."""
     if json_out:
-        print_json(summary)
+        print_json(
+            {
+                "out": str(summary.out),
+                "topics": dict(summary.topics),
+                "messages": summary.messages,
+                "rejected": summary.rejected,
+                "metadata": summary.metadata,
+                "attachments": summary.attachments,
+                "interrupted": summary.interrupted,
+            }
+        )
     elif not quiet:
         stderr.print(
-            f"wrote {summary['messages']} messages on {len(counts)} topics to {out}"
-            + (f", rejected {rejected}" if stdin or udp is not None else "")
-            + (" (stopped by interrupt)" if interrupted else "")
+            f"wrote {summary.messages} messages on {len(summary.topics)} topics to {summary.out}"
+            + (f", rejected {summary.rejected}" if summary.live else "")
+            + (" (stopped by interrupt)" if summary.interrupted else "")
         )
 
 
@@ -278,7 +288,7 @@ def recover(
         typer.Option(help="Finished log to write (default: PARTIAL without .partial)."),
     ] = None,
     keep: Annotated[bool, typer.Option("--keep", help="Keep PARTIAL after recovering.")] = False,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No notes.")] = False,
 ) -> None:
     """Finish an unfinished recording into a complete, indexed log (every readable message).
@@ -307,7 +317,7 @@ def filter_cmd(
         list[str] | None,
         typer.Option("--exclude", help="Drop topics matching this glob (repeatable)."),
     ] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No notes.")] = False,
 ) -> None:
     """Copy a log without some topics (metadata and attachments kept), e.g. drop the ground

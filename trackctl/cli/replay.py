@@ -113,30 +113,12 @@ def replay(
     wanted = split_csv(topics)
     check_topics(reader, wanted)
     origin = reader.start_ns or 0
-    start_ns = None if start is None else origin + int(round(start * 1e9))
-    end_ns = None if end is None else origin + int(round(end * 1e9))
-    stream = replay_jsonl(reader, wanted, start_ns, end_ns, speed)
-    n = 0
+    stream = replay_jsonl(reader, wanted, _log_time(origin, start), _log_time(origin, end), speed)
     try:
         if fmt is Format.jsonl:
-            n = _write_jsonl(reader, stream, records, sink, paced=speed > 0)
+            _write_jsonl(reader, stream, records, sink, paced=speed > 0)
         else:
-            meter = RateMeter()
-            screen = console()
-            last_draw = 0.0
-            with Live(
-                _table(meter, str(log)), console=screen, refresh_per_second=4, transient=False
-            ) as live:
-                for raw, line in stream:
-                    meter.add(raw)
-                    if sink is not None:
-                        sink.send(line)
-                    n += 1
-                    now = time.monotonic()
-                    if now - last_draw > 0.2:
-                        live.update(_table(meter, str(log)))
-                        last_draw = now
-                live.update(_table(meter, str(log)))
+            _show_table(stream, sink, str(log))
     except BrokenPipeError:
         # `replay | head`: the reader went away; stop quietly like other Unix tools.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -144,12 +126,45 @@ def replay(
     finally:
         if sink is not None:
             sink.close()
-    if sink is not None and sink.failed:
+    if sink is not None:
+        _warn_sink(sink, udp, quiet)
+
+
+def _log_time(origin: int, seconds: float | None) -> int | None:
+    """``--start``/``--end`` (seconds after the first message) as log time, ns."""
+    return None if seconds is None else origin + int(round(seconds * 1e9))
+
+
+def _show_table(stream: Iterable[tuple[RawMessage, str]], sink: UdpSink | None, title: str) -> int:
+    """A live table of the topics' counts and rates, each line also sent to ``sink``.
+    Returns the messages played."""
+    meter = RateMeter()
+    n = 0
+    last_draw = 0.0
+    with Live(
+        _table(meter, title), console=console(), refresh_per_second=4, transient=False
+    ) as live:
+        for raw, line in stream:
+            meter.add(raw)
+            if sink is not None:
+                sink.send(line)
+            n += 1
+            now = time.monotonic()
+            if now - last_draw > 0.2:
+                live.update(_table(meter, title))
+                last_draw = now
+        live.update(_table(meter, title))
+    return n
+
+
+def _warn_sink(sink: UdpSink, udp: str | None, quiet: bool) -> None:
+    """Warnings about datagrams that failed (always) or were too large (not with --quiet)."""
+    if sink.failed:
         stderr.print(
             f"[yellow]warning:[/] {sink.failed} datagrams to {udp} failed ({sink.last_error})",
             markup=True,
         )
-    if sink is not None and sink.skipped and not quiet:
+    if sink.skipped and not quiet:
         stderr.print(
             f"[yellow]warning:[/] {sink.skipped} messages larger than a UDP datagram were not sent",
             markup=True,

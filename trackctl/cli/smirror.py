@@ -8,13 +8,18 @@ from typing import Annotated
 import typer
 
 from trackctl.cli.common import (
-    SITE_HELP,
     AllowUnmeasuredOption,
+    JsonOption,
+    OutputsOnlyOption,
+    QuietOption,
+    SiteOption,
     VerboseOption,
+    fail_if_option,
     load_site_file,
+    out_option,
     parse_choice,
     parse_pose,
-    print_json,
+    print_written,
     stderr,
 )
 from trackctl.cli.process import run_system
@@ -23,16 +28,9 @@ from trackctl.cli.process import run_system
 def smirror(
     log: Annotated[Path, typer.Argument(help="MCAP log with node frames (+ robot odometry).")],
     out: Annotated[
-        Path | None,
-        typer.Option(
-            help="Output MCAP: input + /smirror/<robot>/pose, /smirror/<node>/sent, report "
-            "(omit: report only)."
-        ),
+        Path | None, out_option("input + /smirror/<robot>/pose, /smirror/<node>/sent, report")
     ] = None,
-    outputs_only: Annotated[
-        bool,
-        typer.Option("--outputs-only", help="Write only what the run adds, not the input."),
-    ] = False,
+    outputs_only: OutputsOnlyOption = False,
     mode: Annotated[
         str,
         typer.Option(help="mirror+odom (S-Mirror + motion sensor) or centralized (vision only)."),
@@ -59,18 +57,15 @@ def smirror(
             "pose until then."
         ),
     ] = None,
-    site: Annotated[Path | None, typer.Option(help=SITE_HELP)] = None,
+    site: SiteOption = None,
     plot: Annotated[
         Path | None, typer.Option(help="Write the paper's figures (PNG) to this directory.")
     ] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
-    fail_if: Annotated[
-        str | None,
-        typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "error_m_mean>0.33".'),
-    ] = None,
+    json_out: JsonOption = False,
+    fail_if: Annotated[str | None, fail_if_option("error_m_mean>0.33")] = None,
     allow_unmeasured: AllowUnmeasuredOption = False,
     verbose: VerboseOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """S-Mirror: localize robots from their LEDs in node images, dead-reckoning in between.
 
@@ -161,7 +156,7 @@ def simulate_smirror(
     led_clothes: Annotated[
         float, typer.Option(help="Share of people in LED-coloured (green/magenta) shirts.")
     ] = 0.0,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
     """Three rooms, three node cameras, a robot with LEDs and encoders patrolling (S-Mirror).
@@ -199,7 +194,4 @@ def simulate_smirror(
     except ValueError as err:
         raise InputError(f"simulate smirror: {err}") from None
     counts = simulate(str(out), cfg)
-    if json_out:
-        print_json({"out": str(out), "topics": counts})
-    elif not quiet:
-        stderr.print(f"wrote {sum(counts.values())} messages on {len(counts)} topics to {out}")
+    print_written(out, counts, json_out=json_out, quiet=quiet)

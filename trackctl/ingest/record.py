@@ -5,11 +5,15 @@ from __future__ import annotations
 import heapq
 import os
 import select
+import signal
 import socket
+import sys
+import threading
 import time
 import warnings
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -23,8 +27,12 @@ from trackctl.ingest.video import FrameSelection, frame_size, read_frames
 from trackctl.logs import topics
 from trackctl.logs.jsonl import AttachmentLine, JsonlRecord, MetadataLine, parse_line
 from trackctl.logs.writer import LogWriter
+from trackctl.progress import Progress
 
 __all__ = [
+    "IngestPlan",
+    "IngestSummary",
+    "ingest",
     "RecordConfig",
     "record_files",
     "write_site",
@@ -70,6 +78,19 @@ class RecordConfig:
     def empty(self) -> bool:
         """True when no file source is given."""
         return not (self.imu or self.rssi or self.odom or self.video or self.calib or self.ros2)
+
+    @property
+    def inputs(self) -> tuple[Path, ...]:
+        """Every file read (the output may be none of them)."""
+        return (
+            *self.imu.values(),
+            *self.rssi,
+            *self.odom.values(),
+            *self.video.values(),
+            *self.calib.values(),
+            *((self.ros2,) if self.ros2 is not None else ()),
+            *((self.site,) if self.site is not None else ()),
+        )
 
 
 def parse_named(values: Iterable[str], option: str) -> dict[str, Path]:
@@ -342,3 +363,157 @@ def record_live(
             for line, where, lineno in drain():
                 take(line, where, lineno)
     return stats
+
+
+TIME_UNITS = ("s", "ms", "us", "ns")
+
+
+@dataclass(frozen=True, slots=True)
+class IngestPlan:
+    """One recording: file sources, and at most one live source (stdin or a UDP port)."""
+
+    files: RecordConfig = field(default_factory=RecordConfig)
+    stdin: bool = False
+    """Record JSON lines from stdin until EOF or Ctrl-C."""
+    udp: int | None = None
+    """Record JSON lines from UDP datagrams on 127.0.0.1:PORT until Ctrl-C (0: a free port)."""
+    compression: str = "zstd"
+
+    @property
+    def live(self) -> bool:
+        """True with a live source."""
+        return self.stdin or self.udp is not None
+
+    def check(self) -> None:
+        """Raise InputError for a plan that cannot be recorded."""
+        if self.files.time_unit not in TIME_UNITS:
+            raise InputError(f"--time-unit {self.files.time_unit!r}: expected s, ms, us or ns")
+        if self.stdin and self.udp is not None:
+            raise InputError("--stdin and --udp are exclusive; record one live source at a time")
+        if self.files.empty and not self.live:
+            raise InputError(
+                "nothing to record: give --imu/--rssi/--odom/--video/--ros2, --stdin or --udp"
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class IngestSummary:
+    """What :func:`ingest` wrote."""
+
+    out: Path
+    topics: Mapping[str, int]
+    """Messages per topic, sorted by topic."""
+    live: bool = False
+    rejected: int = 0
+    """Live lines rejected (bad JSON, bad message...)."""
+    metadata: int = 0
+    attachments: int = 0
+    interrupted: bool = False
+    """The live recording was ended by Ctrl-C, SIGINT, SIGTERM or SIGHUP (the log is valid)."""
+
+    @property
+    def messages(self) -> int:
+        """Messages written."""
+        return sum(self.topics.values())
+
+
+ProgressScope = Callable[[], AbstractContextManager[Progress]]
+"""Opens the progress display of the file pass and yields the callback it reports to."""
+
+
+@contextmanager
+def _no_progress() -> Iterator[Progress]:
+    yield lambda done, total, stage=None: None
+
+
+@contextmanager
+def _interrupt_on_signals() -> Iterator[None]:
+    """SIGTERM and SIGINT raise KeyboardInterrupt while recording (main thread only).
+
+    SIGTERM (a supervisor stopping us) ends a live recording like Ctrl-C: with a valid log.
+    SIGINT too, explicitly: a shell starts background jobs with SIGINT ignored, and then
+    ``kill -INT`` would not stop the recording.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)
+
+
+def ingest(
+    plan: IngestPlan,
+    out: Path,
+    progress: ProgressScope | None = None,
+    on_reject: Callable[[str], None] | None = None,
+    on_live: Callable[[tuple[str, int] | None], None] | None = None,
+) -> IngestSummary:
+    """Record ``plan`` into the MCAP log ``out``: the site, then the files merged in time order,
+    then the live source until it ends or Ctrl-C / SIGINT / SIGTERM / SIGHUP.
+
+    ``out`` is written atomically and is never one of the inputs. A live recording goes to
+    ``OUT.partial``, flushed every second and kept if the recorder dies (SIGKILL loses at most
+    the last second); an interrupt ends it normally with a valid log (``interrupted``). Bad live
+    lines are rejected through ``on_reject`` and recording goes on. ``progress`` is opened around
+    the file pass only; ``on_live`` is called as the live source starts, with the UDP address
+    (``None``: stdin).
+
+    Raises:
+        InputError: the plan cannot be recorded (see :meth:`IngestPlan.check`), a bad file.
+        KeyboardInterrupt: an interrupt during the file pass (the output is removed).
+    """
+    plan.check()
+    cfg = plan.files
+    counts: Counter[str] = Counter()
+    stats: LiveStats | None = None
+    source = UdpSource(plan.udp) if plan.udp is not None else None
+    try:
+        with _interrupt_on_signals():
+            chunk = 256 * 1024 if plan.live else 1 << 20
+            with LogWriter(
+                out,
+                inputs=cfg.inputs,
+                compression=plan.compression,
+                chunk_size=chunk,
+                keep_partial=plan.live,
+            ) as writer:
+                write_site(writer, cfg)
+                if not cfg.empty:
+                    with (progress or _no_progress)() as bar:
+                        counts.update(record_files(writer, cfg, lambda n: bar(n, None)))
+                if plan.live:
+                    stats = _record_source(writer, source, on_reject, on_live)
+                    counts.update(stats.counts)
+    finally:
+        if source is not None:
+            source.close()
+    return IngestSummary(
+        out=out,
+        topics=dict(sorted(counts.items())),
+        live=plan.live,
+        rejected=stats.rejected if stats else 0,
+        metadata=stats.metadata if stats else 0,
+        attachments=stats.attachments if stats else 0,
+        interrupted=stats.interrupted if stats else False,
+    )
+
+
+def _record_source(
+    writer: LogWriter,
+    source: UdpSource | None,
+    on_reject: Callable[[str], None] | None,
+    on_live: Callable[[tuple[str, int] | None], None] | None,
+) -> LiveStats:
+    """The live part of :func:`ingest`: ``source``, or stdin without one."""
+    if source is not None:
+        if on_live is not None:
+            on_live((source.address[0], source.address[1]))
+        return record_live(writer, source, on_reject, drain=source.drain)
+    if on_live is not None:
+        on_live(None)
+    return record_live(writer, StreamSource(sys.stdin.fileno()), on_reject)
