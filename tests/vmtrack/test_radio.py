@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from trackctl.logs.messages import RssiReading, RssiScan, Vec3
+from trackctl.vmtrack.grid import SiteGrid
 from trackctl.vmtrack.radio import (
     PathLoss,
     RadioConfig,
@@ -15,7 +16,6 @@ from trackctl.vmtrack.radio import (
     _scan_cost,
     fit_path_loss,
 )
-from trackctl.vmtrack.retrack import _Grid
 
 MODEL = (-40.0, 2.5)
 AP = (0.0, 6.0)
@@ -26,11 +26,11 @@ def _scan(t_ns: int, heard: dict[str, float], ap: tuple[float, float] = AP) -> R
     return RssiScan(t_ns, "ap-0", readings, Vec3(ap[0], ap[1], 2.0))
 
 
-def _room() -> _Grid:
-    return _Grid([np.array([[0.0, 0.0], [16.0, 12.0]])], 0.2)
+def _room() -> SiteGrid:
+    return SiteGrid([np.array([[0.0, 0.0], [16.0, 12.0]])], 0.2)
 
 
-def _at(grid: _Grid, cost: np.ndarray, x: float, y: float) -> float:
+def _at(grid: SiteGrid, cost: np.ndarray, x: float, y: float) -> float:
     j, i = np.round((np.array([x, y]) - grid.lo) / grid.cell).astype(int)
     return float(cost[i, j])
 

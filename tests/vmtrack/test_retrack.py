@@ -15,6 +15,7 @@ from scipy import ndimage
 from tests.conftest import examples
 from trackctl.logs.messages import RssiReading, RssiScan, Vec3
 from trackctl.vmtrack.align import AlignConfig
+from trackctl.vmtrack.grid import SiteGrid
 from trackctl.vmtrack.identify import dead_reckoned
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.radio import RadioEvidence
@@ -25,7 +26,6 @@ from trackctl.vmtrack.retrack import (
     _displacements,
     _exclusive,
     _Follower,
-    _Grid,
     _layer_costs,
     _predecessors,
     _publish,
@@ -109,7 +109,7 @@ def _share_on(xy: dict[int, tuple[float, float]], walk: np.ndarray, n: int) -> f
 )
 def test_emission_is_the_distance_to_the_nearest_detection(pts, probe):
     pts_a = np.array(pts)
-    grid = _Grid([pts_a, np.array([[0.0, 0.0], [10.0, 8.0]])], 0.2)
+    grid = SiteGrid([pts_a, np.array([[0.0, 0.0], [10.0, 8.0]])], 0.2)
     e = grid.emission(pts_a, 0.35, 1e9)
     cell = np.round((np.array(probe) - grid.lo) / grid.cell).astype(int)
     centre = grid.lo + cell * grid.cell
@@ -201,7 +201,7 @@ def test_the_path_follows_the_phone_through_a_crowd():
     frame_t, points, people = _scene(1)
     carrier = people[0]
     phone = _phone(carrier, frame_t, 0.0)
-    grid = _Grid(points, CFG.cell_m)
+    grid = SiteGrid(points, CFG.cell_m)
     emissions = [grid.emission(p, CFG.det_sigma_m, CFG.miss_cost) for p in points]
     u = _displacements(frame_t, dead_reckoned(phone), 0.0, np.ones(len(frame_t), complex))
     cells = _viterbi_path(grid, emissions, u, _step_costs(grid.cell, 1 / FPS, CFG))
@@ -339,7 +339,7 @@ def test_a_carrier_who_walks_out_of_view_is_still_found_in_it():
 
 
 def _door_costs(points: list[np.ndarray], cfg: RetrackConfig = CFG):
-    grid = _Grid(points, cfg.cell_m)
+    grid = SiteGrid(points, cfg.cell_m)
     doors = grid.doors(points, cfg)
 
     def at(x: float, y: float) -> float:
@@ -422,7 +422,7 @@ def test_absolute_layer_costs_compare_across_passes() -> None:
     from it pays for every frame it is off (up to the miss cost), whatever pass it was in."""
     n = 30
     points = [np.array([[5.0, 5.0]]) for _ in range(n)]
-    grid = _Grid(points, CFG.cell_m)
+    grid = SiteGrid(points, CFG.cell_m)
     emissions = [grid.emission(p, CFG.det_sigma_m, CFG.miss_cost) for p in points]
     steps = _step_costs(grid.cell, 1 / 3, CFG)
     still = np.zeros((n, 1), complex)
@@ -500,7 +500,7 @@ def test_a_straight_walk_is_published_on_the_evidence_of_the_phones_rssi():
         (carrier[k][None] + rng.normal(0, 0.3, (1, 2))) if inside[k] else np.empty((0, 2))
         for k in range(n)
     ]
-    grid = _Grid([np.array([[-10.0, 0.0], [26.0, 10.0]])], CFG.cell_m)
+    grid = SiteGrid([np.array([[-10.0, 0.0], [26.0, 10.0]])], CFG.cell_m)
     cells = np.round((carrier - grid.lo) / grid.cell).astype(int)[:, ::-1]
     cells[~inside] = -1
     u = np.r_[0, np.diff(carrier[:, 0])] + 0j
@@ -632,7 +632,7 @@ def test_a_path_another_alignment_fits_as_well_is_not_published(twin):
     frame_t, points, carrier = _twin_scene(6, twin)
     n = len(frame_t)
     phone = _phone(carrier, frame_t, 0.0)
-    grid = _Grid(points, CFG.cell_m).with_visits(points, CFG)
+    grid = SiteGrid(points, CFG.cell_m).with_visits(points, CFG)
     follow = _Follower(frame_t, points, {"m": phone}, grid, AlignConfig(), CFG, False)
     found = follow("m", 0.0, np.ones(n, complex), False, None)
     assert found is not None and _share_on(found.xy, carrier, n) > 0.9
@@ -723,7 +723,7 @@ def test_two_phones_on_one_of_a_pair_are_parted_onto_both():
     frame_t, points, one, two = _pair_scene(7)
     n = len(frame_t)
     phones = {"a": _phone(one, frame_t, 0.0), "b": _phone(two, frame_t, 0.0)}
-    grid = _Grid(points, CFG.cell_m).with_visits(points, CFG)
+    grid = SiteGrid(points, CFG.cell_m).with_visits(points, CFG)
     follow = _Follower(frame_t, points, phones, grid, AlignConfig(), CFG, False)
     out = Retracked()
     found = follow("a", 0.0, np.ones(n, complex), False, None)
@@ -779,7 +779,7 @@ def test_the_cheapest_refined_alignment_becomes_the_path(sigma):
     n = len(frame_t)
     phone = _phone(carrier, frame_t, 0.0)
     cfg = RetrackConfig(settle_walk_sigma_mps=sigma)
-    grid = _Grid(points, cfg.cell_m).with_visits(points, cfg)
+    grid = SiteGrid(points, cfg.cell_m).with_visits(points, cfg)
     follow = _Follower(frame_t, points, {"m": phone}, grid, AlignConfig(), cfg, False)
     # the search's path: the phone read 90 deg off, onto the strangers
     ride = follow("m", 0.0, np.full(n, 1j), False, None)

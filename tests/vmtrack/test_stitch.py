@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from trackctl.logs.messages import TrackState
-from trackctl.vmtrack.online import FrameOut
+from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.stitch import StitchConfig, Tracklet, plan_publication, stitch
 from trackctl.vmtrack.tracker import GroundTrack, TrackerConfig
 

@@ -194,6 +194,8 @@ register_catalog(
                 "withheld_s/*",
                 "ambiguous_s/*",
                 "grouped_s/*",
+                "clear_share/*",
+                "searched/*",
                 "searched_again",
                 "imu_bad_samples",
             ],

@@ -36,18 +36,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from trackctl.vmtrack.align import AlignConfig, Alignment, PairEvidence, best_fit, lag_grid
+from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.motion import PhoneMotion
+from trackctl.vmtrack.stitch import Publication
 from trackctl.vmtrack.tracker import GroundTrack
-
-if TYPE_CHECKING:
-    from trackctl.vmtrack.online import FrameOut
-    from trackctl.vmtrack.stitch import Publication
 
 __all__ = ["IdentifyConfig", "Identities", "dead_reckoned", "identify", "visual_velocity"]
 
@@ -130,6 +127,9 @@ class Identities:
     where not fitted): each phone's alignment over time, as its path implies."""
     placed: dict[str, list[tuple[int, float, float]]] = field(default_factory=dict)
     """MID -> (frame ns, x, y) where the identity put its carrier, in time order."""
+    clear: dict[str, tuple[int, int]] = field(default_factory=dict)
+    """MID -> (frames its path puts the phone on a chain, of them clear: the chain fits, and by
+    ``ratio`` better than any other)."""
 
 
 @dataclass
@@ -331,6 +331,7 @@ def identify(
     ambiguous = np.zeros(n_f, bool)
     for mid, path in paths.items():
         cost = costs[mid]
+        out.clear[mid] = (int((path >= 0).sum()), int((_clear_path(path, cost, cfg) >= 0).sum()))
         for f in np.flatnonzero(path >= 0):
             row = cost[f]
             mine = row[path[f]]

@@ -13,17 +13,14 @@ import math
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from trackctl.logs.messages import RssiScan, TrackState
 from trackctl.vmtrack.align import Alignment, CandidateTable, PairEvidence, lag_grid
+from trackctl.vmtrack.config import VmTrackConfig
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.tracker import GroundTrack
-
-if TYPE_CHECKING:
-    from trackctl.vmtrack.config import VmTrackConfig
 
 __all__ = ["IdentityBinder", "BindingStats"]
 

@@ -12,8 +12,6 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -21,6 +19,7 @@ from scipy.spatial import cKDTree
 from trackctl.logs.messages import RssiScan, TrackState
 from trackctl.vmtrack.config import Mode, VmTrackConfig
 from trackctl.vmtrack.identity import IdentityBinder
+from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.tracker import (
     GroundTrack,
     associate,
@@ -29,18 +28,10 @@ from trackctl.vmtrack.tracker import (
     update_many,
 )
 
-__all__ = ["FrameOut", "OnlineTracker", "Prediction"]
+__all__ = ["OnlineTracker", "Prediction"]
 
 Prediction = tuple[np.ndarray, float, bool]
 """Where a track can be: ground xy, search radius (m), undetected in the last frame."""
-
-
-@dataclass
-class FrameOut:
-    """One frame's tracks: (track, MID bound now, state, index into the track's history)."""
-
-    t_ns: int
-    rows: Sequence[tuple[GroundTrack, str | None, TrackState, int]]
 
 
 class OnlineTracker:

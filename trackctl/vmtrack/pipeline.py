@@ -46,8 +46,9 @@ from trackctl.vmtrack.config import Identity, Mode, Source, VmTrackConfig
 from trackctl.vmtrack.frames import FrameDetector, detections_topic, image_cameras
 from trackctl.vmtrack.identify import Identities, identify
 from trackctl.vmtrack.identity import BindingStats, IdentityBinder
+from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.motion import PhoneMotion
-from trackctl.vmtrack.online import FrameOut, OnlineTracker
+from trackctl.vmtrack.online import OnlineTracker
 from trackctl.vmtrack.radio import RadioEvidence
 from trackctl.vmtrack.retrack import PhoneTrack, Retracked, retrack
 from trackctl.vmtrack.scene import scene_update
@@ -297,7 +298,7 @@ def _silent(done: int, total: int | None, stage: str | None = None) -> None:
     """No progress to report to."""
 
 
-_RETRACK_ONLY = ("withheld_s/", "ambiguous_s/", "grouped_s/")
+_RETRACK_ONLY = ("withheld_s/", "ambiguous_s/", "grouped_s/", "searched/")
 _BINDINGS = ("bindings", "checkpoint_bindings", "offline_bindings")
 
 
@@ -575,6 +576,7 @@ def _write_and_score(
             cfg.phones_aligned,
             radio,
             progress,
+            _trusted(ids, cfg.retrack.trust_clear_share),
         )
         _take_retrack_alignments(ids.alignments, retracked)
     published: dict[str, int] = {}
@@ -676,6 +678,18 @@ def _write_and_score(
     }
 
 
+def _trusted(ids: Identities, share: float | None) -> set[str]:
+    """The phones whose offline identity is clear in at least ``share`` of the frames it puts
+    them on a chain, with an alignment fitted (:attr:`RetrackConfig.trust_clear_share`)."""
+    if share is None:
+        return set()
+    return {
+        mid
+        for mid, (on, clear) in ids.clear.items()
+        if on and clear >= share * on and mid in ids.known
+    }
+
+
 def _radio_metrics(retracked: Retracked) -> dict[str, float | int | None]:
     """Each AP's path loss as the re-tracking fitted it (a site's calibration, from the log)."""
     out: dict[str, float | int | None] = {}
@@ -713,10 +727,12 @@ def _identity_metrics(
     ids: Identities | None,
     stats: BindingStats,
     phones: dict[str, PhoneMotion],
-    retracked: dict[str, PhoneTrack] | None = None,
+    retracked: Retracked | None = None,
 ) -> dict[str, float | int | None]:
-    """Identity figures a log without ground truth can give: ambiguity and each phone's
-    estimated alignment (clock offset, device-to-walk yaw, step scale)."""
+    """Identity figures a log without ground truth can give: ambiguity, each phone's
+    estimated alignment (clock offset, device-to-walk yaw, step scale), the share of its
+    identity that is clear and whether the re-tracking searched its alignment (1) or started
+    from its identity's (0)."""
     if not phones:
         return {}
     out: dict[str, float | int | None] = {
@@ -724,15 +740,37 @@ def _identity_metrics(
         "unanchored_frames": ids.unanchored_frames if ids else None,
     }
     for mid in sorted(phones):
-        al = ids.alignments.get(mid) if ids else None
-        out[f"clock_offset_s/{mid}"] = round(al.lag_s, 3) if al else None
-        out[f"yaw_offset_deg/{mid}"] = round(al.yaw_deg, 1) if al else None
-        out[f"step_scale/{mid}"] = round(al.scale, 3) if al else None
-        pt = retracked.get(mid) if retracked else None
-        out[f"withheld_s/{mid}"] = round(pt.withheld_s, 1) if pt else None
-        out[f"ambiguous_s/{mid}"] = round(pt.ambiguous_s, 1) if pt else None
-        out[f"grouped_s/{mid}"] = round(pt.grouped_s, 1) if pt else None
+        out.update(_phone_figures(mid, ids, retracked))
     return out
+
+
+def _phone_figures(
+    mid: str, ids: Identities | None, retracked: Retracked | None
+) -> dict[str, float | int | None]:
+    """One phone's figures of :func:`_identity_metrics` (null where the stage that gives them
+    did not run)."""
+    al = ids.alignments.get(mid) if ids else None
+    pt = retracked.get(mid) if retracked else None
+    on, clear = ids.clear.get(mid, (0, 0)) if ids else (0, 0)
+    searched = int(mid in retracked.searched) if pt and retracked else None
+    if al is None:
+        aligned: dict[str, float | int | None] = dict.fromkeys(
+            (f"clock_offset_s/{mid}", f"yaw_offset_deg/{mid}", f"step_scale/{mid}")
+        )
+    else:
+        aligned = {
+            f"clock_offset_s/{mid}": round(al.lag_s, 3),
+            f"yaw_offset_deg/{mid}": round(al.yaw_deg, 1),
+            f"step_scale/{mid}": round(al.scale, 3),
+        }
+    return {
+        **aligned,
+        f"withheld_s/{mid}": round(pt.withheld_s, 1) if pt else None,
+        f"ambiguous_s/{mid}": round(pt.ambiguous_s, 1) if pt else None,
+        f"grouped_s/{mid}": round(pt.grouped_s, 1) if pt else None,
+        f"clear_share/{mid}": round(clear / on, 3) if on else None,
+        f"searched/{mid}": searched,
+    }
 
 
 def _no_truth_metrics(

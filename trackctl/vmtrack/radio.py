@@ -37,15 +37,13 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, overload
+from typing import overload
 
 import numpy as np
 from scipy.special import ndtr
 
 from trackctl.logs.messages import RssiScan
-
-if TYPE_CHECKING:
-    from trackctl.vmtrack.retrack import _Grid
+from trackctl.vmtrack.grid import SiteGrid
 
 __all__ = ["PathLoss", "RadioConfig", "RadioEvidence", "fit_path_loss"]
 
@@ -246,13 +244,13 @@ class RadioEvidence:
         return out
 
     def emissions(
-        self, mid: str, grid: _Grid, base: Sequence[np.ndarray | float]
+        self, mid: str, grid: SiteGrid, base: Sequence[np.ndarray | float]
     ) -> Sequence[np.ndarray | float]:
         """``base`` (each frame's cost per cell) with this phone's scans added (computed when a
         frame is read: one phone's grids are not all held)."""
         return _WithRadio(self, mid, grid, base, np.arange(len(base)))
 
-    def cost(self, mid: str, grid: _Grid, k: int) -> np.ndarray | None:
+    def cost(self, mid: str, grid: SiteGrid, k: int) -> np.ndarray | None:
         """The in-view cost per cell of frame ``k``'s scans of phone ``mid``; None without."""
         seen = self.by_frame.get(k)
         if not seen:
@@ -281,7 +279,7 @@ class RadioEvidence:
         return out
 
     def _field(
-        self, grid: _Grid, model: PathLoss, ap: tuple[float, float]
+        self, grid: SiteGrid, model: PathLoss, ap: tuple[float, float]
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """One AP's expected level on ``grid`` (dBm), the cost of not hearing a phone there and
         the log of the chance to hear it: what :func:`_scan_cost` computes for every scan,
@@ -295,7 +293,7 @@ class RadioEvidence:
             got = self._fields[key] = (mu, -np.log1p(-p), np.log(p))
         return got
 
-    def _distance(self, grid: _Grid, ap: tuple[float, float]) -> np.ndarray:
+    def _distance(self, grid: SiteGrid, ap: tuple[float, float]) -> np.ndarray:
         key = (id(grid), ap)
         d = self._dist.get(key)
         if d is None:
@@ -339,7 +337,7 @@ class _WithRadio(Sequence[np.ndarray | float]):
         self,
         radio: RadioEvidence,
         mid: str,
-        grid: _Grid,
+        grid: SiteGrid,
         base: Sequence[np.ndarray | float],
         order: np.ndarray,
     ) -> None:

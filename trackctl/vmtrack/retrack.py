@@ -45,15 +45,14 @@ cell), about 6 bytes per 0.2 m cell and frame in all: a 20 x 15 m lobby (with 2 
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy import ndimage
-from scipy.spatial import cKDTree
 
 from trackctl.progress import Progress
 from trackctl.vmtrack.align import AlignConfig, best_fit, lag_grid
+from trackctl.vmtrack.grid import SiteGrid, Visit
 from trackctl.vmtrack.identify import dead_reckoned, visual_velocity
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.radio import PathLoss, RadioConfig, RadioEvidence
@@ -191,6 +190,16 @@ class RetrackConfig:
     ``min_stretch_s`` or more are settled jointly, the one that loses least without them
     followed again without them (:func:`_exclusive`). Off for a site where people carry two
     phones (both would then be moved apart)."""
+    trust_clear_share: float | None = 0.8
+    """A phone whose offline identity is clear (:attr:`~trackctl.vmtrack.identify.Identities.
+    clear`: its chain fits, by ``IdentifyConfig.ratio`` better than any other) in at least this
+    share of the frames it puts the phone on a chain is followed from that identity's
+    alignment, refitted, and its alignment is not searched: the search takes ~95 % of the
+    re-tracking's time (~50 s per phone and 5 min of log) and exists for crowds, where a
+    chain's alignment is learnt from the wrong walker as often as not. Measured (stop 51):
+    the simulated lobby's phones read 0.84-0.96, the real crowds' 0.01-0.75 (`students001`
+    0.01-0.24, `crowds_zara01` 0.30-0.75, `crowds_zara03` 0.48-0.58, `biwi_hotel` 0.32-0.66),
+    so crowds are searched as before. None: every phone searched (``--refine full``)."""
     refine_passes: int = 2
     velocity_window_s: float = 7.0
     """Centred window of the least-squares velocity of the path's detections and of the phone's
@@ -240,110 +249,8 @@ class Retracked(dict[str, PhoneTrack]):
         super().__init__()
         self.calibration: dict[str, PathLoss] = {}
         self.searched_again: list[str] = []
-
-
-_Visit = tuple[np.ndarray, "float | np.ndarray"]
-"""Door costs per cell, and the cost of a frame out of view (one for all, or per frame)."""
-
-
-class _Grid:
-    """A site-sized position grid with the frames' detection-distance emissions."""
-
-    def __init__(self, points: Sequence[np.ndarray], cell_m: float) -> None:
-        pts = [p for p in points if len(p)]
-        allp = np.vstack(pts) if pts else np.zeros((1, 2))
-        self.lo = allp.min(axis=0) - 2.0
-        hi = allp.max(axis=0) + 2.0
-        self.cell = cell_m
-        size = ((hi - self.lo) / cell_m).astype(int) + 1
-        self.shape = (int(size[1]), int(size[0]))
-        self.visit: _Visit | None = None
-        """Door costs per cell and the cost per frame out of view (None: always in view)."""
-
-    def with_visits(self, points: Sequence[np.ndarray], cfg: RetrackConfig) -> _Grid:
-        """This grid, with the path's one visit to the view set up (``cfg.away_cost``)."""
-        if cfg.away_cost is not None:
-            self.visit = (self.doors(points, cfg), cfg.away_cost)
-        return self
-
-    def emission(self, pts: np.ndarray, sigma: float, cap: float) -> np.ndarray | float:
-        """Cost of each cell at one frame: min(d^2 / 2 sigma^2, cap), d the distance to the
-        nearest detection (a distance transform; detections snapped to cells)."""
-        if not len(pts):
-            return cap
-        mask = np.ones(self.shape, bool)
-        mask[self.cells_of(pts)[0]] = False
-        if mask.all():
-            return cap
-        dist = ndimage.distance_transform_edt(mask, sampling=self.cell)
-        return np.minimum(dist * dist / (2 * sigma * sigma), cap).astype(np.float32)
-
-    def cells_of(self, pts: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
-        """The (rows, cols) index of the cells ``pts`` (n, 2) snap to, for those on the grid,
-        and which those are (n,)."""
-        ij = np.round((pts - self.lo) / self.cell).astype(int)
-        ok = (ij >= 0).all(axis=1) & (ij[:, 0] < self.shape[1]) & (ij[:, 1] < self.shape[0])
-        return (ij[ok, 1], ij[ok, 0]), ok
-
-    def xy(self, cells: np.ndarray) -> np.ndarray:
-        """Positions of (row, col) cells; NaN where the path is out of view (row -1)."""
-        out = (self.lo + cells[:, ::-1] * self.cell).astype(float)
-        out[cells[:, 0] < 0] = np.nan
-        return out
-
-    def doors(self, points: Sequence[np.ndarray], cfg: RetrackConfig) -> np.ndarray:
-        """Cost of coming into view or leaving it at each cell: ``door_cost`` at the doors and
-        outside the covered area (every cell a detection fell in over the log, closed over 1 m
-        gaps and filled), ``wall_cost`` inside it. The doors are its edge, or where the edge
-        sees people come and go (:attr:`RetrackConfig.door_ratio`)."""
-        seen = self._counts(points)
-        r = max(int(round(1.0 / self.cell)), 1)
-        covered = ndimage.binary_closing(seen > 0, structure=np.ones((2 * r + 1, 2 * r + 1)))
-        covered = ndimage.binary_fill_holes(covered)
-        depth = ndimage.distance_transform_edt(np.pad(covered, 1), sampling=self.cell)[1:-1, 1:-1]
-        edge = covered & (depth <= cfg.edge_m)
-        inner = covered & ~edge
-        if cfg.door_ratio is None or seen[inner].sum() == 0:
-            return np.where(inner, cfg.wall_cost, cfg.door_cost).astype(np.float32)
-        ends = self._counts(points, cfg)
-        sigma = cfg.door_smooth_m / self.cell
-        s_ends = ndimage.gaussian_filter(np.where(edge, ends, 0.0), sigma)
-        s_seen = ndimage.gaussian_filter(np.where(edge, seen, 0.0), sigma)
-        rate = s_ends / np.maximum(s_seen, 1e-9)
-        door = (
-            edge & (s_seen > 0) & (rate >= cfg.door_ratio * ends[inner].sum() / seen[inner].sum())
-        )
-        # outside the covered area: a door within reach of one (people walk in through it)
-        reach = max(int(round((cfg.edge_m + 2.0) / self.cell)), 1)
-        door |= ~covered & ndimage.binary_dilation(door, iterations=reach)
-        return np.where(door, cfg.door_cost, cfg.wall_cost).astype(np.float32)
-
-    def _counts(
-        self, points: Sequence[np.ndarray], ends: RetrackConfig | None = None
-    ) -> np.ndarray:
-        """Detections per cell over the log; with ``ends``, how many of them begin or end
-        (half a count each: nobody within ``door_link_m`` in the ``door_frames`` frames before,
-        or after; the log's first and last frames count neither)."""
-        out = np.zeros(self.shape)
-        trees = [cKDTree(p) if len(p) else None for p in points] if ends else []
-        for k, p in enumerate(points):
-            if not len(p):
-                continue
-            at, ok = self.cells_of(p)
-            if ends is None:
-                np.add.at(out, at, 1.0)
-                continue
-            m = ends.door_frames
-            for side in (-1, 1):
-                if not 0 <= k + side * m < len(points):
-                    continue
-                near = np.zeros(int(ok.sum()), bool)
-                for j in range(k + side, k + side * (m + 1), side):
-                    tree = trees[j]
-                    if tree is not None:
-                        near |= tree.query(p[ok])[0] < ends.door_link_m
-                np.add.at(out, at, (~near).astype(float) / 2)
-        return out
+        self.searched: list[str] = []
+        """The phones whose alignment was searched (the rest started from their identity's)."""
 
 
 def _reversed(away: float | np.ndarray) -> float | np.ndarray:
@@ -496,14 +403,14 @@ def _displacements(
 
 
 def _layer_costs(
-    grid: _Grid,
+    grid: SiteGrid,
     emissions: Sequence[np.ndarray | float],
     walks: np.ndarray,
     steps: np.ndarray,
     turn_cost: float | None = None,
     jump_cost: float | None = None,
     free: np.ndarray | None = None,
-    visit: _Visit | None = None,
+    visit: Visit | None = None,
     absolute: bool = False,
 ) -> np.ndarray:
     """One pass of the Viterbi recursion over (layer, position) without back-pointers: at each
@@ -568,11 +475,11 @@ def _layer_costs(
 
 
 def _viterbi_path(
-    grid: _Grid,
+    grid: SiteGrid,
     emissions: Sequence[np.ndarray | float],
     u: np.ndarray,
     steps: np.ndarray,
-    visit: _Visit | None = None,
+    visit: Visit | None = None,
 ) -> np.ndarray:
     """The cheapest path's cell (row, col) at every frame; (-1, -1) where it is out of view.
     ``visit``: (door costs per cell, cost per frame out of view): the path is out of view,
@@ -669,9 +576,9 @@ def _backtrack(
 
 def _search_field(
     points: Sequence[np.ndarray], cfg: RetrackConfig
-) -> tuple[_Grid, list[np.ndarray | float]]:
+) -> tuple[SiteGrid, list[np.ndarray | float]]:
     """The search's coarser grid and every frame's emissions on it (the same for all phones)."""
-    grid = _Grid(points, cfg.search_cell_m).with_visits(points, cfg)
+    grid = SiteGrid(points, cfg.search_cell_m).with_visits(points, cfg)
     return grid, [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
 
 
@@ -680,13 +587,13 @@ class _Searcher:
     """One phone's alignment search over the coarse grid (:func:`_search`)."""
 
     frame_t: np.ndarray
-    grid: _Grid
+    grid: SiteGrid
     emissions: Sequence[np.ndarray | float]
     steps: np.ndarray
     track: np.ndarray
     cfg: RetrackConfig
     carry_changes: np.ndarray | None
-    visit: _Visit | None
+    visit: Visit | None
     lags: np.ndarray
     """Clock offsets of the offset and scale pass."""
     candidates: list[tuple[float, np.ndarray]] = field(default_factory=list)
@@ -803,8 +710,8 @@ def _search(
     acfg: AlignConfig,
     cfg: RetrackConfig,
     carry_changes: np.ndarray | None = None,
-    space: tuple[_Grid, Sequence[np.ndarray | float]] | None = None,
-    visit: _Visit | None = None,
+    space: tuple[SiteGrid, Sequence[np.ndarray | float]] | None = None,
+    visit: Visit | None = None,
     alternatives: list[tuple[float, np.ndarray]] | None = None,
 ) -> tuple[float, np.ndarray] | None:
     """The phone's alignment found from the detections alone (None without a walk), the
@@ -893,7 +800,7 @@ def _yaw_changes_cost(a: np.ndarray, cfg: RetrackConfig, free: np.ndarray | None
 
 def _yaw_search(
     frame_t: np.ndarray,
-    grid: _Grid,
+    grid: SiteGrid,
     emissions: Sequence[np.ndarray | float],
     steps: np.ndarray,
     track: np.ndarray,
@@ -901,7 +808,7 @@ def _yaw_search(
     scale: float,
     cfg: RetrackConfig,
     carry_changes: np.ndarray | None = None,
-    visit: _Visit | None = None,
+    visit: Visit | None = None,
     steady: bool = False,
 ) -> np.ndarray | None:
     """The walk's rotation per frame (complex, with ``scale``): the yaw through which the
@@ -1032,7 +939,7 @@ def _nearest(points: np.ndarray, xy: Sequence[float] | np.ndarray, within_m: flo
 def _publish(
     frame_t: np.ndarray,
     points: Sequence[np.ndarray],
-    grid: _Grid,
+    grid: SiteGrid,
     cells: np.ndarray,
     u: np.ndarray,
     cfg: RetrackConfig,
@@ -1144,9 +1051,9 @@ def _evidence(
 def _with_radio(
     radio: RadioEvidence | None,
     mid: str,
-    grid: _Grid,
+    grid: SiteGrid,
     emissions: Sequence[np.ndarray | float],
-) -> tuple[Sequence[np.ndarray | float], _Visit | None]:
+) -> tuple[Sequence[np.ndarray | float], Visit | None]:
     """The frames' emissions and the visit's costs of one phone: with its RSSI when there is."""
     if not radio or not radio.cfg.enabled:
         return emissions, grid.visit
@@ -1166,6 +1073,7 @@ def retrack(
     aligned: bool = False,
     radio: RadioEvidence | None = None,
     progress: Progress | None = None,
+    trusted: Collection[str] = frozenset(),
 ) -> Retracked:
     """Each phone's carrier re-tracked through the raw detections ``points`` (one (n, 2) array
     per frame at ``frame_t``). ``start``: a first clock offset and ``a`` per frame per phone (the
@@ -1174,12 +1082,14 @@ def retrack(
     ``start`` is used as it is, neither searched nor refitted. ``radio``: the phones' RSSI at
     the site's APs (:mod:`~trackctl.vmtrack.radio`), weighed with the detections; with its
     ``fit``, each AP's path loss is fitted where the paths put the carriers and the paths are
-    found again under it (:func:`_calibrated_pass`)."""
+    found again under it (:func:`_calibrated_pass`). ``trusted``: phones whose ``start`` is
+    their carrier's (:attr:`RetrackConfig.trust_clear_share`): followed from it, refitted, not
+    searched."""
     out = Retracked()
     n = len(frame_t)
     if n < 2:
         return out
-    grid = _Grid(points, cfg.cell_m).with_visits(points, cfg)
+    grid = SiteGrid(points, cfg.cell_m).with_visits(points, cfg)
     # the frames' distance grids (float32), the search's coarser ones, one path's back-pointers
     coarse = (cfg.cell_m / cfg.search_cell_m) ** 2
     need = int(n * grid.shape[0] * grid.shape[1] * (4 + 4 * coarse + 1))
@@ -1198,15 +1108,19 @@ def retrack(
             progress(k, len(follow.walks), "re-tracking phones")
         if len(track) < 2:
             continue
-        # the nominal step (scale 1) to start: in a crowd the chains' scale is another
-        # walker's as often as not, and the refit finds the phone's own
+        # a searched phone starts from the nominal step (scale 1) at the chains' clock offset:
+        # in a crowd the chains' scale is another walker's as often as not, and the refit
+        # finds the phone's own; a trusted one from the chains' whole alignment
         lag, a0 = start.get(mid, (0.0, np.full(n, 1.0 + 0j)))
-        got = follow(mid, lag, a0, not aligned, radio)
+        search = not aligned and mid not in trusted
+        if search:
+            out.searched.append(mid)
+        got = follow(mid, lag, a0, search, radio)
         if got is not None:
             out[mid] = got
     final = radio
     if radio and radio.cfg.enabled and radio.cfg.fit and out:
-        final = _calibrated_pass(follow, out, radio, frame_t, cfg, progress)
+        final = _calibrated_pass(follow, out, radio, frame_t, cfg, progress, trusted)
     for mid, found in out.items():
         out[mid] = follow.settle(mid, found, final)
     if cfg.exclusive:
@@ -1276,6 +1190,7 @@ def _calibrated_pass(
     frame_t: np.ndarray,
     cfg: RetrackConfig,
     progress: Progress | None = None,
+    trusted: Collection[str] = frozenset(),
 ) -> RadioEvidence:
     """The APs' calibration from where the first pass put the carriers (on detections), then
     each path again under it, twice: from the first pass's alignment (refitted, not searched)
@@ -1283,7 +1198,7 @@ def _calibrated_pass(
     model, whose errors (7 dB at 10 m) can make a wrong alignment the cheapest, and a refit
     from it only finds the nearest optimum (`students001` seed 3: a phone 2 s off its clock
     offset on the walker ahead of its carrier, right in 43 of 114 frames, 114 searched
-    again)."""
+    again). A ``trusted`` phone is refitted only (:attr:`RetrackConfig.trust_clear_share`)."""
     on = {mid: sorted(tr.seen) for mid, tr in out.items()}
     calibrated = radio.calibrated(
         {mid: (frame_t[ks], np.array([out[mid].xy[k] for k in ks])) for mid, ks in on.items()}
@@ -1293,7 +1208,7 @@ def _calibrated_pass(
         if progress is not None:
             progress(k, len(out), "re-tracking phones under the fitted radio model")
         again = follow(mid, first.lag_s, first.a, False, calibrated)
-        if not follow.aligned:
+        if not follow.aligned and mid not in trusted:
             searched = follow(mid, first.lag_s, first.a, True, calibrated)
             if searched is not None and (
                 again is None
@@ -1329,7 +1244,7 @@ class _Follower:
         frame_t: np.ndarray,
         points: Sequence[np.ndarray],
         phones: dict[str, PhoneMotion],
-        grid: _Grid,
+        grid: SiteGrid,
         acfg: AlignConfig,
         cfg: RetrackConfig,
         aligned: bool,
@@ -1344,7 +1259,7 @@ class _Follower:
             else _step_costs(grid.cell, self.dt, cfg, cfg.settle_walk_sigma_mps)
         )
         self.emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
-        self.space: tuple[_Grid, list[np.ndarray | float]] | None = None
+        self.space: tuple[SiteGrid, list[np.ndarray | float]] | None = None
         self.walks = {mid: dead_reckoned(phones[mid]) for mid in sorted(phones)}
         self.alternatives: dict[str, list[tuple[float, np.ndarray]]] = {}
         """Each phone's other alignments from its last search."""

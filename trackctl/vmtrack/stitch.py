@@ -24,16 +24,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
+from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.tracker import GroundTrack
-
-if TYPE_CHECKING:  # online imports the configuration, which imports this module
-    from trackctl.vmtrack.online import FrameOut
 
 __all__ = ["StitchConfig", "Tracklet", "stitch", "Publication", "plan_publication"]
 

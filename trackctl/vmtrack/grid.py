@@ -1,0 +1,139 @@
+"""The re-tracking's position grid over the site: each frame's detection-distance emissions
+and where a path may come into view or leave it (:mod:`~trackctl.vmtrack.retrack`; the RSSI
+terms of :mod:`~trackctl.vmtrack.radio` are laid on the same grid)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Protocol
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+__all__ = ["DoorModel", "SiteGrid", "Visit"]
+
+
+class DoorModel(Protocol):
+    """Where paths come into view and leave it (the fields of
+    :class:`~trackctl.vmtrack.retrack.RetrackConfig` of the same names)."""
+
+    @property
+    def away_cost(self) -> float | None: ...
+    @property
+    def door_cost(self) -> float: ...
+    @property
+    def wall_cost(self) -> float: ...
+    @property
+    def edge_m(self) -> float: ...
+    @property
+    def door_ratio(self) -> float | None: ...
+    @property
+    def door_link_m(self) -> float: ...
+    @property
+    def door_frames(self) -> int: ...
+    @property
+    def door_smooth_m(self) -> float: ...
+
+
+Visit = tuple[np.ndarray, "float | np.ndarray"]
+"""Door costs per cell, and the cost of a frame out of view (one for all, or per frame)."""
+
+
+class SiteGrid:
+    """A site-sized position grid with the frames' detection-distance emissions."""
+
+    def __init__(self, points: Sequence[np.ndarray], cell_m: float) -> None:
+        pts = [p for p in points if len(p)]
+        allp = np.vstack(pts) if pts else np.zeros((1, 2))
+        self.lo = allp.min(axis=0) - 2.0
+        hi = allp.max(axis=0) + 2.0
+        self.cell = cell_m
+        size = ((hi - self.lo) / cell_m).astype(int) + 1
+        self.shape = (int(size[1]), int(size[0]))
+        self.visit: Visit | None = None
+        """Door costs per cell and the cost per frame out of view (None: always in view)."""
+
+    def with_visits(self, points: Sequence[np.ndarray], cfg: DoorModel) -> SiteGrid:
+        """This grid, with the path's one visit to the view set up (``cfg.away_cost``; None:
+        the path is in view throughout)."""
+        if cfg.away_cost is not None:
+            self.visit = (self.doors(points, cfg), cfg.away_cost)
+        return self
+
+    def emission(self, pts: np.ndarray, sigma: float, cap: float) -> np.ndarray | float:
+        """Cost of each cell at one frame: min(d^2 / 2 sigma^2, cap), d the distance to the
+        nearest detection (a distance transform; detections snapped to cells)."""
+        if not len(pts):
+            return cap
+        mask = np.ones(self.shape, bool)
+        mask[self.cells_of(pts)[0]] = False
+        if mask.all():
+            return cap
+        dist = ndimage.distance_transform_edt(mask, sampling=self.cell)
+        return np.minimum(dist * dist / (2 * sigma * sigma), cap).astype(np.float32)
+
+    def cells_of(self, pts: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+        """The (rows, cols) index of the cells ``pts`` (n, 2) snap to, for those on the grid,
+        and which those are (n,)."""
+        ij = np.round((pts - self.lo) / self.cell).astype(int)
+        ok = (ij >= 0).all(axis=1) & (ij[:, 0] < self.shape[1]) & (ij[:, 1] < self.shape[0])
+        return (ij[ok, 1], ij[ok, 0]), ok
+
+    def xy(self, cells: np.ndarray) -> np.ndarray:
+        """Positions of (row, col) cells; NaN where the path is out of view (row -1)."""
+        out = (self.lo + cells[:, ::-1] * self.cell).astype(float)
+        out[cells[:, 0] < 0] = np.nan
+        return out
+
+    def doors(self, points: Sequence[np.ndarray], cfg: DoorModel) -> np.ndarray:
+        """Cost of coming into view or leaving it at each cell: ``door_cost`` at the doors and
+        outside the covered area (every cell a detection fell in over the log, closed over 1 m
+        gaps and filled), ``wall_cost`` inside it. The doors are its edge, or where the edge
+        sees people come and go (:attr:`~trackctl.vmtrack.retrack.RetrackConfig.door_ratio`)."""
+        seen = self._counts(points)
+        r = max(int(round(1.0 / self.cell)), 1)
+        covered = ndimage.binary_closing(seen > 0, structure=np.ones((2 * r + 1, 2 * r + 1)))
+        covered = ndimage.binary_fill_holes(covered)
+        depth = ndimage.distance_transform_edt(np.pad(covered, 1), sampling=self.cell)[1:-1, 1:-1]
+        edge = covered & (depth <= cfg.edge_m)
+        inner = covered & ~edge
+        if cfg.door_ratio is None or seen[inner].sum() == 0:
+            return np.where(inner, cfg.wall_cost, cfg.door_cost).astype(np.float32)
+        ends = self._counts(points, cfg)
+        sigma = cfg.door_smooth_m / self.cell
+        s_ends = ndimage.gaussian_filter(np.where(edge, ends, 0.0), sigma)
+        s_seen = ndimage.gaussian_filter(np.where(edge, seen, 0.0), sigma)
+        rate = s_ends / np.maximum(s_seen, 1e-9)
+        door = (
+            edge & (s_seen > 0) & (rate >= cfg.door_ratio * ends[inner].sum() / seen[inner].sum())
+        )
+        # outside the covered area: a door within reach of one (people walk in through it)
+        reach = max(int(round((cfg.edge_m + 2.0) / self.cell)), 1)
+        door |= ~covered & ndimage.binary_dilation(door, iterations=reach)
+        return np.where(door, cfg.door_cost, cfg.wall_cost).astype(np.float32)
+
+    def _counts(self, points: Sequence[np.ndarray], ends: DoorModel | None = None) -> np.ndarray:
+        """Detections per cell over the log; with ``ends``, how many of them begin or end
+        (half a count each: nobody within ``door_link_m`` in the ``door_frames`` frames before,
+        or after; the log's first and last frames count neither)."""
+        out = np.zeros(self.shape)
+        trees = [cKDTree(p) if len(p) else None for p in points] if ends else []
+        for k, p in enumerate(points):
+            if not len(p):
+                continue
+            at, ok = self.cells_of(p)
+            if ends is None:
+                np.add.at(out, at, 1.0)
+                continue
+            m = ends.door_frames
+            for side in (-1, 1):
+                if not 0 <= k + side * m < len(points):
+                    continue
+                near = np.zeros(int(ok.sum()), bool)
+                for j in range(k + side, k + side * (m + 1), side):
+                    tree = trees[j]
+                    if tree is not None:
+                        near |= tree.query(p[ok])[0] < ends.door_link_m
+                np.add.at(out, at, (~near).astype(float) / 2)
+        return out
