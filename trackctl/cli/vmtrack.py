@@ -70,8 +70,8 @@ def vm_track(
         typer.Option(
             help="Re-tracking: auto (a phone whose identity is clear starts from its alignment, "
             "the others' are searched; the report's searched/<MID> says which) or full (every "
-            "phone's alignment searched: ~20x the time on a log of clear identities, for "
-            "+0.000-0.005 IDF1 on the simulated lobby).",
+            "phone's alignment searched: ~20x the time where identities are clear; on the "
+            "simulated lobby IDF1 moved by < 0.001).",
         ),
     ] = "auto",
     visits: Annotated[
