@@ -544,6 +544,20 @@ def _bridged(
     return None if pnp is None else (pnp, out[1])
 
 
+def _by_product_poses(
+    bridge: tuple[Pose, np.ndarray] | None, fix: np.ndarray | None
+) -> tuple[Pose | None, Pose | None]:
+    """The I-Cam and Basic modes' poses at a robot frame: the I-Cam fix (heading 0), and the
+    fix with the bridged heading, else the bridged pose."""
+    icam_pose = None if fix is None else (float(fix[0]), float(fix[1]), 0.0)
+    basic_pose: Pose | None = None
+    if fix is not None:
+        basic_pose = (float(fix[0]), float(fix[1]), bridge[0][2] if bridge else 0.0)
+    elif bridge is not None:
+        basic_pose = bridge[0]
+    return icam_pose, basic_pose
+
+
 @dataclass
 class RobotPassStats:
     """Counters of the robot pass (reported)."""
@@ -737,17 +751,9 @@ class RobotPass:
         # bridging-alone scores see it
         bridge = raw if raw is not None and _usable_start(raw[1], self.cfg.max_sigma_m) else None
         fix = self.icam.at(t_ns)
-        if bridge is not None:
-            self.stats.bridge_fixes += 1
-        if fix is not None:
-            self.stats.icam_fixes += 1
+        self._count_fixes(bridge, fix)
         # every mode's estimate comes out of the same pass (I-Cam and Basic are by-products)
-        icam_pose = None if fix is None else (float(fix[0]), float(fix[1]), 0.0)
-        basic_pose: Pose | None = None
-        if fix is not None:
-            basic_pose = (float(fix[0]), float(fix[1]), bridge[0][2] if bridge else 0.0)
-        elif bridge is not None:
-            basic_pose = bridge[0]
+        icam_pose, basic_pose = _by_product_poses(bridge, fix)
         self.ekf.t_ns = t_ns
         fused = self._ekf_update(t_ns, bridge, obs)
         if fused or fix is not None or bridge is not None:
@@ -755,27 +761,42 @@ class RobotPass:
         self.bridge_only.append((t_ns, None if raw is None else raw[0]))
         self.other[Mode.ICAM].append((t_ns, icam_pose))
         self.other[Mode.BASIC].append((t_ns, basic_pose))
-        if self.ekf.initialized:
-            if self.cfg.mode is Mode.FULL:
-                self.stats.frames_with_pose += 1
-            if self.ekf.smoother is not None:
-                # the smoothed covariance also counts the map's and the cameras' systematic
-                # errors as independent between fixes, and reads ~10x too sure of itself: the
-                # std reported with a smoothed pose is the filter's (the larger of the two)
-                self._causal_sigma[t_ns] = self.ekf.sigma_m
-                self.ekf.output(t_ns)  # emitted by the smoother once it knows what followed
-            else:
-                self._emit_full(t_ns, self.ekf.kf.x, self.ekf.kf.P)
-        else:
+        self._output_full(t_ns)
+        if self.cfg.mode is not Mode.FULL:
+            self._output_by_product(t_ns, icam_pose if self.cfg.mode is Mode.ICAM else basic_pose)
+
+    def _count_fixes(self, bridge: tuple[Pose, np.ndarray] | None, fix: np.ndarray | None) -> None:
+        """Count the frame's usable bridged pose and I-Cam fix."""
+        if bridge is not None:
+            self.stats.bridge_fixes += 1
+        if fix is not None:
+            self.stats.icam_fixes += 1
+
+    def _output_full(self, t_ns: int) -> None:
+        """Full mode's estimate at a robot frame: none before the filter starts; else the
+        filter's pose now, or the smoother's once it knows what followed."""
+        if not self.ekf.initialized:
             self.other[Mode.FULL].append((t_ns, None))
             if self.cfg.mode is Mode.FULL:
                 self.est.append((t_ns, None))
-        if self.cfg.mode is not Mode.FULL:
-            pose = icam_pose if self.cfg.mode is Mode.ICAM else basic_pose
-            self.est.append((t_ns, pose))
-            if pose is not None:
-                self.stats.frames_with_pose += 1
-                self.writer.write(POSE_TOPIC, pose_in_frame(t_ns, pose[0], pose[1], pose[2]), t_ns)
+            return
+        if self.cfg.mode is Mode.FULL:
+            self.stats.frames_with_pose += 1
+        if self.ekf.smoother is not None:
+            # the smoothed covariance also counts the map's and the cameras' systematic
+            # errors as independent between fixes, and reads ~10x too sure of itself: the
+            # std reported with a smoothed pose is the filter's (the larger of the two)
+            self._causal_sigma[t_ns] = self.ekf.sigma_m
+            self.ekf.output(t_ns)  # emitted by the smoother once it knows what followed
+        else:
+            self._emit_full(t_ns, self.ekf.kf.x, self.ekf.kf.P)
+
+    def _output_by_product(self, t_ns: int, pose: Pose | None) -> None:
+        """I-Cam or Basic mode: the run's estimate at a robot frame, written when it has one."""
+        self.est.append((t_ns, pose))
+        if pose is not None:
+            self.stats.frames_with_pose += 1
+            self.writer.write(POSE_TOPIC, pose_in_frame(t_ns, pose[0], pose[1], pose[2]), t_ns)
 
     def _emit_full(self, t_ns: int, x: np.ndarray, p: np.ndarray) -> None:
         """Full mode's pose at a robot frame (smoothed unless ``--no-smooth``)."""

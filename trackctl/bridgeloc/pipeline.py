@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -96,53 +96,90 @@ def _pass_metrics(rp: RobotPass, setup: Setup, cfg: BridgeLocConfig) -> dict[str
     would score it, and the figures that need no truth (coverage, tags, filter consistency)."""
     n_tags = len(rp.tag_map.tags)
     sig = rp.sigmas if cfg.mode is Mode.FULL else None
-    metrics = _score(rp.est, rp.truth, cfg, n_tags, setup.meta, rp.bridge_only, sig)
-    for m, rows in rp.other.items():
-        if rows:  # the same run scored as the other modes would be (same frames, same fixes)
-            sm = _score(rows, rp.truth, cfg, n_tags, {})
-            metrics[f"success_rate_{m.value}"] = sm["success_rate"]
-            metrics[f"error_m_mean_{m.value}"] = sm["error_m_mean"]
-    basic = rp.other.get(Mode.BASIC)
-    if cfg.mode is Mode.FULL and basic:
-        # like for like: this mode's error where bridging alone gives a pose too
-        where = {t for t, p in basic if p is not None}
-        errs = [
-            math.dist(p[:2], rp.truth[t])
-            for t, p in rp.est
-            if p is not None and t in where and t in rp.truth
-        ]
-        metrics["error_m_mean_where_basic"] = round(float(np.mean(errs)), 4) if errs else None
-    metrics.update(asdict(rp.stats))
-    frames = rp.stats.robot_frames
-    metrics["pose_share"] = round(rp.stats.frames_with_pose / frames, 4) if frames else None
-    metrics["fix_share"] = round(rp.stats.frames_with_fix / frames, 4) if frames else None
-    nis = [(v, k) for v, k in rp.ekf.nis_values if math.isfinite(v)]
-    metrics["nis_per_dof_mean"] = round(float(np.mean([v / k for v, k in nis])), 3) if nis else None
-    metrics["nis_within_95"] = (
-        round(float(np.mean([v <= chi2_95(k) for v, k in nis])), 4) if nis else None
+    metrics: dict[str, Any] = dict(
+        _score(rp.est, rp.truth, cfg, n_tags, setup.meta, rp.bridge_only, sig)
     )
-    metrics["icam_static_blobs_dropped"] = rp.icam.static_dropped
-    metrics["tags_mapped"] = n_tags
-    for k, tag in enumerate(rp.tag_map.tags):
-        x, y, z = (round(float(v), 2) for v in tag.center)
-        metrics[f"tag{k}"] = f"{tag.signature} at ({x}, {y}, {z}) m"
-        metrics[f"tag{k}_infra_sightings"] = tag.sightings
-        metrics[f"tag{k}_robot_sightings"] = rp.robot_sightings.get(k, 0)
-    metrics["tag_map_error_m_mean"] = _map_error(rp.tag_map, setup.meta)
+    metrics.update(_other_modes(rp, cfg, n_tags))
+    metrics.update(_where_basic(rp, cfg))
+    metrics.update(asdict(rp.stats))
+    metrics.update(_coverage_and_consistency(rp))
+    metrics.update(_tag_figures(rp, setup, n_tags))
     return metrics
 
 
-def _score(
+def _other_modes(rp: RobotPass, cfg: BridgeLocConfig, n_tags: int) -> dict[str, Any]:
+    """The same run scored as the other modes would be (same frames, same fixes)."""
+    out: dict[str, Any] = {}
+    for m, rows in rp.other.items():
+        if rows:
+            sm = _score(rows, rp.truth, cfg, n_tags, {})
+            out[f"success_rate_{m.value}"] = sm["success_rate"]
+            out[f"error_m_mean_{m.value}"] = sm["error_m_mean"]
+    return out
+
+
+def _where_basic(rp: RobotPass, cfg: BridgeLocConfig) -> dict[str, Any]:
+    """Full mode, like for like: its error where bridging alone gives a pose too."""
+    basic = rp.other.get(Mode.BASIC)
+    if cfg.mode is not Mode.FULL or not basic:
+        return {}
+    where = {t for t, p in basic if p is not None}
+    errs = [
+        math.dist(p[:2], rp.truth[t])
+        for t, p in rp.est
+        if p is not None and t in where and t in rp.truth
+    ]
+    return {"error_m_mean_where_basic": round(float(np.mean(errs)), 4) if errs else None}
+
+
+def _coverage_and_consistency(rp: RobotPass) -> dict[str, Any]:
+    """Shares of robot frames with a pose and with a fix; the filter's NIS figures."""
+    frames = rp.stats.robot_frames
+    nis = [(v, k) for v, k in rp.ekf.nis_values if math.isfinite(v)]
+    return {
+        "pose_share": round(rp.stats.frames_with_pose / frames, 4) if frames else None,
+        "fix_share": round(rp.stats.frames_with_fix / frames, 4) if frames else None,
+        "nis_per_dof_mean": round(float(np.mean([v / k for v, k in nis])), 3) if nis else None,
+        "nis_within_95": (
+            round(float(np.mean([v <= chi2_95(k) for v, k in nis])), 4) if nis else None
+        ),
+    }
+
+
+def _tag_figures(rp: RobotPass, setup: Setup, n_tags: int) -> dict[str, Any]:
+    """The tag map: each mapped tag and its sightings, and its error against the truth."""
+    out: dict[str, Any] = {
+        "icam_static_blobs_dropped": rp.icam.static_dropped,
+        "tags_mapped": n_tags,
+    }
+    for k, tag in enumerate(rp.tag_map.tags):
+        x, y, z = (round(float(v), 2) for v in tag.center)
+        out[f"tag{k}"] = f"{tag.signature} at ({x}, {y}, {z}) m"
+        out[f"tag{k}_infra_sightings"] = tag.sightings
+        out[f"tag{k}_robot_sightings"] = rp.robot_sightings.get(k, 0)
+    out["tag_map_error_m_mean"] = _map_error(rp.tag_map, setup.meta)
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class _Tally:
+    """Counts of a scoring pass over the output instants with ground truth."""
+
+    errors: list[float]
+    positions: int
+    localized: int
+    successes: int
+    confident: int
+    calibrated: int
+
+
+def _tally(
     est: Estimates,
     truth: dict[int, tuple[float, float]],
     cfg: BridgeLocConfig,
-    n_tags: int,
-    meta: dict[str, str],
-    bridge_only: Estimates | None = None,
-    sigmas: dict[int, float] | None = None,
-) -> dict[str, float | int | str | None]:
-    """Positions = output instants with ground truth; success = a pose within ``success_m``
-    of the truth; confident (full mode) = the filter's position std <= ``max_sigma_m``."""
+    sigmas: dict[int, float] | None,
+) -> _Tally:
+    """Errors and counts of the estimates at instants with ground truth."""
     errors = []
     positions = localized = successes = confident = calibrated = 0
     for t_ns, pose in est:
@@ -159,29 +196,53 @@ def _score(
         if sigmas is not None and sigmas.get(t_ns, math.inf) <= cfg.max_sigma_m:
             confident += 1
             calibrated += e <= 2 * sigmas[t_ns]
+    return _Tally(errors, positions, localized, successes, confident, calibrated)
+
+
+def _score(
+    est: Estimates,
+    truth: dict[int, tuple[float, float]],
+    cfg: BridgeLocConfig,
+    n_tags: int,
+    meta: dict[str, str],
+    bridge_only: Estimates | None = None,
+    sigmas: dict[int, float] | None = None,
+) -> dict[str, float | int | str | None]:
+    """Positions = output instants with ground truth; success = a pose within ``success_m``
+    of the truth; confident (full mode) = the filter's position std <= ``max_sigma_m``."""
+    tally = _tally(est, truth, cfg, sigmas)
+    errors, positions, confident = tally.errors, tally.positions, tally.confident
     out: dict[str, float | int | str | None] = {
         "system": "bridgeloc",
         "mode": cfg.mode.value,
         "tags": int(len(json.loads(meta["tags_truth"]))) if "tags_truth" in meta else n_tags,
         "positions": positions,
-        "localized": localized,
-        "success_rate": round(successes / positions, 4) if positions else None,
+        "localized": tally.localized,
+        "success_rate": round(tally.successes / positions, 4) if positions else None,
         "success_threshold_m": cfg.success_m,
         "error_m_mean": round(float(np.mean(errors)), 4) if errors else None,
         "error_m_median": round(float(np.median(errors)), 4) if errors else None,
     }
     if sigmas is not None:
         out["confident_rate"] = round(confident / positions, 4) if positions else None
-        out["confident_within_2sigma"] = round(calibrated / confident, 4) if confident else None
+        out["confident_within_2sigma"] = (
+            round(tally.calibrated / confident, 4) if confident else None
+        )
     if meta.get("field") == "office" and "tags_truth" in meta and bridge_only is not None:
-        # Fig. 4.20 is about view bridging itself: score the bridging fixes alone
-        rows = [
-            (*truth[t], math.dist(p[:2], truth[t]))
-            for t, p in bridge_only
-            if p is not None and t in truth
-        ]
-        out.update(_office_grid(rows, json.loads(meta["tags_truth"])[0]))
+        out.update(_office_bridging(bridge_only, truth, meta))
     return out
+
+
+def _office_bridging(
+    bridge_only: Estimates, truth: dict[int, tuple[float, float]], meta: dict[str, str]
+) -> dict[str, float | None]:
+    """Fig. 4.20 is about view bridging itself: the bridging fixes alone, scored per spot."""
+    rows = [
+        (*truth[t], math.dist(p[:2], truth[t]))
+        for t, p in bridge_only
+        if p is not None and t in truth
+    ]
+    return _office_grid(rows, json.loads(meta["tags_truth"])[0])
 
 
 OFFICE_DISTANCES = (1.0, 2.0, 3.0, 4.0)

@@ -19,6 +19,7 @@ near one.
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -131,19 +132,12 @@ def _solve(x: np.ndarray, vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return vals[None, :] - (x @ beta)[..., 0], beta[..., 0]
 
 
-def fit_tiny_tag(
-    gray: np.ndarray,
-    corners: np.ndarray,
-    n: int,
-    border_ratio: float,
-    cfg: TinyFitConfig | None = None,
-) -> TinyFit | None:
-    """Fit the tag model around a start quad (corners in printed order TL, TR, BR, BL).
+_Start = tuple[np.ndarray, np.ndarray, np.ndarray, float]
+"""A start quad as centre, side vectors u and v (px) and side length (px)."""
 
-    Returns ``None`` when nothing tag-like is there: too little contrast, a poor fit, or a fit that
-    ran off to another blob.
-    """
-    cfg = cfg or TinyFitConfig()
+
+def _start(corners: np.ndarray) -> _Start | None:
+    """Centre, mean side vectors and side of the start quad; None for a degenerate quad."""
     q = np.asarray(corners, np.float64).reshape(4, 2)
     t = q.mean(axis=0)
     u0 = ((q[1] - q[0]) + (q[2] - q[3])) / 2
@@ -151,10 +145,22 @@ def fit_tiny_tag(
     side = float(np.sqrt(abs(u0[0] * v0[1] - u0[1] * v0[0])))
     if side < 2.0 or np.linalg.norm(u0) < 1e-6 or np.linalg.norm(v0) < 1e-6:
         return None
-    if _darkness(gray, t, side) < cfg.min_dark:
-        return None  # cheap screen first: a tag's black is far below its margin even blurred
-    u0 = u0 / np.linalg.norm(u0) * side  # the hole of a far tag is lopsided: start square
-    v0 = v0 / np.linalg.norm(v0) * side
+    return t, u0, v0, side
+
+
+@dataclass(frozen=True, slots=True)
+class _Patch:
+    """The pixels the model is fitted to: coordinates and grey levels (flat)."""
+
+    px: np.ndarray
+    py: np.ndarray
+    vals: np.ndarray
+
+
+def _patch(
+    gray: np.ndarray, t: np.ndarray, u0: np.ndarray, v0: np.ndarray, cfg: TinyFitConfig
+) -> _Patch | None:
+    """The pixels around the start (subsampled when many); None when they leave the image."""
     r = (0.5 + cfg.reach) * (np.abs(u0) + np.abs(v0))
     x0, x1 = int(np.floor(t[0] - r[0])), int(np.ceil(t[0] + r[0]))
     y0, y1 = int(np.floor(t[1] - r[1])), int(np.ceil(t[1] + r[1]))
@@ -168,16 +174,18 @@ def fit_tiny_tag(
         # a larger tag has pixels to spare: fit a checkerboard half (or less) of them
         keep = ((xs + ys).ravel() % int(np.ceil(len(vals) / cfg.max_pixels))) == 0
         px, py, vals = px[keep], py[keep], vals[keep]
-    edges = _edges(n, border_ratio)
-    k_lin = 3 + n * n
-    if len(vals) <= k_lin + 7 + 4:
-        return None
+    return _Patch(px, py, vals)
 
-    def resid(thetas: np.ndarray) -> np.ndarray:
-        return _solve(_design(thetas, px, py, n, edges, cfg.blur_px), vals)[0]
 
-    # a coarse start: the hole's centre may be off by a pixel and its size by 15 %; a pixel
-    # matters below 8 px only (and the grid costs most on large patches)
+_Residuals = Callable[[np.ndarray], np.ndarray]
+"""Residuals (B, P) of a batch of geometries (B, 7)."""
+
+
+def _coarse_start(
+    resid: _Residuals, t: np.ndarray, u0: np.ndarray, v0: np.ndarray, side: float
+) -> np.ndarray:
+    """The best of a grid of starts: the hole's centre may be off by a pixel and its size by
+    15 %; a pixel matters below 8 px only (and the grid costs most on large patches)."""
     shifts = (-0.75, 0.0, 0.75) if side < 8.0 else (0.0,)
     starts = np.array(
         [
@@ -187,7 +195,11 @@ def fit_tiny_tag(
             for oy in shifts
         ]
     )
-    theta0 = starts[int(np.argmin((resid(starts) ** 2).sum(axis=1)))]
+    return starts[int(np.argmin((resid(starts) ** 2).sum(axis=1)))]
+
+
+def _refine(resid: _Residuals, theta0: np.ndarray) -> np.ndarray:
+    """Levenberg-Marquardt from ``theta0``; the fitted geometry."""
 
     def jac(theta: np.ndarray) -> np.ndarray:
         # forward differences evaluated as one batch (one vectorised call instead of eight)
@@ -198,21 +210,67 @@ def fit_tiny_tag(
     sol = least_squares(
         lambda th: resid(th[None, :])[0], theta0, jac=jac, method="lm", xtol=1e-3, ftol=1e-3
     )
-    theta = sol.x
+    return np.asarray(sol.x)
+
+
+def _stayed(theta: np.ndarray, t: np.ndarray, side: float) -> bool:
+    """False when the fit ran off to another blob (size or centre far from the start's)."""
     tx, ty, ux, uy, vx, vy, _ = theta
     su, sv = float(np.hypot(ux, uy)), float(np.hypot(vx, vy))
     if not (0.7 * side <= su <= 1.4 * side and 0.7 * side <= sv <= 1.4 * side):
-        return None  # ran off to another blob
-    if np.hypot(tx - t[0], ty - t[1]) > 0.5 * side:
+        return False
+    return not np.hypot(tx - t[0], ty - t[1]) > 0.5 * side
+
+
+def _fitted_corners(theta: np.ndarray) -> np.ndarray:
+    """The (4, 2) corners of a geometry, in the start quad's order."""
+    tx, ty, ux, uy, vx, vy, _ = theta
+    ctr = np.array([tx, ty])
+    uu, vv = np.array([ux, uy]), np.array([vx, vy])
+    return np.stack(
+        [ctr - uu / 2 - vv / 2, ctr + uu / 2 - vv / 2, ctr + uu / 2 + vv / 2, ctr - uu / 2 + vv / 2]
+    )
+
+
+def fit_tiny_tag(
+    gray: np.ndarray,
+    corners: np.ndarray,
+    n: int,
+    border_ratio: float,
+    cfg: TinyFitConfig | None = None,
+) -> TinyFit | None:
+    """Fit the tag model around a start quad (corners in printed order TL, TR, BR, BL).
+
+    Returns ``None`` when nothing tag-like is there: too little contrast, a poor fit, or a fit that
+    ran off to another blob.
+    """
+    cfg = cfg or TinyFitConfig()
+    start = _start(corners)
+    if start is None:
         return None
+    t, u0, v0, side = start
+    if _darkness(gray, t, side) < cfg.min_dark:
+        return None  # cheap screen first: a tag's black is far below its margin even blurred
+    u0 = u0 / np.linalg.norm(u0) * side  # the hole of a far tag is lopsided: start square
+    v0 = v0 / np.linalg.norm(v0) * side
+    patch = _patch(gray, t, u0, v0, cfg)
+    if patch is None:
+        return None
+    px, py, vals = patch.px, patch.py, patch.vals
+    edges = _edges(n, border_ratio)
+    k_lin = 3 + n * n
+    if len(vals) <= k_lin + 7 + 4:
+        return None
+
+    def resid(thetas: np.ndarray) -> np.ndarray:
+        return _solve(_design(thetas, px, py, n, edges, cfg.blur_px), vals)[0]
+
+    theta = _refine(resid, _coarse_start(resid, t, u0, v0, side))
+    if not _stayed(theta, t, side):
+        return None  # ran off to another blob
     res, beta = _solve(_design(theta[None, :], px, py, n, edges, cfg.blur_px), vals)
     contrast = float(-beta[0, 2])
     rms = float(np.sqrt(np.mean(res[0] ** 2)))
     if contrast < cfg.min_contrast or rms > cfg.max_rms_frac * contrast:
         return None  # not a dark square in a white margin
-    ctr = np.array([tx, ty])
-    uu, vv = np.array([ux, uy]), np.array([vx, vy])
-    fitted = np.stack(
-        [ctr - uu / 2 - vv / 2, ctr + uu / 2 - vv / 2, ctr + uu / 2 + vv / 2, ctr - uu / 2 + vv / 2]
-    )
-    return TinyFit(fitted, contrast, rms)
+    return TinyFit(_fitted_corners(theta), contrast, rms)

@@ -16,7 +16,7 @@ from trackctl.evmatch.eindex import ECatalog
 from trackctl.evmatch.engines import Engine
 from trackctl.logs import topics
 from trackctl.logs.codecs import Codec
-from trackctl.logs.messages import GroundTruth, VScenario
+from trackctl.logs.messages import EObservations, GroundTruth, VScenario
 from trackctl.logs.reader import IndexedWindowReader, LogReader, RawMessage
 
 __all__ = ["ECatalog", "EData", "VSource", "VStore", "load_e", "load_ground_truth"]
@@ -35,6 +35,109 @@ class EData(ECatalog):
     rows: pd.DataFrame = field(default_factory=pd.DataFrame)
 
 
+@dataclass
+class _EListings:
+    """E-scenarios as streamed: EIDs and cells as integer codes (in order of first sight) in
+    flat typed buffers (5 bytes per listing), not millions of Python strings or small arrays."""
+
+    eid_code: dict[str, int] = field(default_factory=dict)
+    cell_code: dict[str, int] = field(default_factory=dict)
+    t_list: array[int] = field(default_factory=lambda: array("q"))
+    """Per scenario: window start, ns."""
+    c_list: array[int] = field(default_factory=lambda: array("i"))
+    """Per scenario: cell code."""
+    lengths: array[int] = field(default_factory=lambda: array("q"))
+    """Per scenario: listings."""
+    flat_e: array[int] = field(default_factory=lambda: array("i"))
+    """Per listing: EID code."""
+    flat_v: array[int] = field(default_factory=lambda: array("b"))
+    """Per listing: vague (1) or inclusive (0)."""
+    window_ns: int | None = None
+
+    def add(self, obs: EObservations) -> None:
+        """Append one E-scenario."""
+        self.t_list.append(obs.t_ns)
+        self.c_list.append(self.cell_code.setdefault(obs.cell, len(self.cell_code)))
+        self.lengths.append(len(obs.eids))
+        self.flat_e.extend(self.eid_code.setdefault(e, len(self.eid_code)) for e in obs.eids)
+        self.flat_v.extend(obs.vague)
+
+
+def _stream_e(reader: LogReader, topic: str) -> _EListings:
+    """Every E-scenario on ``topic`` into flat buffers.
+
+    Raises:
+        InputError: windows of different lengths.
+    """
+    buf = _EListings()
+    for msg in reader.messages([topic]):
+        obs = msg.message
+        if buf.window_ns is None:
+            buf.window_ns = obs.window_ns
+        elif obs.window_ns != buf.window_ns:
+            raise InputError(
+                f"{reader.path}: {topic} at {msg.log_time_ns} ns: window_ns {obs.window_ns} "
+                f"differs from the first message's {buf.window_ns}; EV-Matching needs one "
+                "window length"
+            )
+        buf.add(obs)
+    return buf
+
+
+def _sorted_codes(code: dict[str, int]) -> tuple[list[str], np.ndarray]:
+    """The names in sorted order and the map from a first-sight code to the sorted one (a
+    name's code is its index in the sorted list)."""
+    names = sorted(code)
+    remap = np.empty(len(code), np.int32)
+    remap[[code[n] for n in names]] = np.arange(len(names), dtype=np.int32)
+    return names, remap
+
+
+def _listing_columns(
+    buf: _EListings,
+    t_arr: np.ndarray,
+    windows: np.ndarray,
+    e_remap: np.ndarray,
+    c_remap: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per listing: window, cell and EID codes (sorted-name order) and the vague flag."""
+    n_rows = len(buf.flat_e)
+    lens = np.frombuffer(buf.lengths, dtype=np.int64) if buf.lengths else np.zeros(0, np.int64)
+    w = np.repeat(np.searchsorted(windows, t_arr).astype(np.int32), lens)
+    cell_codes = (
+        c_remap[np.frombuffer(buf.c_list, dtype=np.int32)] if buf.c_list else np.zeros(0, np.int32)
+    )
+    c = np.repeat(cell_codes, lens)
+    e = e_remap[np.frombuffer(buf.flat_e, dtype=np.int32)] if n_rows else np.zeros(0, np.int32)
+    v = np.frombuffer(buf.flat_v, dtype=np.int8).astype(bool) if n_rows else np.zeros(0, bool)
+    return w, c, e, v
+
+
+def _unique_listings(
+    w: np.ndarray, c: np.ndarray, e: np.ndarray, v: np.ndarray, n_cells: int, n_eids: int
+) -> tuple[np.ndarray | slice, int]:
+    """The listings in (window, cell, EID) order, one per EID and scenario (an EID listed twice
+    in one scenario keeps its inclusive flag), and the number of scenarios listing any."""
+    n_rows = len(e)
+    # the key is built in place: a city's E table has tens of millions of listings
+    key = w.astype(np.int64)
+    key *= max(n_cells, 1)
+    key += c
+    key *= max(n_eids, 1)
+    key += e
+    if n_rows and bool(np.all(key[1:] > key[:-1])):
+        sel: np.ndarray | slice = slice(None)  # written in order, no repeats (the simulator)
+    else:
+        order = np.lexsort((v, key))
+        key = key[order]
+        first = np.r_[True, key[1:] != key[:-1]] if n_rows else np.zeros(0, bool)
+        sel = order[first]
+        del order, first
+    key //= max(n_eids, 1)  # the scenario of each (sorted) listing
+    n_scenarios = int(np.count_nonzero(key[1:] != key[:-1])) + 1 if n_rows else 0
+    return sel, n_scenarios
+
+
 def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
     """Read every E-scenario on ``topic`` (streamed; memory grows with the listings only).
 
@@ -47,66 +150,17 @@ def load_e(reader: LogReader, topic: str = topics.EV_E) -> EData:
             f"{reader.path}: topic {topic} is missing; ev-match needs the E-scenarios "
             "(trackctl.EObservations: EIDs heard per cell and window)"
         )
-    # EIDs and cells become integer codes while streaming, into flat typed buffers (5 bytes per
-    # listing), not millions of Python strings or small arrays
-    eid_code: dict[str, int] = {}
-    cell_code: dict[str, int] = {}
-    t_list = array("q")
-    c_list = array("i")
-    lengths = array("q")
-    flat_e = array("i")
-    flat_v = array("b")
-    window_ns = None
-    for msg in reader.messages([topic]):
-        obs = msg.message
-        if window_ns is None:
-            window_ns = obs.window_ns
-        elif obs.window_ns != window_ns:
-            raise InputError(
-                f"{reader.path}: {topic} at {msg.log_time_ns} ns: window_ns {obs.window_ns} "
-                f"differs from the first message's {window_ns}; EV-Matching needs one window length"
-            )
-        t_list.append(obs.t_ns)
-        c_list.append(cell_code.setdefault(obs.cell, len(cell_code)))
-        lengths.append(len(obs.eids))
-        flat_e.extend(eid_code.setdefault(e, len(eid_code)) for e in obs.eids)
-        flat_v.extend(obs.vague)
-    t_arr = np.frombuffer(t_list, dtype=np.int64) if t_list else np.zeros(0, np.int64)
+    buf = _stream_e(reader, topic)
+    window_ns = buf.window_ns
+    t_arr = np.frombuffer(buf.t_list, dtype=np.int64) if buf.t_list else np.zeros(0, np.int64)
     windows = np.unique(t_arr)
     # codes in sorted-name order: an EID's code is its index in the sorted EID list
-    eids = np.array(sorted(eid_code), dtype=object)
-    e_remap = np.empty(len(eid_code), np.int32)
-    e_remap[[eid_code[e] for e in eids]] = np.arange(len(eids), dtype=np.int32)
-    cells = sorted(cell_code)
-    c_remap = np.empty(len(cell_code), np.int32)
-    c_remap[[cell_code[c] for c in cells]] = np.arange(len(cells), dtype=np.int32)
-    n_rows = len(flat_e)
-    lens = np.frombuffer(lengths, dtype=np.int64) if lengths else np.zeros(0, np.int64)
-    w = np.repeat(np.searchsorted(windows, t_arr).astype(np.int32), lens)
-    c = np.repeat(
-        c_remap[np.frombuffer(c_list, dtype=np.int32)] if c_list else np.zeros(0, np.int32), lens
-    )
-    e = e_remap[np.frombuffer(flat_e, dtype=np.int32)] if n_rows else np.zeros(0, np.int32)
-    v = np.frombuffer(flat_v, dtype=np.int8).astype(bool) if n_rows else np.zeros(0, bool)
-    del flat_e, flat_v
-    # sort by (window, cell, EID); an EID listed twice in one scenario keeps its inclusive flag.
-    # The key is built in place: a city's E table has tens of millions of listings.
-    key = w.astype(np.int64)
-    key *= max(len(cells), 1)
-    key += c
-    key *= max(len(eids), 1)
-    key += e
-    if n_rows and bool(np.all(key[1:] > key[:-1])):
-        sel: np.ndarray | slice = slice(None)  # written in order, no repeats (the simulator)
-    else:
-        order = np.lexsort((v, key))
-        key = key[order]
-        first = np.r_[True, key[1:] != key[:-1]] if n_rows else np.zeros(0, bool)
-        sel = order[first]
-        del order, first
-    key //= max(len(eids), 1)  # the scenario of each (sorted) listing
-    n_scenarios = int(np.count_nonzero(key[1:] != key[:-1])) + 1 if n_rows else 0
-    del key
+    eid_names, e_remap = _sorted_codes(buf.eid_code)
+    eids = np.array(eid_names, dtype=object)
+    cells, c_remap = _sorted_codes(buf.cell_code)
+    w, c, e, v = _listing_columns(buf, t_arr, windows, e_remap, c_remap)
+    del buf, t_arr
+    sel, n_scenarios = _unique_listings(w, c, e, v, len(cells), len(eids))
     rows = pd.DataFrame({"w": w[sel], "cell": c[sel], "eid": e[sel], "vague": v[sel]})
     del w, c, e, v
     return EData(

@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from mcap.records import Channel, ChunkIndex
+from mcap.summary import Summary
 
 from trackctl.errors import InputError, MissingTopicError
 from trackctl.evmatch.eindex import ECatalog, EIndex, EShard
@@ -132,7 +134,12 @@ def _build_shard(task: _ChunkTask, codes: Any, rank: np.ndarray) -> EShard:
     return shard
 
 
-def _e_tasks(reader: LogReader, path: str) -> list[_ChunkTask]:
+def _e_channel(reader: LogReader) -> tuple[Summary, Channel]:
+    """The log's summary and its E-scenario channel.
+
+    Raises:
+        MissingTopicError: the log has no summary or no E-scenarios.
+    """
     summary = reader.summary
     channel = next(
         (ch for ch in (summary.channels.values() if summary else ()) if ch.topic == topics.EV_E),
@@ -142,18 +149,21 @@ def _e_tasks(reader: LogReader, path: str) -> list[_ChunkTask]:
         raise MissingTopicError(
             f"{reader.path}: topic {topics.EV_E} is missing; ev-match needs the E-scenarios"
         )
+    return summary, channel
+
+
+def _decode_spec(summary: Summary, channel: Channel) -> tuple[str, str, str, bytes]:
+    """How the executors decode the channel: schema name, message encoding, schema encoding,
+    schema data (empty without a schema)."""
     schema = summary.schemas.get(channel.schema_id)
-    spec = (
-        schema.name if schema else "",
-        channel.message_encoding,
-        schema.encoding if schema else "",
-        schema.data if schema else b"",
-    )
-    chunks = sorted(
-        (ci for ci in summary.chunk_indexes if channel.id in ci.message_index_offsets),
-        key=lambda ci: (ci.message_start_time, ci.chunk_start_offset),
-    )
-    # groups of consecutive chunks covering about _WINDOWS_PER_SHARD distinct start times
+    if schema is None:
+        return "", channel.message_encoding, "", b""
+    return schema.name, channel.message_encoding, schema.encoding, schema.data
+
+
+def _chunk_groups(chunks: Sequence[ChunkIndex]) -> list[list[int]]:
+    """Offsets of consecutive chunks (in time order) grouped to cover about
+    ``_WINDOWS_PER_SHARD`` distinct start times each."""
     groups: list[list[int]] = []
     last_start: int | None = None
     starts_in_group = 0
@@ -166,7 +176,17 @@ def _e_tasks(reader: LogReader, path: str) -> list[_ChunkTask]:
             starts_in_group += 1
             last_start = ci.message_start_time
         groups[-1].append(ci.chunk_start_offset)
-    return [_ChunkTask(path, tuple(g), channel.id, spec) for g in groups]
+    return groups
+
+
+def _e_tasks(reader: LogReader, path: str) -> list[_ChunkTask]:
+    summary, channel = _e_channel(reader)
+    spec = _decode_spec(summary, channel)
+    chunks = sorted(
+        (ci for ci in summary.chunk_indexes if channel.id in ci.message_index_offsets),
+        key=lambda ci: (ci.message_start_time, ci.chunk_start_offset),
+    )
+    return [_ChunkTask(path, tuple(g), channel.id, spec) for g in _chunk_groups(chunks)]
 
 
 def spark_index(

@@ -188,13 +188,12 @@ class GroundFit:
         return float(np.max(self.residuals_px))
 
 
-def ground_pose(intrinsics: CameraModel, image_px: np.ndarray, world_m: np.ndarray) -> GroundFit:
-    """Pose of a camera from floor point pairs: pixels (N, 2) and world points (N, 2 on the floor
-    or N, 3), N >= 4, not all on one line.
+def _point_pairs(image_px: np.ndarray, world_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (N, 2) and world points (N, 3; floor points get z = 0), checked for
+    :func:`ground_pose`.
 
     Raises:
-        ValueError: too few or degenerate points, or no pose puts the points in front of the
-            camera.
+        ValueError: the counts differ, fewer than 4 pairs, or a NaN or infinite value.
     """
     img = np.ascontiguousarray(np.asarray(image_px, float).reshape(-1, 2))
     world = np.asarray(world_m, float)
@@ -207,6 +206,48 @@ def ground_pose(intrinsics: CameraModel, image_px: np.ndarray, world_m: np.ndarr
         raise ValueError(f"need at least 4 point pairs, got {len(img)}")
     if not (np.isfinite(img).all() and np.isfinite(world).all()):
         raise ValueError("a point holds a NaN or infinite value")
+    return img, world
+
+
+def _pnp_flag(world: np.ndarray, sv: np.ndarray) -> int:
+    """The solvePnP method for these world points (``sv``: their centred singular values)."""
+    planar = sv[2] < 1e-6 * sv[0]
+    # OpenCV's IPPE needs the plane z = 0 in object coordinates; the floor is, when planar
+    flag = cv2.SOLVEPNP_IPPE if planar and np.allclose(world[:, 2], 0) else cv2.SOLVEPNP_EPNP
+    if flag == cv2.SOLVEPNP_EPNP and len(world) < 6 and not planar:
+        flag = cv2.SOLVEPNP_SQPNP
+    return int(flag)
+
+
+def _solve_pnp(
+    world: np.ndarray, img: np.ndarray, k: np.ndarray, dist: np.ndarray, flag: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """solvePnP then Levenberg-Marquardt refinement: (rvec, tvec).
+
+    Raises:
+        ValueError: OpenCV found no pose or failed.
+    """
+    try:
+        ok, rvec, tvec = cv2.solvePnP(world, img, k, dist, flags=flag)
+        if not ok:
+            raise ValueError("OpenCV's solvePnP found no pose for these points")
+        rvec, tvec = cv2.solvePnPRefineLM(world, img, k, dist, rvec, tvec)
+    except cv2.error as err:
+        raise ValueError(
+            f"OpenCV's solvePnP failed ({str(err).strip().splitlines()[-1]})"
+        ) from None
+    return rvec, tvec
+
+
+def ground_pose(intrinsics: CameraModel, image_px: np.ndarray, world_m: np.ndarray) -> GroundFit:
+    """Pose of a camera from floor point pairs: pixels (N, 2) and world points (N, 2 on the floor
+    or N, 3), N >= 4, not all on one line.
+
+    Raises:
+        ValueError: too few or degenerate points, or no pose puts the points in front of the
+            camera.
+    """
+    img, world = _point_pairs(image_px, world_m)
     centred = world - world.mean(axis=0)
     sv = np.linalg.svd(centred, compute_uv=False)
     if sv[1] < 1e-3 * max(sv[0], 1e-9):
@@ -219,20 +260,7 @@ def ground_pose(intrinsics: CameraModel, image_px: np.ndarray, world_m: np.ndarr
         ]
     )
     dist = np.asarray(intrinsics.distortion or (0.0,) * 5, float)
-    planar = sv[2] < 1e-6 * sv[0]
-    # OpenCV's IPPE needs the plane z = 0 in object coordinates; the floor is, when planar
-    flag = cv2.SOLVEPNP_IPPE if planar and np.allclose(world[:, 2], 0) else cv2.SOLVEPNP_EPNP
-    if flag == cv2.SOLVEPNP_EPNP and len(img) < 6 and not planar:
-        flag = cv2.SOLVEPNP_SQPNP
-    try:
-        ok, rvec, tvec = cv2.solvePnP(world, img, k, dist, flags=flag)
-        if not ok:
-            raise ValueError("OpenCV's solvePnP found no pose for these points")
-        rvec, tvec = cv2.solvePnPRefineLM(world, img, k, dist, rvec, tvec)
-    except cv2.error as err:
-        raise ValueError(
-            f"OpenCV's solvePnP failed ({str(err).strip().splitlines()[-1]})"
-        ) from None
+    rvec, tvec = _solve_pnp(world, img, k, dist, _pnp_flag(world, sv))
     depth = (cv2.Rodrigues(rvec)[0] @ world.T + tvec).T[:, 2]
     if (depth <= 0).any():
         raise ValueError("the best pose puts points behind the camera; check the pairs' order")

@@ -6,13 +6,15 @@ from __future__ import annotations
 import math
 import os
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from trackctl.errors import InputError
 from trackctl.logs import topics
-from trackctl.logs.reader import LogReader
+from trackctl.logs.messages import GroundTruthEntity
+from trackctl.logs.reader import LogMessage, LogReader
 from trackctl.metrics.tracking import InitialIdentity
 from trackctl.plots import pyplot
 from trackctl.vmtrack.pipeline import TRACKS_TOPIC
@@ -20,17 +22,32 @@ from trackctl.vmtrack.pipeline import TRACKS_TOPIC
 __all__ = ["user_errors", "tracking_segments", "plot_vmtrack", "plot_run"]
 
 
-def user_errors(
-    log: str | os.PathLike[str],
-) -> dict[str, list[tuple[float, float]]]:
-    """Per phone carrier: (time s, error m or NaN when the phone's track is absent)."""
+@dataclass(frozen=True, slots=True)
+class _VmLog:
+    """What the VM figures read of a vm-track output log."""
+
+    tracks: dict[int, dict[str, tuple[float, float]]]
+    """Per track message (log time ns): track id -> position (x, y) m."""
+    truth: list[LogMessage]
+    """The ground-truth messages, in log order."""
+    mids: set[str]
+    """EIDs (phone MIDs) the ground truth carries."""
+    t0: int | None
+    """Log time of the first message read."""
+
+
+def _read_vm_log(log: str | os.PathLike[str]) -> _VmLog:
+    """The tracks and the ground truth of a vm-track output log.
+
+    Raises:
+        InputError: the log lacks the tracks or the ground truth.
+    """
     reader = LogReader(log)
     present = reader.topics()
     for needed in (TRACKS_TOPIC, topics.GROUND_TRUTH):
         if needed not in present:
             raise InputError(f"{reader.path}: {needed} is missing; the VM figures need it")
     tracks: dict[int, dict[str, tuple[float, float]]] = {}
-    out: dict[str, list[tuple[float, float]]] = defaultdict(list)
     t0: int | None = None
     pending = []
     mid_of: set[str] = set()
@@ -44,24 +61,44 @@ def user_errors(
         else:
             pending.append(msg)
             mid_of.update(e.electronic_id for e in msg.message.entities if e.electronic_id)
+    return _VmLog(tracks, pending, mid_of, t0)
+
+
+def _carrier_error(
+    ent: GroundTruthEntity,
+    mid: str,
+    hyp: dict[str, tuple[float, float]],
+    named: bool,
+    followed: InitialIdentity,
+) -> float:
+    """A phone carrier's error (m) against the tracks of one instant: the track named by the
+    phone's MID ``mid``, else the track they were first seen with; NaN when that track is
+    absent."""
+    xy_true = (ent.position_m.x, ent.position_m.y)
+    if named:
+        xy = hyp.get(mid)
+        return math.nan if xy is None else math.dist(xy, xy_true)
+    found = followed.error(ent.entity_id, xy_true, hyp)
+    return math.nan if found is None else found
+
+
+def user_errors(
+    log: str | os.PathLike[str],
+) -> dict[str, list[tuple[float, float]]]:
+    """Per phone carrier: (time s, error m or NaN when the phone's track is absent)."""
+    vm = _read_vm_log(log)
+    out: dict[str, list[tuple[float, float]]] = defaultdict(list)
     # identified tracks carry the phone's MID; a visual-only run names nobody, so each carrier
     # follows the track they were first seen with (InitialIdentity, as the paper scores V-AF)
-    named = any(k in mid_of for frame in tracks.values() for k in frame)
+    named = any(k in vm.mids for frame in vm.tracks.values() for k in frame)
     followed = InitialIdentity()
-    for msg in pending:
-        hyp = tracks.get(msg.log_time_ns, {})
-        t_s = (msg.log_time_ns - (t0 or 0)) / 1e9
+    for msg in vm.truth:
+        hyp = vm.tracks.get(msg.log_time_ns, {})
+        t_s = (msg.log_time_ns - (vm.t0 or 0)) / 1e9
         for e in msg.message.entities:
-            if not e.electronic_id:
-                continue
-            xy_true = (e.position_m.x, e.position_m.y)
-            if named:
-                xy = hyp.get(e.electronic_id)
-                err = math.nan if xy is None else math.dist(xy, xy_true)
-            else:
-                found = followed.error(e.entity_id, xy_true, hyp)
-                err = math.nan if found is None else found
-            out[e.electronic_id].append((t_s, err))
+            mid = e.electronic_id
+            if mid:
+                out[mid].append((t_s, _carrier_error(e, mid, hyp, named, followed)))
     return dict(out)
 
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from trackctl.geometry.odometry import DiffDrive, increment, integrate_step
 from trackctl.logs import topics
 from trackctl.logs.foxglove import pose_in_frame
-from trackctl.logs.messages import MetricReport, WheelOdometry
+from trackctl.logs.messages import GroundTruth, MetricReport, WheelOdometry
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import ProcessorInfo, Progress
@@ -86,13 +86,12 @@ class CheckProcessor:
         self, reader: LogReader, writer: LogWriter, progress: Progress | None = None
     ) -> MetricReport:
         states: dict[str, _TopicState] = defaultdict(_TopicState)
-        nonmono = nonfinite = stamp_mismatch = decode_errors = messages = 0
-        first_problem = ""
+        tally = _CheckTally()
         total = reader.message_count
         for raw in reader.raw():
-            messages += 1
-            if progress is not None and messages % 5000 == 0:
-                progress(messages, total)
+            tally.messages += 1
+            if progress is not None and tally.messages % 5000 == 0:
+                progress(tally.messages, total)
             st = states[raw.topic]
             if st.last_log is not None:
                 st.add_period(raw.log_time_ns - st.last_log, self.config.gap_factor)
@@ -100,46 +99,67 @@ class CheckProcessor:
             try:
                 msg = reader.codec(raw).decode(raw.data)
             except Exception:  # noqa: BLE001 - counting undecodable messages is the point
-                decode_errors += 1
+                tally.decode_errors += 1
                 continue
-            stamp = getattr(msg, "t_ns", None)
-            if stamp is not None:
-                if st.last_stamp is not None and stamp < st.last_stamp:
-                    nonmono += 1
-                    first_problem = first_problem or (
-                        f"{raw.topic}: stamp {stamp} ns after {st.last_stamp} ns"
-                    )
-                if stamp != raw.log_time_ns:
-                    stamp_mismatch += 1
-                st.last_stamp = stamp
-            finite = getattr(msg, "finite_values", None)
-            if finite is not None:
-                for key, value in finite().items():
-                    if not math.isfinite(value):
-                        nonfinite += 1
-                        first_problem = first_problem or f"{raw.topic}: {key} = {value}"
+            tally.check_stamp(raw.topic, raw.log_time_ns, st, getattr(msg, "t_ns", None))
+            tally.check_values(raw.topic, msg)
         gaps = sum(st.finish(self.config.gap_factor) for st in states.values())
         max_gap_s = max((st.max_period for st in states.values()), default=0) / 1e9
         return MetricReport(
             t_ns=reader.end_ns or 0,
             processor=self.name,
             metrics={
-                "messages": messages,
+                "messages": tally.messages,
                 "topics": len(states),
-                "nonmonotonic_stamps": nonmono,
-                "nonfinite_values": nonfinite,
-                "stamp_mismatches": stamp_mismatch,
-                "decode_errors": decode_errors,
+                "nonmonotonic_stamps": tally.nonmono,
+                "nonfinite_values": tally.nonfinite,
+                "stamp_mismatches": tally.stamp_mismatch,
+                "decode_errors": tally.decode_errors,
                 "gaps": gaps,
                 "max_gap_s": round(max_gap_s, 6),
                 "truncated": reader.truncated,
                 "crc_errors": len(reader.damage),
                 "lost_messages": reader.lost_messages,
                 "data_crc_ok": reader.verify_data_crc(),
-                "first_problem": first_problem or None,
+                "first_problem": tally.first_problem or None,
             },
             params={"gap_factor": self.config.gap_factor},
         )
+
+
+@dataclass
+class _CheckTally:
+    """The problems the ``check`` processor counts, and the first one it met."""
+
+    messages: int = 0
+    nonmono: int = 0
+    nonfinite: int = 0
+    stamp_mismatch: int = 0
+    decode_errors: int = 0
+    first_problem: str = ""
+
+    def check_stamp(self, topic: str, log_time_ns: int, st: _TopicState, stamp: int | None) -> None:
+        """A message's sensor stamp: before the topic's previous one, or not its log time."""
+        if stamp is None:
+            return
+        if st.last_stamp is not None and stamp < st.last_stamp:
+            self.nonmono += 1
+            self.first_problem = self.first_problem or (
+                f"{topic}: stamp {stamp} ns after {st.last_stamp} ns"
+            )
+        if stamp != log_time_ns:
+            self.stamp_mismatch += 1
+        st.last_stamp = stamp
+
+    def check_values(self, topic: str, msg: object) -> None:
+        """NaN or infinite values of a message that lists its float fields."""
+        finite = getattr(msg, "finite_values", None)
+        if finite is None:
+            return
+        for key, value in finite().items():
+            if not math.isfinite(value):
+                self.nonfinite += 1
+                self.first_problem = self.first_problem or f"{topic}: {key} = {value}"
 
 
 CHECK_PROCESSOR = ProcessorInfo(
@@ -179,65 +199,24 @@ class DeadReckoningProcessor:
     def run(
         self, reader: LogReader, writer: LogWriter, progress: Progress | None = None
     ) -> MetricReport:
-        odom_topics = sorted(
-            t
-            for t, info in reader.topics().items()
-            if info.schema_name == WheelOdometry.SCHEMA and t.startswith("/robot/")
-        )
-        if not odom_topics:
-            reader.require([topics.odom("<NAME>")], self.name, "wheel odometry to integrate")
+        odom_topics = self._odom_topics(reader)
         robots = {t.split("/")[2]: t for t in odom_topics}
         has_truth = topics.GROUND_TRUTH in reader.topics()
-        align: dict[str, _Align] = {}
-        metadata = reader.metadata()
-        errors = _ErrorStats()
-        path_m = 0.0
-        poses = 0
-        state: dict[str, tuple[float, float, float, int, WheelOdometry]] = {}
         # Ground-truth samples wait (a few at a time) for the dead-reckoned poses around them.
-        pending: dict[str, list[tuple[int, float, float, float | None]]] = {
-            name: [] for name in robots
-        }
+        rk = _Reckoning(metadata=reader.metadata(), pending={name: [] for name in robots})
         stream = reader.messages(odom_topics + ([topics.GROUND_TRUTH] if has_truth else []))
         for msg in stream:
             if msg.topic == topics.GROUND_TRUTH:
-                for ent in msg.message.entities:
-                    if ent.entity_id not in pending:
-                        continue
-                    gt = (msg.log_time_ns, ent.position_m.x, ent.position_m.y, ent.yaw_rad)
-                    latest = state.get(ent.entity_id)
-                    if latest is not None and latest[3] >= msg.log_time_ns:
-                        # same stamp as the pose already integrated (log-time order)
-                        pose = (latest[3], latest[0], latest[1], latest[2])
-                        self._score([gt], None, pose, errors, align, ent.entity_id)
-                    else:
-                        pending[ent.entity_id].append(gt)
+                self._on_truth(msg.log_time_ns, msg.message, rk)
                 continue
-            name = msg.topic.split("/")[2]
-            odo: WheelOdometry = msg.message
-            prev = state.get(name)
-            if prev is None:
-                x, y, yaw = 0.0, 0.0, 0.0
-                pending[name] = [g for g in pending[name] if g[0] >= msg.log_time_ns]
-            else:
-                x, y, yaw, t_prev, last = prev
-                ds, dyaw = self._motion(name, last, odo, (msg.log_time_ns - t_prev) / 1e9, metadata)
-                path_m += abs(ds)
-                x, y, yaw = integrate_step(x, y, yaw, ds, dyaw)
-            self._score(pending[name], prev, (msg.log_time_ns, x, y, yaw), errors, align, name)
-            state[name] = (x, y, yaw, msg.log_time_ns, odo)
-            writer.write(
-                f"/robot/{name}/dead_reckoning",
-                pose_in_frame(msg.log_time_ns, x, y, yaw, frame_id=f"{name}/odom"),
-                msg.log_time_ns,
-            )
-            poses += 1
-            if progress is not None and poses % 5000 == 0:
-                progress(poses, None)
+            self._on_odometry(msg.topic, msg.log_time_ns, msg.message, rk, writer)
+            if progress is not None and rk.poses % 5000 == 0:
+                progress(rk.poses, None)
+        errors = rk.errors
         metrics: dict[str, float | int | None] = {
             "robots": len(robots),
-            "poses": poses,
-            "path_m": round(path_m, 4),
+            "poses": rk.poses,
+            "path_m": round(rk.path_m, 4),
             "error_m_mean": errors.mean(),
             "error_m_max": None if errors.n == 0 else round(errors.max, 4),
             "error_m_final": None if errors.n == 0 else round(errors.last, 4),
@@ -251,6 +230,59 @@ class DeadReckoningProcessor:
                 "wheel_base_m": self.config.drive.wheel_base_m,
             },
         )
+
+    def _odom_topics(self, reader: LogReader) -> list[str]:
+        """The wheel-odometry topics of the robots (``/robot/<NAME>/...``), sorted.
+
+        Raises:
+            MissingTopicError: the log has none.
+        """
+        odom_topics = sorted(
+            t
+            for t, info in reader.topics().items()
+            if info.schema_name == WheelOdometry.SCHEMA and t.startswith("/robot/")
+        )
+        if not odom_topics:
+            reader.require([topics.odom("<NAME>")], self.name, "wheel odometry to integrate")
+        return odom_topics
+
+    def _on_truth(self, t_ns: int, gt: GroundTruth, rk: _Reckoning) -> None:
+        """A ground-truth sample: scored now against a pose of the same stamp, else queued for
+        the robot's next pose."""
+        for ent in gt.entities:
+            if ent.entity_id not in rk.pending:
+                continue
+            sample = (t_ns, ent.position_m.x, ent.position_m.y, ent.yaw_rad)
+            latest = rk.state.get(ent.entity_id)
+            if latest is not None and latest[3] >= t_ns:
+                # same stamp as the pose already integrated (log-time order)
+                pose = (latest[3], latest[0], latest[1], latest[2])
+                self._score([sample], None, pose, rk.errors, rk.align, ent.entity_id)
+            else:
+                rk.pending[ent.entity_id].append(sample)
+
+    def _on_odometry(
+        self, topic: str, t_ns: int, odo: WheelOdometry, rk: _Reckoning, writer: LogWriter
+    ) -> None:
+        """One odometry sample: integrate it, score the truth waiting for it, write the pose."""
+        name = topic.split("/")[2]
+        prev = rk.state.get(name)
+        if prev is None:
+            x, y, yaw = 0.0, 0.0, 0.0
+            rk.pending[name] = [g for g in rk.pending[name] if g[0] >= t_ns]
+        else:
+            x, y, yaw, t_prev, last = prev
+            ds, dyaw = self._motion(name, last, odo, (t_ns - t_prev) / 1e9, rk.metadata)
+            rk.path_m += abs(ds)
+            x, y, yaw = integrate_step(x, y, yaw, ds, dyaw)
+        self._score(rk.pending[name], prev, (t_ns, x, y, yaw), rk.errors, rk.align, name)
+        rk.state[name] = (x, y, yaw, t_ns, odo)
+        writer.write(
+            f"/robot/{name}/dead_reckoning",
+            pose_in_frame(t_ns, x, y, yaw, frame_id=f"{name}/odom"),
+            t_ns,
+        )
+        rk.poses += 1
 
     def _motion(
         self,
@@ -335,6 +367,25 @@ class _ErrorStats:
 
     def mean(self) -> float | None:
         return None if self.n == 0 else round(self.total / self.n, 4)
+
+
+_Truth = tuple[int, float, float, float | None]
+"""A ground-truth sample of a robot: (log time ns, x m, y m, yaw rad or None)."""
+
+
+@dataclass
+class _Reckoning:
+    """State of a dead-reckoning pass over every robot of a log."""
+
+    metadata: dict[str, dict[str, str]]
+    pending: dict[str, list[_Truth]]
+    """Per robot: ground-truth samples waiting for the poses around them."""
+    state: dict[str, tuple[float, float, float, int, WheelOdometry]] = field(default_factory=dict)
+    """Per robot: the latest pose (x, y, yaw), its time and its odometry sample."""
+    align: dict[str, _Align] = field(default_factory=dict)
+    errors: _ErrorStats = field(default_factory=_ErrorStats)
+    path_m: float = 0.0
+    poses: int = 0
 
 
 DEAD_RECKONING_PROCESSOR = ProcessorInfo(

@@ -11,7 +11,8 @@ run (:mod:`~trackctl.smirror.localizer`: nodes, link, robot filter), the metrics
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -82,6 +83,129 @@ def _mean(values: Iterable[float]) -> float | None:
     return None if not v else round(float(np.mean(v)), 4)
 
 
+def _median(values: Sequence[float], digits: int) -> float | None:
+    """Rounded median, None without values."""
+    return None if not values else round(float(np.median(values)), digits)
+
+
+def _ratio(num: float, den: float, digits: int) -> float | None:
+    """``num / den`` rounded, None when ``den`` is zero."""
+    return None if not den else round(num / den, digits)
+
+
+@dataclass(frozen=True, slots=True)
+class _LinkRates:
+    """The link's throughput figures, kB/s (all None in centralized mode)."""
+
+    kbps: float | None = None
+    unicast: float | None = None
+    in_coverage: float | None = None
+    out_coverage: float | None = None
+
+
+def _coverage_rates(
+    res: SmirrorResult, cov: np.ndarray, ev: np.ndarray
+) -> tuple[float | None, float | None]:
+    """The link's bytes split by where the robot was when they were sent: kB/s in, out."""
+    if len(res.t_s) <= 1 or not len(ev):
+        return None, None
+    ts = np.asarray(res.t_s)
+    period = float(np.median(np.diff(ts)))
+    idx = np.clip(np.searchsorted(ts, ev[:, 0], side="right") - 1, 0, len(ts) - 1)
+    ev_cov = cov[idx]
+    t_in, t_out = cov.sum() * period, (~cov).sum() * period
+    kin = None if t_in == 0 else round(float(ev[ev_cov, 1].sum()) / t_in / 1e3, 3)
+    kout = None if t_out == 0 else round(float(ev[~ev_cov, 1].sum()) / t_out / 1e3, 3)
+    return kin, kout
+
+
+def _link_rates(res: SmirrorResult, cov: np.ndarray, ev: np.ndarray, central: bool) -> _LinkRates:
+    """Throughput of the nodes' transmissions ``ev`` (none in centralized mode: no link)."""
+    if central:
+        return _LinkRates()
+    dur = max(res.duration_s, 1e-9)
+    kin, kout = _coverage_rates(res, cov, ev)
+    return _LinkRates(
+        kbps=round(float(ev[:, 1].sum()) / dur / 1e3, 3),
+        unicast=round(float(ev[:, 2].sum()) / dur / 1e3, 3),
+        in_coverage=kin,
+        out_coverage=kout,
+    )
+
+
+def _cast_mode(res: SmirrorResult, central: bool) -> str:
+    """How the nodes sent: the one mode used, ``mixed``, or ``none``."""
+    if central or not res.cast_modes:
+        return "none"
+    if len(res.cast_modes) == 1:
+        return next(iter(res.cast_modes))
+    return "mixed"
+
+
+def _error_figures(
+    err: np.ndarray, cov: np.ndarray, rng: np.ndarray
+) -> dict[str, float | int | None]:
+    """Error spread, error against range in coverage, coverage share, sample count."""
+    empty = not len(err)
+    return {
+        "error_m_p95": None if empty else round(float(np.percentile(err, 95)), 4),
+        "error_m_max": None if empty else round(float(err.max()), 4),
+        "error_m_in_coverage_le_11m_max_bin": _max_bin(err[cov], rng[cov]),
+        "error_m_per_m_range": _slope(err[cov], rng[cov]),
+        "coverage_fraction": None if not len(cov) else round(float(cov.mean()), 4),
+        "samples": len(err),
+    }
+
+
+def _cost_figures(res: SmirrorResult) -> dict[str, float | int | None]:
+    """What the run sent and processed, and how long it took."""
+    return {
+        "foreground_bytes": res.foreground_bytes,
+        "full_frame_bytes": res.full_frame_bytes,
+        "full_to_foreground_ratio": _ratio(res.full_frame_bytes, res.foreground_bytes, 2),
+        "image_messages": res.image_messages,
+        "images_new": res.images_new,
+        "images_old": res.images_old,
+        "beacons": res.beacons,
+        "node_ms_median": _median(res.node_ms, 3),
+        "robot_ms_median": _median(res.robot_ms, 3),
+        "fix_attempts": res.fix_attempts,
+        "fixes": res.fixes,
+        "fixes_used": res.fixes_used,
+        "broadcast_lost": res.broadcast_lost,
+        "decode_failures": res.decode_failures,
+        "duration_s": round(res.duration_s, 3),
+    }
+
+
+def _truthless_figures(res: SmirrorResult, central: bool) -> dict[str, float | int | None]:
+    """Figures that need no ground truth: localized time, fixes, filter consistency."""
+    nis = np.asarray(res.nis)
+    return {
+        "localized_share": None
+        if central or res.odometry_s <= 0
+        else round(res.localized_s / res.odometry_s, 4),
+        "first_fix_s": None if res.first_fix_s is None else round(res.first_fix_s, 3),
+        "fixes_per_min": None
+        if res.duration_s <= 0
+        else round(res.fixes_used / (res.duration_s / 60), 3),
+        "nis_mean": None if not res.nis else round(float(np.mean(res.nis)), 3),
+        "nis_within_95": None if not res.nis else round(float(np.mean(nis <= NIS_95_3DOF)), 4),
+        "unlocalized_samples": res.unlocalized_samples,
+    }
+
+
+def _queue_figures(res: SmirrorResult, central: bool) -> dict[str, float | int | None]:
+    """The links: queueing, answers never sent, our answers that arrived."""
+    queued = not central and bool(res.queue_ms)
+    return {
+        "queue_ms_mean": _mean(res.queue_ms) if queued else None,
+        "queue_ms_max": round(float(np.max(res.queue_ms)), 3) if queued else None,
+        "answers_dropped": res.answers_dropped,
+        "delivered_share": None if central else _ratio(res.fix_attempts, res.ours_requested, 4),
+    }
+
+
 def report_metrics(
     res: SmirrorResult, cfg: SmirrorConfig
 ) -> dict[str, float | int | str | bool | None]:
@@ -91,27 +215,7 @@ def report_metrics(
     delay = np.asarray(res.delay_ms)
     central = cfg.mode is Mode.CENTRALIZED
     ev = np.asarray(res.events, float).reshape(-1, 4)
-    dur = max(res.duration_s, 1e-9)
-    kbps = None if central else round(float(ev[:, 1].sum()) / dur / 1e3, 3)
-    uni = None if central else round(float(ev[:, 2].sum()) / dur / 1e3, 3)
-    # split the link's bytes by where the robot was when they were sent
-    kin = kout = None
-    if not central and len(res.t_s) > 1 and len(ev):
-        ts = np.asarray(res.t_s)
-        period = float(np.median(np.diff(ts)))
-        idx = np.clip(np.searchsorted(ts, ev[:, 0], side="right") - 1, 0, len(ts) - 1)
-        ev_cov = cov[idx]
-        t_in, t_out = cov.sum() * period, (~cov).sum() * period
-        kin = None if t_in == 0 else round(float(ev[ev_cov, 1].sum()) / t_in / 1e3, 3)
-        kout = None if t_out == 0 else round(float(ev[~ev_cov, 1].sum()) / t_out / 1e3, 3)
-    if central:
-        cast = "none"
-    elif len(res.cast_modes) == 1:
-        cast = next(iter(res.cast_modes))
-    elif res.cast_modes:
-        cast = "mixed"
-    else:
-        cast = "none"
+    link = _link_rates(res, cov, ev, central)
     rng = np.asarray(res.range_m)
     return {
         "system": "smirror",
@@ -120,59 +224,18 @@ def report_metrics(
         "error_m_mean_in_coverage": _mean(err[cov]),
         "error_m_mean_out_coverage": _mean(err[~cov]),
         "delay_ms_mean": _mean(delay),
-        "kbps_mean": kbps,
-        "kbps_unicast_equivalent": uni,
+        "kbps_mean": link.kbps,
+        "kbps_unicast_equivalent": link.unicast,
         "requesters": res.requesters,
-        "cast_mode": cast,
-        "kbps_in_coverage": kin,
-        "kbps_out_coverage": kout,
+        "cast_mode": _cast_mode(res, central),
+        "kbps_in_coverage": link.in_coverage,
+        "kbps_out_coverage": link.out_coverage,
         "delay_ms_mean_in_coverage": _mean(delay[cov]),
         "delay_ms_mean_out_coverage": _mean(delay[~cov]),
-        "error_m_p95": None if not len(err) else round(float(np.percentile(err, 95)), 4),
-        "error_m_max": None if not len(err) else round(float(err.max()), 4),
-        "error_m_in_coverage_le_11m_max_bin": _max_bin(err[cov], rng[cov]),
-        "error_m_per_m_range": _slope(err[cov], rng[cov]),
-        "coverage_fraction": None if not len(cov) else round(float(cov.mean()), 4),
-        "samples": len(err),
-        "foreground_bytes": res.foreground_bytes,
-        "full_frame_bytes": res.full_frame_bytes,
-        "full_to_foreground_ratio": None
-        if not res.foreground_bytes
-        else round(res.full_frame_bytes / res.foreground_bytes, 2),
-        "image_messages": res.image_messages,
-        "images_new": res.images_new,
-        "images_old": res.images_old,
-        "beacons": res.beacons,
-        "node_ms_median": None if not res.node_ms else round(float(np.median(res.node_ms)), 3),
-        "robot_ms_median": None if not res.robot_ms else round(float(np.median(res.robot_ms)), 3),
-        "fix_attempts": res.fix_attempts,
-        "fixes": res.fixes,
-        "fixes_used": res.fixes_used,
-        "broadcast_lost": res.broadcast_lost,
-        "decode_failures": res.decode_failures,
-        "duration_s": round(res.duration_s, 3),
-        # figures that need no ground truth
-        "localized_share": None
-        if central or res.odometry_s <= 0
-        else round(res.localized_s / res.odometry_s, 4),
-        "first_fix_s": None if res.first_fix_s is None else round(res.first_fix_s, 3),
-        "fixes_per_min": None
-        if res.duration_s <= 0
-        else round(res.fixes_used / (res.duration_s / 60), 3),
-        "nis_mean": None if not res.nis else round(float(np.mean(res.nis)), 3),
-        "nis_within_95": None
-        if not res.nis
-        else round(float(np.mean(np.asarray(res.nis) <= NIS_95_3DOF)), 4),
-        "unlocalized_samples": res.unlocalized_samples,
-        # the links: queueing, answers never sent, our answers that arrived
-        "queue_ms_mean": None if central or not res.queue_ms else _mean(res.queue_ms),
-        "queue_ms_max": None
-        if central or not res.queue_ms
-        else round(float(np.max(res.queue_ms)), 3),
-        "answers_dropped": res.answers_dropped,
-        "delivered_share": None
-        if central or not res.ours_requested
-        else round(res.fix_attempts / res.ours_requested, 4),
+        **_error_figures(err, cov, rng),
+        **_cost_figures(res),
+        **_truthless_figures(res, central),
+        **_queue_figures(res, central),
         "robots": max(1, len(res.per_robot)),
         **_per_robot(res, cfg),
     }
