@@ -29,9 +29,6 @@ STILL_OVER: dict[str, int] = {
     "trackctl/vmtrack/identity.py::IdentityBinder._resolve_offline": 19,
     "trackctl/vmtrack/identify.py::_carry_through_unseen": 19,
     "trackctl/vmtrack/identity.py::IdentityBinder._rssi_evidence": 18,
-    "trackctl/vmtrack/retrack.py::_Searcher.steady": 17,
-    "trackctl/vmtrack/pipeline.py::_track_log": 17,
-    "trackctl/vmtrack/pipeline.py::_plan_inputs": 16,
 }
 
 

@@ -37,7 +37,7 @@ from trackctl.logs.messages import (
     TrackState,
     Vec3,
 )
-from trackctl.logs.reader import LogReader
+from trackctl.logs.reader import LogMessage, LogReader, TopicInfo
 from trackctl.logs.writer import LogWriter
 from trackctl.metrics.tracking import InitialIdentity, MotAccumulator
 from trackctl.processing.base import Progress
@@ -123,15 +123,7 @@ def _plan_inputs(reader: LogReader, cfg: VmTrackConfig) -> _Inputs:
     has_images = any(i.schema_name == "foxglove.CompressedImage" for i in present.values())
     imu_topics = sorted(t for t, i in present.items() if i.schema_name == Imu.SCHEMA)
     if cfg.source is Source.FRAMES or (cfg.source is Source.AUTO and has_images):
-        frame_cams = image_cameras(reader, present)
-        if not frame_cams:
-            raise MissingTopicError(
-                f"{reader.path}: no foxglove.CompressedImage topic (/<camera>/image); "
-                "--source frames needs camera frames"
-            )
-        detector = FrameDetector(reader, frame_cams, cfg.frames)
-        image_topics = [topics.image(c) for c in sorted(frame_cams)]
-        inputs = _Inputs(cfg.mode, image_topics, imu_topics, detector=detector)
+        inputs = _frame_inputs(reader, present, cfg, imu_topics)
     elif not det_topics:
         raise MissingTopicError(
             f"{reader.path}: no trackctl.Detections topic (/<camera>/detections) and no "
@@ -147,6 +139,21 @@ def _plan_inputs(reader: LogReader, cfg: VmTrackConfig) -> _Inputs:
         )
         inputs.mode = Mode.V_AF
     return inputs
+
+
+def _frame_inputs(
+    reader: LogReader, present: dict[str, TopicInfo], cfg: VmTrackConfig, imu_topics: list[str]
+) -> _Inputs:
+    """Stage 0 for a log with camera frames: the detector over its image topics."""
+    frame_cams = image_cameras(reader, present)
+    if not frame_cams:
+        raise MissingTopicError(
+            f"{reader.path}: no foxglove.CompressedImage topic (/<camera>/image); "
+            "--source frames needs camera frames"
+        )
+    detector = FrameDetector(reader, frame_cams, cfg.frames)
+    image_topics = [topics.image(c) for c in sorted(frame_cams)]
+    return _Inputs(cfg.mode, image_topics, imu_topics, detector=detector)
 
 
 def _phone_motions(
@@ -226,20 +233,35 @@ def _track_log(
         if detector is None:
             points.extend(_ground_points(reader, msg.topic, msg.message, inputs.cams))
             continue
-        camera = msg.topic.strip("/").split("/")[0]
-        people = online.predictions(msg.log_time_ns, moved_only=True)
-        preds = None if search_full else online.predictions(msg.log_time_ns)
-        found, ground, ground_covs = detector.detect(
-            msg.log_time_ns, camera, bytes(msg.message.data), preds, people
-        )
-        writer.write(detections_topic(camera), found, msg.log_time_ns)
-        points.extend((camera, g) for g in ground)
-        if covs is not None:
-            covs.extend(ground_covs)
+        _detect_in_frame(msg, detector, online, writer, search_full, points, covs)
     if frame_t is not None:
         online.process_frame(frame_t, points, covs)
     online.close()
     return truth
+
+
+def _detect_in_frame(
+    msg: LogMessage,
+    detector: FrameDetector,
+    online: OnlineTracker,
+    writer: LogWriter,
+    search_full: bool,
+    points: list[tuple[str, np.ndarray]],
+    covs: list[np.ndarray] | None,
+) -> None:
+    """One camera image of stage 2: people detected (in the tracks' predicted regions unless
+    ``search_full``), their detections written, their ground points (and covariances)
+    appended to the frame's."""
+    camera = msg.topic.strip("/").split("/")[0]
+    people = online.predictions(msg.log_time_ns, moved_only=True)
+    preds = None if search_full else online.predictions(msg.log_time_ns)
+    found, ground, ground_covs = detector.detect(
+        msg.log_time_ns, camera, bytes(msg.message.data), preds, people
+    )
+    writer.write(detections_topic(camera), found, msg.log_time_ns)
+    points.extend((camera, g) for g in ground)
+    if covs is not None:
+        covs.extend(ground_covs)
 
 
 def run(

@@ -644,32 +644,14 @@ class _Searcher:
 
     def steady(self, coarse: np.ndarray) -> tuple[float, np.ndarray] | None:
         """The one-yaw search: (clock offset, rotation per frame) or None without a walk."""
-        cfg, n = self.cfg, len(self.frame_t)
+        cfg = self.cfg
         rot = np.exp(1j * np.radians(np.arange(0.0, 360.0, cfg.yaw_step_deg)))
         if np.isnan(self.walks([(float(lg), 1.0 + 0j) for lg in coarse])).all():
             return None
         changed = any(self.changes(float(lg)) for lg in coarse)
-        found: list[tuple[float, np.ndarray]] = []
-        if not changed:
-            # every (offset, yaw) at once; the few best yaws refined
-            costs = self.costs(self.walks([(float(lg), r) for lg in coarse for r in rot]))
-            k = max(cfg.search_candidates, cfg.ambiguity_candidates)
-            for i in _distinct_best(costs.reshape(len(coarse), len(rot)), k):
-                found.append((float(coarse[i // len(rot)]), np.full(n, rot[i % len(rot)])))
-            self.candidates = found[: cfg.ambiguity_candidates]
-            found = found[: cfg.search_candidates]
-        else:
-            # a yaw per stretch between the carry changes the phone saw, at every offset
-            for lg in coarse:
-                for sc in cfg.search_first_scales:
-                    yaw = self.yaw(float(lg), sc, steady=True)
-                    if yaw is not None:
-                        found.append((float(lg), yaw))
-            if not found:
-                return None
-            order = np.argsort(self.costs(self.walks(found)))
-            self.candidates = [found[i] for i in order[: cfg.ambiguity_candidates]]
-            found = [found[i] for i in order[: cfg.search_candidates]]
+        found = self._per_stretch(coarse) if changed else self._one_yaw(coarse, rot)
+        if not found:
+            return None
         refined = [(*self.offset_and_scale(a), a) for _, a in found]
         _, lag, scale, a = min(refined, key=lambda c: c[0])
         if changed:
@@ -677,6 +659,36 @@ class _Searcher:
             if yaw is not None:
                 return lag, yaw
         return lag, a * scale
+
+    def _one_yaw(self, coarse: np.ndarray, rot: np.ndarray) -> list[tuple[float, np.ndarray]]:
+        """The steady search without carry changes: every (offset, yaw) at once; the best
+        distinct yaws, the first ``search_candidates`` to refine (the first
+        ``ambiguity_candidates`` kept as :attr:`candidates`)."""
+        cfg, n = self.cfg, len(self.frame_t)
+        costs = self.costs(self.walks([(float(lg), r) for lg in coarse for r in rot]))
+        k = max(cfg.search_candidates, cfg.ambiguity_candidates)
+        found = [
+            (float(coarse[i // len(rot)]), np.full(n, rot[i % len(rot)]))
+            for i in _distinct_best(costs.reshape(len(coarse), len(rot)), k)
+        ]
+        self.candidates = found[: cfg.ambiguity_candidates]
+        return found[: cfg.search_candidates]
+
+    def _per_stretch(self, coarse: np.ndarray) -> list[tuple[float, np.ndarray]]:
+        """The steady search with carry changes: a yaw per stretch between the changes the
+        phone saw, at every offset and first scale; the cheapest to refine (empty: none)."""
+        cfg = self.cfg
+        found: list[tuple[float, np.ndarray]] = []
+        for lg in coarse:
+            for sc in cfg.search_first_scales:
+                yaw = self.yaw(float(lg), sc, steady=True)
+                if yaw is not None:
+                    found.append((float(lg), yaw))
+        if not found:
+            return found
+        order = np.argsort(self.costs(self.walks(found)))
+        self.candidates = [found[i] for i in order[: cfg.ambiguity_candidates]]
+        return [found[i] for i in order[: cfg.search_candidates]]
 
     def yaw_path(self, lag_s: float) -> tuple[float, np.ndarray] | None:
         """The yaw-per-frame search started at clock offset ``lag_s``, started again elsewhere
