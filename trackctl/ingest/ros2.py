@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -381,6 +381,71 @@ def _camera_model(msg: Any, name: str, t_ns: int, tree: _StaticTree) -> CameraMo
 Stamped = tuple[int, int, str, Any]
 
 
+def _static_tree(reader: Any) -> _StaticTree:
+    """The bag's ``/tf_static`` links."""
+    tree = _StaticTree()
+    # rosbags reads every connection when given none: ask only for what exists
+    statics = [c for c in reader.connections if c.topic == topics.TF_STATIC]
+    for conn, _, raw in reader.messages(connections=statics) if statics else ():
+        tree.add(reader.deserialize(raw, conn.msgtype))
+    return tree
+
+
+def _deserialize(reader: Any, msgtype: str, raw: bytes, where: str) -> Any:
+    """One bag message, decoded.
+
+    Raises:
+        InputError: damaged CDR (names the bag, topic and time).
+    """
+    try:
+        return reader.deserialize(raw, msgtype)
+    except Exception as err:  # rosbags raises struct/index errors on damaged CDR
+        raise InputError(f"{where}: cannot decode {msgtype} ({err})") from err
+
+
+@dataclass(slots=True)
+class _Converter:
+    """ROS messages to trackctl messages, with the state one read carries: the static tf tree
+    and the cameras already calibrated (each is written once)."""
+
+    tree: _StaticTree
+    calibrated: set[str] = field(default_factory=set)
+
+    def convert(
+        self, plan: TopicPlan, msgtype: str, msg: Any, log_ns: int, where: str
+    ) -> list[tuple[str, Any]]:
+        """The ``(trackctl topic, message)`` pairs one ROS message becomes (none for a
+        camera's later CameraInfo)."""
+        t_ns = _stamp(msg.header, log_ns) if hasattr(msg, "header") else log_ns
+        name = plan.name
+        if plan.role == "odometry":
+            return [(topics.odom(name), _odometry(msg, name, t_ns))]
+        if plan.role == "imu":
+            return [(topics.robot_imu(name), _imu(msg, name, t_ns))]
+        if plan.role == "image":
+            if msgtype.endswith("CompressedImage"):
+                return [(topics.image(name), _compressed(msg, name, t_ns))]
+            return [(topics.image(name), _raw(msg, name, t_ns, where))]
+        if plan.role == "camera_info" and name not in self.calibrated:
+            return self._calibration(msg, name, t_ns, where)
+        if plan.role == "tf":
+            return [(plan.targets[0], _transforms(msg, log_ns))]
+        return []
+
+    def _calibration(self, msg: Any, name: str, t_ns: int, where: str) -> list[tuple[str, Any]]:
+        from trackctl.ingest.calibration import to_foxglove_calibration
+
+        self.calibrated.add(name)
+        try:
+            model = _camera_model(msg, name, t_ns, self.tree)
+        except ValueError as err:
+            raise InputError(f"{where}: field k/width/height: {err}") from err
+        return [
+            (topics.calibration(name), to_foxglove_calibration(model)),
+            (topics.camera_model(name), model),
+        ]
+
+
 def read_ros2(bag: Path, plans: Sequence[TopicPlan], order: int = 0) -> Iterator[Stamped]:
     """The bag's mapped messages as ``(log time, order, trackctl topic, message)`` in the bag's
     order. Camera calibrations are written once per camera (the first CameraInfo), with the pose
@@ -389,49 +454,20 @@ def read_ros2(bag: Path, plans: Sequence[TopicPlan], order: int = 0) -> Iterator
     Raises:
         InputError: a message cannot be converted (names the bag, topic and field).
     """
-    from trackctl.ingest.calibration import to_foxglove_calibration
-
     by_topic = {p.ros_topic: p for p in plans if p.role != "ignore"}
     if not by_topic:
         return
-    tree = _StaticTree()
     reader = _open(bag)
     try:
-        # rosbags reads every connection when given none: ask only for what exists
-        statics = [c for c in reader.connections if c.topic == topics.TF_STATIC]
-        for conn, _, raw in reader.messages(connections=statics) if statics else ():
-            tree.add(reader.deserialize(raw, conn.msgtype))
+        converter = _Converter(_static_tree(reader))
         wanted = [c for c in reader.connections if c.topic in by_topic]
         if not wanted:
             return
-        calibrated: set[str] = set()
         for conn, log_ns, raw in reader.messages(connections=wanted):
             plan = by_topic[conn.topic]
             where = f"{bag}: {conn.topic} at {log_ns} ns"
-            try:
-                msg = reader.deserialize(raw, conn.msgtype)
-            except Exception as err:  # rosbags raises struct/index errors on damaged CDR
-                raise InputError(f"{where}: cannot decode {conn.msgtype} ({err})") from err
-            t_ns = _stamp(msg.header, log_ns) if hasattr(msg, "header") else log_ns
-            name = plan.name
-            if plan.role == "odometry":
-                yield (log_ns, order, topics.odom(name), _odometry(msg, name, t_ns))
-            elif plan.role == "imu":
-                yield (log_ns, order, topics.robot_imu(name), _imu(msg, name, t_ns))
-            elif plan.role == "image":
-                if conn.msgtype.endswith("CompressedImage"):
-                    yield (log_ns, order, topics.image(name), _compressed(msg, name, t_ns))
-                else:
-                    yield (log_ns, order, topics.image(name), _raw(msg, name, t_ns, where))
-            elif plan.role == "camera_info" and name not in calibrated:
-                calibrated.add(name)
-                try:
-                    model = _camera_model(msg, name, t_ns, tree)
-                except ValueError as err:
-                    raise InputError(f"{where}: field k/width/height: {err}") from err
-                yield (log_ns, order, topics.calibration(name), to_foxglove_calibration(model))
-                yield (log_ns, order, topics.camera_model(name), model)
-            elif plan.role == "tf":
-                yield (log_ns, order, plan.targets[0], _transforms(msg, log_ns))
+            msg = _deserialize(reader, conn.msgtype, raw, where)
+            for topic, out in converter.convert(plan, conn.msgtype, msg, log_ns, where):
+                yield (log_ns, order, topic, out)
     finally:
         reader.close()

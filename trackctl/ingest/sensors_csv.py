@@ -262,20 +262,69 @@ def _sensor_logger_table(files: dict[str, bytes], stem: str, where: Path) -> pd.
     return df.sort_values("time", kind="stable").reset_index(drop=True)
 
 
-def _read_sensor_logger(path: Path, name: str) -> Iterator[Imu]:
+def _sensor_logger_files(path: Path) -> dict[str, bytes]:
+    """The CSV files of a Sensor Logger export (a folder or a .zip), by lower-case stem."""
     files: dict[str, bytes] = {}
     if path.is_dir():
         for f in path.glob("*.csv"):
             files[f.stem.lower()] = f.read_bytes()
-    else:
-        try:
-            with zipfile.ZipFile(path) as zf:
-                for info in zf.infolist():
-                    p = Path(info.filename)
-                    if p.suffix.lower() == ".csv":
-                        files[p.stem.lower()] = zf.read(info)
-        except (zipfile.BadZipFile, OSError) as err:
-            raise InputError(f"{path}: not a readable zip file ({err})") from err
+        return files
+    try:
+        with zipfile.ZipFile(path) as zf:
+            for info in zf.infolist():
+                p = Path(info.filename)
+                if p.suffix.lower() == ".csv":
+                    files[p.stem.lower()] = zf.read(info)
+    except (zipfile.BadZipFile, OSError) as err:
+        raise InputError(f"{path}: not a readable zip file ({err})") from err
+    return files
+
+
+def _interp_xyz(t: np.ndarray, times: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    """The three columns of ``xyz`` (sampled at ``times``) interpolated at ``t``."""
+    return np.column_stack([np.interp(t, times, xyz[:, k]) for k in range(3)])
+
+
+def _gravity(files: dict[str, bytes], path: Path, t: np.ndarray) -> np.ndarray:
+    """Gravity.csv at ``t``: Sensor Logger's Accelerometer.csv is user acceleration (gravity
+    removed); our Imu carries specific force including gravity, so it is added back."""
+    grav = _sensor_logger_table(files, "Gravity", path)
+    if grav is None:
+        raise InputError(
+            f"{path}: Accelerometer.csv has gravity removed and Gravity.csv is missing; "
+            "export TotalAcceleration or Gravity too"
+        )
+    g = _numeric(path / "Gravity.csv", grav, ("x", "y", "z"), 2)
+    gt = grav["time"].to_numpy(dtype=np.int64)
+    return _interp_xyz(t, gt, g)
+
+
+def _gyroscope(gyro: pd.DataFrame | None, path: Path, t: np.ndarray) -> np.ndarray | None:
+    """Gyroscope.csv at ``t`` (None without one)."""
+    if gyro is None:
+        return None
+    gt = gyro["time"].to_numpy(dtype=np.int64)
+    g = _numeric(path / "Gyroscope.csv", gyro, ("x", "y", "z"), 2)
+    return _interp_xyz(t, gt, g)
+
+
+def _orientation(files: dict[str, bytes], path: Path, t: np.ndarray) -> np.ndarray | None:
+    """Orientation.csv quaternions (x, y, z, w) at ``t`` (None without them)."""
+    ori = _sensor_logger_table(files, "Orientation", path)
+    if ori is None or not all(c in ori.columns for c in ("qx", "qy", "qz", "qw")):
+        return None
+    q = _numeric(path / "Orientation.csv", ori, ("qx", "qy", "qz", "qw"), 2)
+    ot = ori["time"].to_numpy(dtype=np.int64)
+    # Nearest sample rather than component-wise interpolation, which would leave the unit
+    # sphere and mix q with -q across sign flips.
+    idx = np.clip(np.searchsorted(ot, t), 0, len(ot) - 1)
+    prev = np.clip(idx - 1, 0, len(ot) - 1)
+    idx = np.where(np.abs(ot[prev] - t) < np.abs(ot[idx] - t), prev, idx)
+    return q[idx]
+
+
+def _read_sensor_logger(path: Path, name: str) -> Iterator[Imu]:
+    files = _sensor_logger_files(path)
     acc = _sensor_logger_table(files, "TotalAcceleration", path)
     gravity_needed = acc is None
     if acc is None:
@@ -289,33 +338,9 @@ def _read_sensor_logger(path: Path, name: str) -> Iterator[Imu]:
     t = acc["time"].to_numpy(dtype=np.int64)
     accel = _numeric(path / "accelerometer.csv", acc, ("x", "y", "z"), 2)
     if gravity_needed:
-        # Sensor Logger's Accelerometer.csv is user acceleration (gravity removed); our Imu
-        # carries specific force including gravity, so add Gravity.csv back when it is there.
-        grav = _sensor_logger_table(files, "Gravity", path)
-        if grav is None:
-            raise InputError(
-                f"{path}: Accelerometer.csv has gravity removed and Gravity.csv is missing; "
-                "export TotalAcceleration or Gravity too"
-            )
-        g = _numeric(path / "Gravity.csv", grav, ("x", "y", "z"), 2)
-        gt = grav["time"].to_numpy(dtype=np.int64)
-        accel = accel + np.column_stack([np.interp(t, gt, g[:, k]) for k in range(3)])
-    gyro_i = None
-    if gyro is not None:
-        gt = gyro["time"].to_numpy(dtype=np.int64)
-        g = _numeric(path / "Gyroscope.csv", gyro, ("x", "y", "z"), 2)
-        gyro_i = np.column_stack([np.interp(t, gt, g[:, k]) for k in range(3)])
-    ori = _sensor_logger_table(files, "Orientation", path)
-    quat = None
-    if ori is not None and all(c in ori.columns for c in ("qx", "qy", "qz", "qw")):
-        q = _numeric(path / "Orientation.csv", ori, ("qx", "qy", "qz", "qw"), 2)
-        ot = ori["time"].to_numpy(dtype=np.int64)
-        # Nearest sample rather than component-wise interpolation, which would leave the unit
-        # sphere and mix q with -q across sign flips.
-        idx = np.clip(np.searchsorted(ot, t), 0, len(ot) - 1)
-        prev = np.clip(idx - 1, 0, len(ot) - 1)
-        idx = np.where(np.abs(ot[prev] - t) < np.abs(ot[idx] - t), prev, idx)
-        quat = q[idx]
+        accel = accel + _gravity(files, path, t)
+    gyro_i = _gyroscope(gyro, path, t)
+    quat = _orientation(files, path, t)
     frame = f"phone/{name}"
     for i in range(len(t)):
         yield Imu(

@@ -109,16 +109,10 @@ def _known(values: Mapping[str, Any], allowed: Any, where: str) -> None:
         )
 
 
-def site_records(data: Any, path: str | Path = "site") -> dict[str, dict[str, str]]:
-    """A parsed site file as the metadata records processors read.
-
-    Raises:
-        InputError: an unknown key, a value of the wrong type (names the file and key path).
-    """
-    top = _mapping(data if data is not None else {}, str(path))
-    _known(top, _TOP, str(path))
+def _robot_records(robots: Any, path: str | Path) -> dict[str, dict[str, str]]:
+    """``robot/NAME`` records of the ``robots`` section."""
     out: dict[str, dict[str, str]] = {}
-    for name, robot in _mapping(top.get("robots", {}), f"{path}: robots").items():
+    for name, robot in _mapping(robots, f"{path}: robots").items():
         where = f"{path}: robots.{name}"
         if not isinstance(name, str) or not name or "/" in name:
             raise InputError(f"{where}: a robot NAME must be a non-empty string without '/'")
@@ -131,8 +125,14 @@ def site_records(data: Any, path: str | Path = "site") -> dict[str, dict[str, st
         for k in ("ticks_per_m", "wheel_base_m"):
             if k in robot and float(robot[k]) <= 0:
                 raise InputError(f"{where}.{k}: must be positive, got {robot[k]!r}")
-    smirror = _mapping(top.get("smirror", {}), f"{path}: smirror")
+    return out
+
+
+def _smirror_records(section: Any, path: str | Path) -> dict[str, dict[str, str]]:
+    """``smirror/requesters`` and ``smirror/floorplan`` records of the ``smirror`` section."""
+    smirror = _mapping(section, f"{path}: smirror")
     _known(smirror, _SMIRROR_KEYS, f"{path}: smirror")
+    out: dict[str, dict[str, str]] = {}
     if "requesters" in smirror:
         count = _number(smirror["requesters"], f"{path}: smirror.requesters", int)
         if int(count) < 1:
@@ -147,21 +147,41 @@ def site_records(data: Any, path: str | Path = "site") -> dict[str, dict[str, st
         except (ValueError, KeyError, TypeError) as err:
             raise InputError(f"{path}: smirror.floorplan: {err}") from err
         out["smirror/floorplan"] = {"plan": json.dumps(dict(plan))}
-    bl = _mapping(top.get("bridgeloc", {}), f"{path}: bridgeloc")
-    _known(bl, BRIDGELOC_KEYS, f"{path}: bridgeloc")
-    if bl:
-        rec = {}
-        for k, v in bl.items():
-            kind = BRIDGELOC_KEYS[k]
-            where = f"{path}: bridgeloc.{k}"
-            if kind is str:
-                if not isinstance(v, str) or not v:
-                    raise InputError(f"{where}: expected a name, got {v!r}")
-                rec[k] = v
-            else:
-                rec[k] = _number(v, where, kind)
-        out["bridgeloc"] = rec
     return out
+
+
+def _bridgeloc_records(section: Any, path: str | Path) -> dict[str, dict[str, str]]:
+    """The ``bridgeloc`` record (none when the section is empty or absent)."""
+    bl = _mapping(section, f"{path}: bridgeloc")
+    _known(bl, BRIDGELOC_KEYS, f"{path}: bridgeloc")
+    if not bl:
+        return {}
+    rec = {}
+    for k, v in bl.items():
+        kind = BRIDGELOC_KEYS[k]
+        where = f"{path}: bridgeloc.{k}"
+        if kind is str:
+            if not isinstance(v, str) or not v:
+                raise InputError(f"{where}: expected a name, got {v!r}")
+            rec[k] = v
+        else:
+            rec[k] = _number(v, where, kind)
+    return {"bridgeloc": rec}
+
+
+def site_records(data: Any, path: str | Path = "site") -> dict[str, dict[str, str]]:
+    """A parsed site file as the metadata records processors read.
+
+    Raises:
+        InputError: an unknown key, a value of the wrong type (names the file and key path).
+    """
+    top = _mapping(data if data is not None else {}, str(path))
+    _known(top, _TOP, str(path))
+    return {
+        **_robot_records(top.get("robots", {}), path),
+        **_smirror_records(top.get("smirror", {}), path),
+        **_bridgeloc_records(top.get("bridgeloc", {}), path),
+    }
 
 
 def read_site(path: str | Path) -> dict[str, dict[str, str]]:

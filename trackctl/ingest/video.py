@@ -125,6 +125,41 @@ def _image_files(path: Path, camera: str) -> list[Path]:
     return files
 
 
+def _csv_times(
+    path: Path, files: list[Path], times: Path, time_unit: str, scale: float
+) -> np.ndarray:
+    """Seconds of every image file from the frame-times CSV ``times`` (``file,t``, t in
+    ``time_unit``, which is ``scale`` seconds)."""
+    if not times.is_file():
+        raise InputError(f"{times}: no such frame-times CSV")
+    table: dict[str, float] = {}
+    for lineno, line in enumerate(times.read_text(errors="replace").splitlines(), 1):
+        if not line.strip() or line.startswith("#"):
+            continue
+        name, _, value = line.partition(",")
+        try:
+            table[Path(name.strip()).name] = float(value) * scale
+        except ValueError:
+            if lineno == 1:
+                continue  # header
+            raise InputError(f"{times}:{lineno}: expected file,t (t in {time_unit})") from None
+    missing = [f.name for f in files if f.name not in table]
+    if missing:
+        raise InputError(f"{times}: no time for image {missing[0]} of {path}")
+    return np.array([table[f.name] for f in files])
+
+
+def _name_times(path: Path, files: list[Path], scale: float) -> np.ndarray:
+    """Seconds of every image file from its numeric name (in units of ``scale`` seconds)."""
+    try:
+        return np.array([float(f.stem) for f in files]) * scale
+    except ValueError:
+        bad = next(f.name for f in files if not f.stem.replace(".", "", 1).isdigit())
+        raise InputError(
+            f"{path}: image name {bad} is not a timestamp; pass --fps or --frame-times CSV"
+        ) from None
+
+
 def _folder_times(
     path: Path, files: list[Path], fps: float | None, times: Path | str | None, time_unit: str
 ) -> np.ndarray:
@@ -132,31 +167,9 @@ def _folder_times(
     a frame number is not a time, so this is never guessed), or ``fps``."""
     scale = _NS_PER_UNIT[time_unit] / 1e9
     if isinstance(times, Path):
-        if not times.is_file():
-            raise InputError(f"{times}: no such frame-times CSV")
-        table: dict[str, float] = {}
-        for lineno, line in enumerate(times.read_text(errors="replace").splitlines(), 1):
-            if not line.strip() or line.startswith("#"):
-                continue
-            name, _, value = line.partition(",")
-            try:
-                table[Path(name.strip()).name] = float(value) * scale
-            except ValueError:
-                if lineno == 1:
-                    continue  # header
-                raise InputError(f"{times}:{lineno}: expected file,t (t in {time_unit})") from None
-        missing = [f.name for f in files if f.name not in table]
-        if missing:
-            raise InputError(f"{times}: no time for image {missing[0]} of {path}")
-        out = np.array([table[f.name] for f in files])
+        out = _csv_times(path, files, times, time_unit, scale)
     elif times == "names":
-        try:
-            out = np.array([float(f.stem) for f in files]) * scale
-        except ValueError:
-            bad = next(f.name for f in files if not f.stem.replace(".", "", 1).isdigit())
-            raise InputError(
-                f"{path}: image name {bad} is not a timestamp; pass --fps or --frame-times CSV"
-            ) from None
+        out = _name_times(path, files, scale)
     elif fps is not None:
         return np.arange(len(files)) / fps
     else:
@@ -218,47 +231,64 @@ def read_frames(
     yield from _video_frames(path, camera, fps, start_ns, jpeg_quality, picker)
 
 
+def _video_rate(
+    path: Path, cap: cv2.VideoCapture, camera: str, fps: float | None, every: int
+) -> float:
+    """The frame rate that stamps an opened video (``fps`` overrides the file's own rate, with a
+    warning when that restamps every frame)."""
+    if not cap.isOpened():
+        raise InputError(f"{path}: OpenCV cannot open this video (camera {camera})")
+    own = cap.get(cv2.CAP_PROP_FPS)
+    rate = fps or own
+    if not rate or rate <= 0:
+        raise InputError(f"{path}: the video has no frame rate; pass --fps")
+    if fps is not None and own and own > 0 and abs(fps - own) > 1e-3 and every == 1:
+        warnings.warn(
+            f"{path}: --fps {fps:g} restamps the video's {own:g} fps frames (every frame "
+            f"kept, time scaled by {own / fps:.3g}); to keep fewer frames use --rate/--every",
+            IncompleteInputWarning,
+            stacklevel=3,  # the caller of _video_frames
+        )
+    return rate
+
+
+def _picked_frames(
+    cap: cv2.VideoCapture, rate: float, picker: _Picker
+) -> Iterator[tuple[int, float, np.ndarray]]:
+    """``(frame number, source time in s, image)`` of the kept frames, until the window or the
+    video ends (skipped frames are not decoded)."""
+    i = 0
+    while True:
+        t_s = i / rate
+        if picker.past_end(t_s):
+            return
+        if not picker.keep(t_s):
+            if not cap.grab():
+                return
+            i += 1
+            continue
+        ok, frame = cap.read()
+        if not ok:
+            return
+        yield i, t_s, frame
+        i += 1
+
+
 def _video_frames(
     path: Path, camera: str, fps: float | None, start_ns: int, quality: int, picker: _Picker
 ) -> Iterator[tuple[int, CompressedImage]]:
     cap = cv2.VideoCapture(str(path))
     try:
-        if not cap.isOpened():
-            raise InputError(f"{path}: OpenCV cannot open this video (camera {camera})")
-        own = cap.get(cv2.CAP_PROP_FPS)
-        rate = fps or own
-        if not rate or rate <= 0:
-            raise InputError(f"{path}: the video has no frame rate; pass --fps")
-        if fps is not None and own and own > 0 and abs(fps - own) > 1e-3 and picker.sel.every == 1:
-            warnings.warn(
-                f"{path}: --fps {fps:g} restamps the video's {own:g} fps frames (every frame "
-                f"kept, time scaled by {own / fps:.3g}); to keep fewer frames use --rate/--every",
-                IncompleteInputWarning,
-                stacklevel=2,
-            )
+        rate = _video_rate(path, cap, camera, fps, picker.sel.every)
         params = [int(cv2.IMWRITE_JPEG_QUALITY), int(quality)]
-        i = 0
         kept = 0
-        while True:
-            t_s = i / rate
-            if picker.past_end(t_s):
-                break
-            if not picker.keep(t_s):
-                ok = cap.grab()  # skipped frames are not decoded
-                if not ok:
-                    break
-                i += 1
-                continue
-            ok, frame = cap.read()
-            if not ok:
-                break
+        for i, t_s, frame in _picked_frames(cap, rate, picker):
             ok, buf = cv2.imencode(".jpg", frame, params)
             if not ok:
                 raise InputError(f"{path}: frame {i} cannot be encoded as JPEG")
             t_ns = start_ns + int(round(t_s * 1e9))
             kept += 1
             yield t_ns, make_compressed_image(t_ns, camera, buf.tobytes(), "jpeg")
-            i += 1
         if kept == 0:
             raise InputError(
                 f"{path}: the video holds no decodable frame in the window (camera {camera})"

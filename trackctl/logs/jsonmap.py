@@ -97,15 +97,31 @@ def _optional_arg(tp: Any) -> Any | None:
     return None
 
 
-def _converters(tp: Any) -> tuple[Encoder, Decoder]:  # noqa: C901 - one branch per kind of type
+def _converters(tp: Any) -> tuple[Encoder, Decoder]:
     """Encoder and decoder of one field type."""
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin is typing.Annotated:
         return _converters(args[0])
     inner = _optional_arg(tp)
     if inner is not None:
-        enc, dec = _converters(inner)
-        return (lambda v: None if v is None else enc(v)), (lambda v: None if v is None else dec(v))
+        return _optional_converters(inner)
+    generic = _generic_converters(tp, origin, args)
+    if generic is not None:
+        return generic
+    return _class_converters(tp)
+
+
+def _optional_converters(inner: Any) -> tuple[Encoder, Decoder]:
+    """Converters of ``inner | None``: None passes through."""
+    enc, dec = _converters(inner)
+    return (lambda v: None if v is None else enc(v)), (lambda v: None if v is None else dec(v))
+
+
+def _generic_converters(
+    tp: Any, origin: Any, args: tuple[Any, ...]
+) -> tuple[Encoder, Decoder] | None:
+    """Converters of a scalar union, ``tuple[X, ...]``, a mapping or a ``Literal`` (None for
+    other types)."""
     if origin in (types.UnionType, typing.Union) or tp is Any:
         return _identity, _identity  # a scalar union (MetricValue): JSON as is
     if origin is tuple:
@@ -116,6 +132,15 @@ def _converters(tp: Any) -> tuple[Encoder, Decoder]:  # noqa: C901 - one branch 
         return (lambda v: dict(v)), (lambda v: dict(v))
     if origin is typing.Literal:
         return _identity, str
+    return None
+
+
+def _class_converters(tp: Any) -> tuple[Encoder, Decoder]:
+    """Converters of a scalar, an ``Enum``, a ``NamedTuple`` or a dataclass.
+
+    Raises:
+        TypeError: any other type.
+    """
     if tp in (int, float, str, bool):
         return _identity, tp
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
@@ -254,15 +279,29 @@ class JsonMessage:
 # -- JSON Schema ----------------------------------------------------------------------------------
 
 
+_ATTRIBUTE = re.compile(r"^\s{4}([A-Za-z_][\w, ]*):\s*(.*)$")
+"""An ``Attributes:`` entry: ``    name: text`` or ``    a, b: text``."""
+
+
 def _docs(cls: type) -> tuple[str, dict[str, str]]:
     """The first docstring paragraph and the ``Attributes:`` entries (``a, b: text`` documents
     both a and b)."""
     lines = inspect.cleandoc(cls.__doc__ or "").splitlines()
+    return _summary(lines), _attributes(lines)
+
+
+def _summary(lines: list[str]) -> str:
+    """The first paragraph, joined into one line."""
     summary: list[str] = []
     for line in lines:
         if not line.strip():
             break
         summary.append(line.strip())
+    return " ".join(summary)
+
+
+def _attributes(lines: list[str]) -> dict[str, str]:
+    """The entries of the ``Attributes:`` section, each joined into one line."""
     attrs: dict[str, str] = {}
     current: list[str] = []
     names: list[str] = []
@@ -274,7 +313,7 @@ def _docs(cls: type) -> tuple[str, dict[str, str]]:
             continue
         if not in_attrs:
             continue
-        m = re.match(r"^\s{4}([A-Za-z_][\w, ]*):\s*(.*)$", line)
+        m = _ATTRIBUTE.match(line)
         if m and not line.startswith(" " * 8):
             for n in names:
                 attrs[n] = " ".join(current)
@@ -282,47 +321,78 @@ def _docs(cls: type) -> tuple[str, dict[str, str]]:
             current = [m.group(2).strip()]
         elif stripped and names:
             current.append(stripped)
-        elif not stripped and names and current:
-            continue
     for n in names:
         attrs[n] = " ".join(current)
-    return " ".join(summary), attrs
+    return attrs
 
 
-def _type_schema(tp: Any) -> dict[str, Any]:  # noqa: C901 - one branch per kind of type
+def _type_schema(tp: Any) -> dict[str, Any]:
+    """The JSON Schema of one field type."""
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin is typing.Annotated:
-        out = _type_schema(args[0])
-        for meta in args[1:]:
-            if isinstance(meta, Length):
-                out["minItems"] = out["maxItems"] = meta.n
-            elif isinstance(meta, Range):
-                bounds = {"minimum": meta.ge, "maximum": meta.le, "exclusiveMinimum": meta.gt}
-                out.update({k: v for k, v in bounds.items() if v is not None})
-        return out
+        return _annotated_schema(args[0], args[1:])
     inner = _optional_arg(tp)
     if inner is not None:
-        out = _type_schema(inner)
-        t = out.get("type")
-        out["type"] = [*t, "null"] if isinstance(t, list) else [t, "null"]
-        if "enum" in out:
-            out["enum"] = [*out["enum"], None]
-        return out
+        return _nullable_schema(inner)
+    generic = _generic_schema(tp, origin, args)
+    if generic is not None:
+        return generic
+    return _class_schema(tp)
+
+
+def _annotated_schema(tp: Any, metadata: tuple[Any, ...]) -> dict[str, Any]:
+    """``tp``'s schema with the bounds of its ``Length`` and ``Range`` metadata."""
+    out = _type_schema(tp)
+    for meta in metadata:
+        if isinstance(meta, Length):
+            out["minItems"] = out["maxItems"] = meta.n
+        elif isinstance(meta, Range):
+            bounds = {"minimum": meta.ge, "maximum": meta.le, "exclusiveMinimum": meta.gt}
+            out.update({k: v for k, v in bounds.items() if v is not None})
+    return out
+
+
+def _nullable_schema(inner: Any) -> dict[str, Any]:
+    """The schema of ``inner | None``: ``inner``'s, with null allowed."""
+    out = _type_schema(inner)
+    t = out.get("type")
+    out["type"] = [*t, "null"] if isinstance(t, list) else [t, "null"]
+    if "enum" in out:
+        out["enum"] = [*out["enum"], None]
+    return out
+
+
+_SCALARS = ["number", "string", "boolean", "null"]
+
+
+def _generic_schema(tp: Any, origin: Any, args: tuple[Any, ...]) -> dict[str, Any] | None:
+    """The schema of a scalar union, ``tuple[X, ...]``, a mapping or a ``Literal`` (None for
+    other types)."""
     if origin in (types.UnionType, typing.Union):
-        return {"type": ["number", "string", "boolean", "null"]}
+        return {"type": list(_SCALARS)}
     if origin is tuple:
         return {"type": "array", "items": _type_schema(args[0])}
     if origin in (dict, Mapping) or tp in (dict, Mapping):
-        scalar = ["number", "string", "boolean", "null"]
         return {
             "type": "object",
-            "additionalProperties": {"type": "string" if args[1:] == (str,) else scalar},
+            "additionalProperties": {"type": "string" if args[1:] == (str,) else list(_SCALARS)},
         }
     if origin is typing.Literal:
         return {"type": "string", "enum": list(args)}
-    simple = {int: "integer", float: "number", str: "string", bool: "boolean"}
-    if tp in simple:
-        return {"type": simple[tp]}
+    return None
+
+
+_SIMPLE = {int: "integer", float: "number", str: "string", bool: "boolean"}
+
+
+def _class_schema(tp: Any) -> dict[str, Any]:
+    """The schema of a scalar, an ``Enum``, a ``NamedTuple`` or a dataclass.
+
+    Raises:
+        TypeError: any other type.
+    """
+    if tp in _SIMPLE:
+        return {"type": _SIMPLE[tp]}
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
         return {"type": "string", "enum": [m.value for m in tp]}
     if _is_named_tuple(tp):

@@ -186,6 +186,18 @@ def _read_layout(f: IO[bytes], size: int) -> _Layout | None:
     return _Layout(summary, data_end, "")
 
 
+def _in_window(log_time: int, start_ns: int | None, end_ns: int | None) -> bool:
+    """``start_ns <= log_time < end_ns`` (an open end when None)."""
+    return (start_ns is None or log_time >= start_ns) and (end_ns is None or log_time < end_ns)
+
+
+def _overlaps(ci: ChunkIndex, start_ns: int | None, end_ns: int | None) -> bool:
+    """Whether a chunk's time span meets the window ``start_ns <= t < end_ns``."""
+    return (start_ns is None or ci.message_end_time >= start_ns) and (
+        end_ns is None or ci.message_start_time < end_ns
+    )
+
+
 class LogReader:
     """Reads an MCAP log lazily and defensively.
 
@@ -340,19 +352,7 @@ class LogReader:
         assert self._summary is not None
         channels = self._wanted_channels(topics)
         schemas = self._summary.schemas
-        chunks = sorted(
-            (
-                ci
-                for ci in self._summary.chunk_indexes
-                if (start_ns is None or ci.message_end_time >= start_ns)
-                and (end_ns is None or ci.message_start_time < end_ns)
-                and (
-                    not ci.message_index_offsets
-                    or has_any_channel(ci.message_index_offsets, channels)
-                )
-            ),
-            key=lambda ci: (ci.message_start_time, ci.chunk_start_offset),
-        )
+        chunks = self._chunks_for(channels, start_ns, end_ns)
         heap: list[tuple[int, int, int, Message]] = []
         i = 0
         while i < len(chunks) or heap:
@@ -365,6 +365,25 @@ class LogReader:
                 record = heapq.heappop(heap)[3]
                 channel = channels[record.channel_id]
                 yield schemas.get(channel.schema_id), channel, record
+
+    def _chunks_for(
+        self, channels: Mapping[int, Channel], start_ns: int | None, end_ns: int | None
+    ) -> list[ChunkIndex]:
+        """The chunks that may hold messages of ``channels`` in the time window, in start-time
+        order (ties in file order)."""
+        assert self._summary is not None
+        return sorted(
+            (
+                ci
+                for ci in self._summary.chunk_indexes
+                if _overlaps(ci, start_ns, end_ns)
+                and (
+                    not ci.message_index_offsets
+                    or has_any_channel(ci.message_index_offsets, channels)
+                )
+            ),
+            key=lambda ci: (ci.message_start_time, ci.chunk_start_offset),
+        )
 
     def _chunk_messages(
         self,
@@ -439,28 +458,29 @@ class LogReader:
                 channels[record.id] = record
             elif isinstance(record, Message):
                 channel = channels.get(record.channel_id)
-                if channel is None:
+                if channel is None or (wanted is not None and channel.topic not in wanted):
                     continue
-                if wanted is not None and channel.topic not in wanted:
-                    continue
-                if start_ns is not None and record.log_time < start_ns:
-                    continue
-                if end_ns is not None and record.log_time >= end_ns:
+                if not _in_window(record.log_time, start_ns, end_ns):
                     continue
                 count += 1
                 yield schemas.get(channel.schema_id), channel, record
         for damage in end.damage:
             self._damaged(damage)
         if end.reason != "end":
-            partial = (
-                f", {end.partial_chunk_messages} of them recovered from the cut-off chunk"
-                if end.partial_chunk_messages
-                else ""
-            )
-            self._warn(
-                f"{self.path}: log is cut at byte {self.size}, {end.reason} starting at byte "
-                f"{end.offset}; read {count} messages{partial}; the rest is lost"
-            )
+            self._warn(self._cut_warning(end, count))
+
+    def _cut_warning(self, end: ScanEnd, count: int) -> str:
+        """The warning of a sequential read that ended before the log's end (``count``: the
+        messages it read)."""
+        partial = (
+            f", {end.partial_chunk_messages} of them recovered from the cut-off chunk"
+            if end.partial_chunk_messages
+            else ""
+        )
+        return (
+            f"{self.path}: log is cut at byte {self.size}, {end.reason} starting at byte "
+            f"{end.offset}; read {count} messages{partial}; the rest is lost"
+        )
 
     def raw(
         self,

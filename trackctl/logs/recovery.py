@@ -292,6 +292,56 @@ def _count_lost(lost: Damage, index_body: bytes) -> Damage:
     return Damage(lost.offset, lost.what, (lost.lost_messages or 0) + counted, lost.kind)
 
 
+@dataclass(frozen=True, slots=True)
+class _RecordAt:
+    """One top-level record met by :func:`_walk`."""
+
+    start: int
+    opcode: int
+    length: int
+    head: bytes
+    """The opcode and length bytes."""
+    body: bytes
+    """Empty, not read, when the record is ``cut``."""
+    cut: bool = False
+    """The record runs past the end of the file (the file then stands after its header)."""
+    tail: int = 0
+    """Bytes of the file after the header (as long as the file was when the walk began)."""
+
+
+def _walk(f: IO[bytes], end: ScanEnd) -> Iterator[_RecordAt]:
+    """The top-level records after the magic, up to the end of the file or a record that runs
+    past it (yielded ``cut``, last); ``end`` says where and why the walk stopped. The caller ends
+    the walk at the footer."""
+    size = os.fstat(f.fileno()).st_size
+    f.seek(_MAGIC_LEN)
+    while True:
+        start = f.tell()
+        head = f.read(_HEAD.size)
+        if len(head) < _HEAD.size:
+            end.offset, end.reason = start, "inside a record header" if head else "end"
+            return
+        opcode, length = _HEAD.unpack(head)
+        tail = size - start - _HEAD.size
+        if length > tail:
+            end.offset, end.reason = start, f"inside a {_NAMES.get(opcode, hex(opcode))} record"
+            yield _RecordAt(start, opcode, length, head, b"", cut=True, tail=tail)
+            return
+        yield _RecordAt(start, opcode, length, head, f.read(length), tail=tail)
+
+
+def _sound_top_level(rec: _RecordAt, end: ScanEnd) -> Any:
+    """The Schema, Channel, Message, Metadata or Attachment outside a chunk (None for other
+    records, and for a damaged one, which is listed in ``end.damage``)."""
+    try:
+        return _top_level(rec.opcode, rec.head, rec.body)
+    except ChunkError as err:
+        kind = _NAMES.get(rec.opcode, "record")
+        lost = 1 if rec.opcode == Opcode.MESSAGE else 0
+        end.damage.append(Damage(rec.start, str(err), lost, kind))
+        return None
+
+
 def scan_damaged(f: IO[bytes], end: ScanEnd) -> Iterator[Any]:
     """Yield Schema, Channel, Message, Metadata and Attachment records in file order.
 
@@ -299,45 +349,30 @@ def scan_damaged(f: IO[bytes], end: ScanEnd) -> Iterator[Any]:
     past the end of the file ends the scan there (a cut log: the complete messages of a cut-off
     last chunk are still recovered). ``end`` says where and why the scan stopped.
     """
-    size = os.fstat(f.fileno()).st_size
-    f.seek(_MAGIC_LEN)
     lost_chunk: Damage | None = None  # counted from the message indexes that follow it
-    while True:
-        start = f.tell()
-        head = f.read(_HEAD.size)
-        if len(head) < _HEAD.size:
-            end.offset, end.reason = start, "inside a record header" if head else "end"
+    for rec in _walk(f, end):
+        if rec.cut:
+            if rec.opcode == Opcode.CHUNK:
+                yield from _cut_chunk(f.read(rec.tail), end)
             break
-        opcode, length = _HEAD.unpack(head)
-        if length > size - start - _HEAD.size:
-            end.offset, end.reason = start, f"inside a {_NAMES.get(opcode, hex(opcode))} record"
-            if opcode == Opcode.CHUNK:
-                yield from _cut_chunk(f.read(size - start - _HEAD.size), end)
-            break
-        body = f.read(length)
-        if opcode == Opcode.MESSAGE_INDEX and lost_chunk is not None:
-            lost_chunk = _count_lost(lost_chunk, body)
+        if rec.opcode == Opcode.MESSAGE_INDEX and lost_chunk is not None:
+            lost_chunk = _count_lost(lost_chunk, rec.body)
             continue
         if lost_chunk is not None:
             end.damage.append(lost_chunk)
             lost_chunk = None
-        if opcode in (Opcode.FOOTER, Opcode.DATA_END):
-            end.offset, end.reason = start, "end"
+        if rec.opcode in (Opcode.FOOTER, Opcode.DATA_END):
+            end.offset, end.reason = rec.start, "end"
             break
-        if opcode == Opcode.CHUNK:
+        if rec.opcode == Opcode.CHUNK:
             try:
-                records = decode_chunk(body)
+                records = decode_chunk(rec.body)
             except ChunkError as err:
-                lost_chunk = Damage(start, str(err), None)
+                lost_chunk = Damage(rec.start, str(err), None)
                 continue
             yield from records
             continue
-        try:
-            record = _top_level(opcode, head, body)
-        except ChunkError as err:
-            kind = _NAMES.get(opcode, "record")
-            end.damage.append(Damage(start, str(err), 1 if opcode == Opcode.MESSAGE else 0, kind))
-            continue
+        record = _sound_top_level(rec, end)
         if record is not None:
             yield record
     if lost_chunk is not None:
@@ -434,6 +469,67 @@ class _IndexBuilder:
         self.body = body
         self._indexed: dict[int, int] = {}
 
+    def take_chunk_part(self, rec: _RecordAt) -> bool:
+        """Take a chunk, or a message index of the chunk in progress; for any other record
+        finish the chunk in progress and return False.
+
+        Raises:
+            ChunkError: the chunk header or message index does not parse.
+        """
+        if rec.opcode == Opcode.MESSAGE_INDEX and self.chunk is not None:
+            self.message_index(rec.start, rec.length, rec.body)
+            return True
+        if rec.opcode == Opcode.CHUNK:
+            self.start_chunk(rec.start, rec.length, rec.body)
+            return True
+        self.finish_chunk()
+        return False
+
+    def index_top_level(self, rec: _RecordAt, record: Any, out: RebuiltIndex) -> None:
+        """Index a record outside any chunk (a message there is only counted)."""
+        from mcap.records import AttachmentIndex, MetadataIndex
+
+        if isinstance(record, Message):
+            out.unindexed_messages += 1
+        elif isinstance(record, Metadata):
+            self.summary.metadata_indexes.append(
+                MetadataIndex(offset=rec.start, length=_HEAD.size + rec.length, name=record.name)
+            )
+        elif isinstance(record, Attachment):
+            self.summary.attachment_indexes.append(
+                AttachmentIndex(
+                    offset=rec.start,
+                    length=_HEAD.size + rec.length,
+                    log_time=record.log_time,
+                    create_time=record.create_time,
+                    data_size=len(record.data),
+                    name=record.name,
+                    media_type=record.media_type,
+                )
+            )
+        else:
+            self.add(record)
+
+    def statistics(self) -> Any:
+        """The statistics of everything indexed (channels whose messages all were lost are left
+        out of the counts)."""
+        from mcap.records import Statistics
+
+        summary = self.summary
+        chunks = summary.chunk_indexes
+        counts = {k: v for k, v in self.counts.items() if v > 0}
+        return Statistics(
+            message_count=sum(counts.values()),
+            schema_count=len(summary.schemas),
+            channel_count=len(summary.channels),
+            attachment_count=len(summary.attachment_indexes),
+            metadata_count=len(summary.metadata_indexes),
+            chunk_count=len(chunks),
+            message_start_time=min((c.message_start_time for c in chunks), default=0),
+            message_end_time=max((c.message_end_time for c in chunks), default=0),
+            channel_message_counts=counts,
+        )
+
 
 def rebuild_index(f: IO[bytes]) -> RebuiltIndex:
     """Walk a log without a usable summary once and rebuild one, as far as the log is sound.
@@ -444,77 +540,29 @@ def rebuild_index(f: IO[bytes]) -> RebuiltIndex:
     not indexed (its complete messages are counted); a damaged chunk met while decompressing is
     left out and listed in ``end.damage``.
     """
-    from mcap.records import AttachmentIndex, MetadataIndex, Statistics
-
-    size = os.fstat(f.fileno()).st_size
-    f.seek(_MAGIC_LEN)
     b = _IndexBuilder()
     end = ScanEnd()
     out = RebuiltIndex(b.summary, end)
-    while True:
-        start = f.tell()
-        head = f.read(_HEAD.size)
-        if len(head) < _HEAD.size:
-            end.offset, end.reason = start, "inside a record header" if head else "end"
-            break
-        opcode, length = _HEAD.unpack(head)
-        if length > size - start - _HEAD.size:
-            end.offset, end.reason = start, f"inside a {_NAMES.get(opcode, hex(opcode))} record"
-            if opcode == Opcode.CHUNK:
+    for rec in _walk(f, end):
+        if rec.cut:
+            if rec.opcode == Opcode.CHUNK:
                 out.cut_chunk_messages = sum(
                     isinstance(r, Message) for r in _cut_chunk(f.read(), ScanEnd())
                 )
             break
-        body = f.read(length)
         try:
-            if opcode == Opcode.MESSAGE_INDEX and b.chunk is not None:
-                b.message_index(start, length, body)
+            if b.take_chunk_part(rec):
                 continue
-            if opcode == Opcode.CHUNK:
-                b.start_chunk(start, length, body)
-                continue
-            b.finish_chunk()
-            if opcode in (Opcode.FOOTER, Opcode.DATA_END):
-                end.offset, end.reason = start, "end"
+            if rec.opcode in (Opcode.FOOTER, Opcode.DATA_END):
+                end.offset, end.reason = rec.start, "end"
                 break
-            record = _top_level(opcode, head, body)
+            record = _top_level(rec.opcode, rec.head, rec.body)
         except ChunkError as err:
             b.chunk = None
-            end.damage.append(Damage(start, str(err), None, _NAMES.get(opcode, "record")))
+            end.damage.append(Damage(rec.start, str(err), None, _NAMES.get(rec.opcode, "record")))
             continue
-        if isinstance(record, Message):
-            out.unindexed_messages += 1
-        elif isinstance(record, Metadata):
-            b.summary.metadata_indexes.append(
-                MetadataIndex(offset=start, length=_HEAD.size + length, name=record.name)
-            )
-        elif isinstance(record, Attachment):
-            b.summary.attachment_indexes.append(
-                AttachmentIndex(
-                    offset=start,
-                    length=_HEAD.size + length,
-                    log_time=record.log_time,
-                    create_time=record.create_time,
-                    data_size=len(record.data),
-                    name=record.name,
-                    media_type=record.media_type,
-                )
-            )
-        else:
-            b.add(record)
+        b.index_top_level(rec, record, out)
     b.finish_chunk()
     end.damage.extend(b.damage)
-    chunks = b.summary.chunk_indexes
-    counts = {k: v for k, v in b.counts.items() if v > 0}
-    b.summary.statistics = Statistics(
-        message_count=sum(counts.values()),
-        schema_count=len(b.summary.schemas),
-        channel_count=len(b.summary.channels),
-        attachment_count=len(b.summary.attachment_indexes),
-        metadata_count=len(b.summary.metadata_indexes),
-        chunk_count=len(chunks),
-        message_start_time=min((c.message_start_time for c in chunks), default=0),
-        message_end_time=max((c.message_end_time for c in chunks), default=0),
-        channel_message_counts=counts,
-    )
+    b.summary.statistics = b.statistics()
     return out
