@@ -1,0 +1,237 @@
+"""VM-Tracking's default path on real footage with phones: CPU seconds against log seconds.
+
+Records OpenCV's vtest.avi (PETS 2009 S2L1 view 001) with its published calibration as
+``benchmarks/pets_footage.py`` does (``trackctl record --video cam0=vtest.avi --calib cam0=...
+--rate 7``), runs ``vm-track --mode v-af`` on it and hands a simulated phone to each of the
+``--phones`` (5) published visual tracks that walk farthest (path length; each at least
+``--min-track-s`` long): the phone follows that track (resampled to 20 Hz and smoothed over
+0.5 s), with the realistic preset's phone model (:func:`trackctl.sim.phones.realistic_imu`:
+carry, heading offsets, gait, always on, own clocks, IMU rates; seeded as ``trackctl simulate
+vm`` seeds it). The footage is the only thing without ground truth, so the carriers' paths are
+the ones the visual tracker published (no APs in this scene: no RSSI; no /ground_truth: the
+report's truth metrics are null). The merged log is every record of the recording plus the
+phones' ``/phone/<MID>/imu`` (and the ``phones`` / ``phone_truth`` metadata the simulator
+writes).
+
+Then runs, each in its own process, the default ``trackctl vm-track MERGED --json --quiet``,
+``--mode v-af`` and ``--no-retrack`` on the merged log, and prints the child's CPU seconds (user
++ system, all its threads: OpenCV's thread count is left at its default, the project sets none),
+its wall seconds, the log's seconds (last minus first camera frame) and CPU s / log s (<= 1.0:
+at least real time on one core), with the report's published tracks, bindings and per phone
+``searched/<MID>`` and ``clear_share/<MID>``. The check: the default row's CPU s / log s <= 1.0
+(exit 1 otherwise).
+
+    TRACKCTL_VTEST=.../vtest.avi python benchmarks/vm_footage_phones.py [--seed 0] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from trackctl.logs import topics
+from trackctl.logs.messages import Imu
+from trackctl.logs.reader import LogReader
+from trackctl.logs.writer import LogWriter
+from trackctl.sim.phones import PhoneTruth, realistic_imu
+from trackctl.sim.vm import PRESETS, mac_of
+from trackctl.sim.walkers import Trajectory
+from trackctl.vmtrack import TRACKS_TOPIC
+
+ROOT = Path(__file__).resolve().parent.parent
+TRACKCTL = Path(sys.executable).parent / "trackctl"
+VTEST = ROOT / ".ci-cache" / "vtest.avi"
+CALIB = ROOT.parent / "shared" / "data" / "footage" / "pets2009_view001.yaml"
+DT_S = 0.05  # carriers' trajectory grid (the simulator's walkers use the same)
+SMOOTH_S = 0.5  # moving average over the track: a walker's velocity has no frame-rate steps
+MAX_RATIO = 1.0
+
+
+def _cpu_run(args: list[str]) -> tuple[float, float, str]:
+    """Run ``trackctl ARGS``; its CPU seconds (user + system), wall seconds and stdout."""
+    before, t0 = os.times(), time.perf_counter()
+    done = subprocess.run(
+        [str(TRACKCTL), *args], capture_output=True, text=True, check=False, timeout=7200
+    )
+    wall, after = time.perf_counter() - t0, os.times()
+    if done.returncode != 0:
+        raise SystemExit(f"trackctl {' '.join(args)} failed ({done.returncode}):\n{done.stderr}")
+    cpu = (after.children_user - before.children_user) + (
+        after.children_system - before.children_system
+    )
+    return cpu, wall, done.stdout
+
+
+def _carriers(vaf: Path, k: int, min_s: float) -> list[Trajectory]:
+    """The ``k`` published visual tracks of ``vaf`` that walk farthest (at least ``min_s``
+    long), each as a smoothed trajectory on the simulator's grid."""
+    rows: dict[str, list[tuple[float, float, float]]] = defaultdict(list)
+    for m in LogReader(vaf).messages([TRACKS_TOPIC]):
+        for t in m.message.tracks:
+            rows[t.track_id].append((m.log_time_ns / 1e9, t.position_m.x, t.position_m.y))
+    length: dict[str, float] = {}
+    for tid, r in rows.items():
+        a = np.array(r)
+        if a[-1, 0] - a[0, 0] >= min_s:
+            length[tid] = float(np.linalg.norm(np.diff(a[:, 1:], axis=0), axis=1).sum())
+    chosen = sorted(length, key=lambda tid: (-length[tid], tid))[:k]
+    if len(chosen) < k:
+        raise SystemExit(f"only {len(chosen)} published tracks last {min_s} s or more; need {k}")
+    out = []
+    taps = max(1, round(SMOOTH_S / DT_S)) | 1
+    kernel = np.ones(taps) / taps
+    for tid in chosen:
+        a = np.array(rows[tid])
+        grid = np.arange(a[0, 0], a[-1, 0] + 1e-9, DT_S)
+        xy = np.column_stack([np.interp(grid, a[:, 0], a[:, j]) for j in (1, 2)])
+        pad = np.pad(xy, ((taps // 2, taps // 2), (0, 0)), mode="edge")
+        xy = np.column_stack([np.convolve(pad[:, j], kernel, mode="valid") for j in (0, 1)])
+        out.append(Trajectory(tid, float(a[0, 0]), DT_S, xy))
+    return out
+
+
+def _phones(
+    carriers: list[Trajectory], duration_s: float, seed: int
+) -> tuple[dict[str, list[Imu]], dict[str, PhoneTruth]]:
+    """Each carrier's phone (``mac_of(i)``), the realistic preset's model, seeded as ``trackctl
+    simulate vm --seed SEED`` seeds its phones (stream [seed, 4], site yaw drawn first)."""
+    cfg = PRESETS["realistic"].phones
+    assert cfg is not None
+    rng = np.random.default_rng([seed, 4])
+    site_yaw = (
+        math.radians(cfg.site_yaw_deg)
+        if cfg.site_yaw_deg is not None
+        else float(rng.uniform(-math.pi, math.pi))
+    )
+    imus: dict[str, list[Imu]] = {}
+    truths: dict[str, PhoneTruth] = {}
+    for i, traj in enumerate(carriers):
+        mac = mac_of(i)
+        imus[mac], truths[mac], _ = realistic_imu(traj, mac, duration_s, rng, cfg, site_yaw)
+    return imus, truths
+
+
+def _merge(
+    rec: Path,
+    out: Path,
+    imus: dict[str, list[Imu]],
+    truths: dict[str, PhoneTruth],
+    carriers: list[Trajectory],
+) -> int:
+    """``out`` = every message, metadata record and attachment of ``rec`` + the phones' IMU, in
+    log-time order; returns the number of IMU messages written."""
+    events = sorted(
+        (imu.t_ns, topics.imu(mac.replace(":", "")), imu)
+        for mac, samples in imus.items()
+        for imu in samples
+    )
+    reader = LogReader(rec)
+    k = 0
+    with LogWriter(out, inputs=[rec]) as w:
+        for raw in reader.raw():
+            while k < len(events) and events[k][0] < raw.log_time_ns:
+                w.write(events[k][1], events[k][2], events[k][0])
+                k += 1
+            w.write_raw(raw)
+        for t_ns, topic, imu in events[k:]:
+            w.write(topic, imu, t_ns)
+        for name, data in reader.metadata().items():
+            w.add_metadata(name, data)
+        for name, (media_type, blob) in reader.attachments().items():
+            w.add_attachment(name, blob, media_type)
+        w.add_metadata("phones", {mac_of(i): t.person for i, t in enumerate(carriers)})
+        w.add_metadata(
+            "phone_truth",
+            {f"{mac}/{key}": v for mac, tr in truths.items() for key, v in asdict(tr).items()},
+        )
+    return len(events)
+
+
+def _per_phone(report: dict[str, object], prefix: str) -> str:
+    """``prefix<MID>`` values as ``01=v 02=v ...`` (the MID's last byte), or ``-``."""
+    vals = sorted((k[len(prefix) :], v) for k, v in report.items() if k.startswith(prefix))
+    return " ".join(f"{mid[-2:]}={v}" for mid, v in vals) or "-"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--video", default=os.environ.get("TRACKCTL_VTEST", str(VTEST)))
+    ap.add_argument("--calib", default=str(CALIB))
+    ap.add_argument("--rate", default="7")
+    ap.add_argument("--phones", type=int, default=5)
+    ap.add_argument("--min-track-s", type=float, default=10.0)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--keep", type=Path, help="copy the logs (recording, v-af, merged) here")
+    args = ap.parse_args()
+    video = Path(args.video)
+    if not video.is_file():
+        sys.exit(f"{video}: no such video; set TRACKCTL_VTEST or pass --video")
+    with tempfile.TemporaryDirectory() as tmp:
+        rec, vaf, merged = (Path(tmp) / n for n in ("pets.mcap", "pets-vaf.mcap", "merged.mcap"))
+        _cpu_run(
+            ["record", str(rec), "--video", f"cam0={video}", "--calib", f"cam0={args.calib}",
+             "--rate", args.rate, "--quiet"]
+        )  # fmt: skip
+        _cpu_run(["vm-track", str(rec), "--mode", "v-af", "--out", str(vaf), "--json", "--quiet"])
+        carriers = _carriers(vaf, args.phones, args.min_track_s)
+        reader = LogReader(rec)
+        duration_s = (reader.end_ns or 0) / 1e9
+        frames = reader.topics()[topics.image("cam0")]
+        log_s = ((frames.last_ns or 0) - (frames.first_ns or 0)) / 1e9
+        imus, truths = _phones(carriers, duration_s, args.seed)
+        n_imu = _merge(rec, merged, imus, truths, carriers)
+        print(f"footage {video.name}: {frames.count} frames at --rate {args.rate}, {log_s:.1f} s")
+        for i, t in enumerate(carriers):
+            mac = mac_of(i)
+            tr = truths[mac]
+            walked = float(np.linalg.norm(np.diff(t.xy, axis=0), axis=1).sum())
+            print(
+                f"phone {mac} <- track {t.person}: {t.t_s[0]:.1f}-{t.t_s[-1]:.1f} s, "
+                f"{walked:.1f} m; {tr.carry}, {tr.imu_hz:g} Hz, clock {tr.clock_offset_s:+.2f} s"
+            )
+        print(f"merged log: {n_imu} IMU messages added (seed {args.seed})")
+        variants = [("default", []), ("--mode v-af", ["--mode", "v-af"]),
+                    ("--no-retrack", ["--no-retrack"])]  # fmt: skip
+        head = (
+            f"{'variant':13s} {'log s':>6s} {'CPU s':>6s} {'wall s':>6s} {'CPU/log':>7s} "
+            f"{'tracks':>6s} {'bind':>4s}  searched/<MID>  clear_share/<MID>"
+        )
+        rows = []
+        ok = False
+        for name, extra in variants:
+            cpu, wall, out = _cpu_run(["vm-track", str(merged), "--json", "--quiet", *extra])
+            report = json.loads(out)
+            ratio = cpu / log_s
+            if name == "default":
+                ok = ratio <= MAX_RATIO
+            rows.append(
+                f"{name:13s} {log_s:6.1f} {cpu:6.1f} {wall:6.1f} {ratio:7.3f} "
+                f"{report.get('tracks_published')!s:>6s} {report.get('bindings')!s:>4s}  "
+                f"{_per_phone(report, 'searched/')}  {_per_phone(report, 'clear_share/')}"
+            )
+            print(rows[-1], file=sys.stderr, flush=True)
+        if args.keep is not None:
+            args.keep.mkdir(parents=True, exist_ok=True)
+            for p in (rec, vaf, merged):
+                shutil.copy2(p, args.keep / p.name)
+    print(head)
+    print("\n".join(rows))
+    verdict = "PASS" if ok else "FAIL"
+    print(f"default path at least real time on one core: {verdict}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
