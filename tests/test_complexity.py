@@ -20,15 +20,13 @@ STILL_OVER: dict[str, int] = {
     "trackctl/vmtrack/pipeline.py::_write_and_score": 55,
     "trackctl/vmtrack/stitch.py::plan_publication": 39,
     "trackctl/vmtrack/online.py::OnlineTracker._associate": 38,
-    "trackctl/vmtrack/identify.py::identify": 28,
+    "trackctl/vmtrack/identify.py::identify": 27,
     "trackctl/vmtrack/retrack.py::_publish": 24,
     "trackctl/vmtrack/tracker.py::associate": 22,
     "trackctl/vmtrack/tracker.py::_agglomerate": 22,
     "trackctl/vmtrack/online.py::OnlineTracker._retire": 21,
     "trackctl/vmtrack/pipeline.py::_frame_tracks": 19,
     "trackctl/vmtrack/identity.py::IdentityBinder._resolve_offline": 19,
-    "trackctl/vmtrack/identify.py::_carry_through_unseen": 19,
-    "trackctl/vmtrack/identity.py::IdentityBinder._rssi_evidence": 18,
 }
 
 

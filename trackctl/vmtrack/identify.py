@@ -385,13 +385,8 @@ def _carry_through_unseen(
         return
     k, a = known
     by_key: dict[int, _Chain] = {c.key: c for c in chains}
-    on = np.zeros(len(frame_t), bool)
-    key_at = np.full(len(frame_t), -1, np.int64)
-    index = {int(t): i for i, t in enumerate(frame_t)}
-    for (key, t_ns), m in out.mid_at.items():
-        if m == mid:
-            on[index[t_ns]] = True
-            key_at[index[t_ns]] = key
+    key_at = _chain_keys(mid, out, frame_t)
+    on = key_at >= 0
     # the phone's dead-reckoned position (complex) at each frame, in phone time
     lag_ns = int(round(float(lags[k]) * 1e9))
     dr = np.interp(frame_t + lag_ns, path_pts[:, 0], path_pts[:, 1]) + 1j * np.interp(
@@ -409,22 +404,49 @@ def _carry_through_unseen(
         g = f
         while g < n and not on[g]:
             g += 1
-        if g < n and g - f <= max_frames and inside[f - 1 : g + 1].all():
-            if not np.isnan(a[f - 1 : g + 1]).any():
-                ta, tb = int(frame_t[f - 1]), int(frame_t[g])
-                pa = complex(*by_key[int(key_at[f - 1])].xy_at(ta))
-                pb = complex(*by_key[int(key_at[g])].xy_at(tb))
-                walk = np.cumsum(step[f : g + 1])  # displacement from frame f - 1
-                miss = pb - (pa + walk[-1])
-                if abs(miss) <= cfg.unseen_m + 0.15 * abs(walk[-1]):
-                    share = np.arange(1, g - f + 1) / (g - f + 1)
-                    xy = pa + walk[:-1] + share * miss
-                    v = np.gradient(xy, frame_t[f:g] / 1e9) if g - f > 1 else np.zeros(1, complex)
-                    for i, t_ns in enumerate(frame_t[f:g]):
-                        out.unseen.setdefault(int(t_ns), []).append(
-                            (mid, (xy[i].real, xy[i].imag), (v[i].real, v[i].imag))
-                        )
+        walkable = g < n and g - f <= max_frames and inside[f - 1 : g + 1].all()
+        if walkable and not np.isnan(a[f - 1 : g + 1]).any():
+            pa = complex(*by_key[int(key_at[f - 1])].xy_at(int(frame_t[f - 1])))
+            pb = complex(*by_key[int(key_at[g])].xy_at(int(frame_t[g])))
+            _walk_gap(mid, out, frame_t[f:g], step[f : g + 1], (pa, pb), cfg)
         f = g
+
+
+def _chain_keys(mid: str, out: Identities, frame_t: np.ndarray) -> np.ndarray:
+    """The key of the chain the identity publishes phone ``mid`` on at each frame (-1: none)."""
+    key_at = np.full(len(frame_t), -1, np.int64)
+    index = {int(t): i for i, t in enumerate(frame_t)}
+    for (key, t_ns), m in out.mid_at.items():
+        if m == mid:
+            key_at[index[t_ns]] = key
+    return key_at
+
+
+def _walk_gap(
+    mid: str,
+    out: Identities,
+    gap_t: np.ndarray,
+    step: np.ndarray,
+    ends: tuple[complex, complex],
+    cfg: IdentifyConfig,
+) -> None:
+    """One gap of :func:`_carry_through_unseen`: the frames ``gap_t`` between the chain that
+    left the carrier at ``ends[0]`` and the one that finds them at ``ends[1]``, walked on the
+    phone's aligned ``step`` s (into each gap frame and the one after), the misfit spread over
+    the gap; nothing when it misses by more than ``unseen_m`` (+ 15 % of the walk)."""
+    pa, pb = ends
+    walk = np.cumsum(step)  # displacement from the frame before the gap
+    miss = pb - (pa + walk[-1])
+    if abs(miss) > cfg.unseen_m + 0.15 * abs(walk[-1]):
+        return
+    m = len(gap_t)
+    share = np.arange(1, m + 1) / (m + 1)
+    xy = pa + walk[:-1] + share * miss
+    v = np.gradient(xy, gap_t / 1e9) if m > 1 else np.zeros(1, complex)
+    for i, t_ns in enumerate(gap_t):
+        out.unseen.setdefault(int(t_ns), []).append(
+            (mid, (xy[i].real, xy[i].imag), (v[i].real, v[i].imag))
+        )
 
 
 def _clear_path(path: np.ndarray, cost: np.ndarray, cfg: IdentifyConfig) -> np.ndarray:

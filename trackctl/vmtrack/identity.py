@@ -208,33 +208,38 @@ class IdentityBinder:
     def _rssi_evidence(self, free: list[GroundTrack]) -> None:
         """RSSI evidence for the candidate filter: people walking side by side move alike, but
         the one nearer an AP is heard louder (log-distance path loss with shadowing)."""
-        cfg = self.cfg
         if not self.pending_rssi or not free:
             return
         xy = np.array([trk.kf.x[:2, 0] for trk in free])
         for scan in self.pending_rssi:
-            if scan.observer_position_m is None:
+            if scan.observer_position_m is not None:
+                self._scan_evidence(scan, free, xy)
+
+    def _scan_evidence(self, scan: RssiScan, free: list[GroundTrack], xy: np.ndarray) -> None:
+        """One AP scan's evidence (:meth:`_rssi_evidence`) for the tracks within
+        ``rssi_evidence_m`` of the AP, at ground positions ``xy``."""
+        cfg = self.cfg
+        assert scan.observer_position_m is not None
+        ap = np.array([scan.observer_position_m.x, scan.observer_position_m.y])
+        dist = np.hypot(xy[:, 0] - ap[0], xy[:, 1] - ap[1])
+        idx = np.flatnonzero(dist < cfg.rssi_evidence_m)
+        if not len(idx):
+            return
+        near = [free[i] for i in idx]
+        vids = [trk.vid for trk in near]
+        anon = [k for k, trk in enumerate(near) if trk.first_mid is None]
+        expect = cfg.rssi_at_1m_dbm - 10 * cfg.path_loss_exponent * np.log10(
+            np.maximum(0.3, dist[idx])
+        )
+        for reading in scan.readings:
+            mid = reading.eid
+            if mid in self.bound or mid not in self.phones:
                 continue
-            ap = np.array([scan.observer_position_m.x, scan.observer_position_m.y])
-            dist = np.hypot(xy[:, 0] - ap[0], xy[:, 1] - ap[1])
-            idx = np.flatnonzero(dist < cfg.rssi_evidence_m)
-            if not len(idx):
-                continue
-            near = [free[i] for i in idx]
-            vids = [trk.vid for trk in near]
-            anon = [k for k, trk in enumerate(near) if trk.first_mid is None]
-            expect = cfg.rssi_at_1m_dbm - 10 * cfg.path_loss_exponent * np.log10(
-                np.maximum(0.3, dist[idx])
-            )
-            for reading in scan.readings:
-                mid = reading.eid
-                if mid in self.bound or mid not in self.phones:
-                    continue
-                z2 = ((reading.rssi_dbm - expect) / cfg.shadowing_db) ** 2
-                self._table(self.candidates, mid).add_rssi(vids, z2)
-                if anon and self.evidence is not None:
-                    self._table(self.evidence, mid).add_rssi([vids[k] for k in anon], z2[anon])
-                    self.by_vid.update({near[k].vid: near[k] for k in anon})
+            z2 = ((reading.rssi_dbm - expect) / cfg.shadowing_db) ** 2
+            self._table(self.candidates, mid).add_rssi(vids, z2)
+            if anon and self.evidence is not None:
+                self._table(self.evidence, mid).add_rssi([vids[k] for k in anon], z2[anon])
+                self.by_vid.update({near[k].vid: near[k] for k in anon})
 
     def _table(self, tables: dict[str, CandidateTable], mid: str) -> CandidateTable:
         table = tables.get(mid)
