@@ -14,6 +14,7 @@ from scipy import ndimage
 
 from tests.conftest import examples
 from trackctl.logs.messages import RssiReading, RssiScan, Vec3
+from trackctl.vmtrack import kernels
 from trackctl.vmtrack.align import AlignConfig
 from trackctl.vmtrack.grid import SiteGrid
 from trackctl.vmtrack.identify import dead_reckoned
@@ -27,10 +28,8 @@ from trackctl.vmtrack.retrack import (
     _exclusive,
     _Follower,
     _layer_costs,
-    _predecessors,
     _publish,
     _refit,
-    _relax,
     _search,
     _settle_disputes,
     _shared,
@@ -128,7 +127,7 @@ def test_emission_is_the_distance_to_the_nearest_detection(pts, probe):
     st.lists(st.floats(0, 50, width=32), min_size=9, max_size=9),
     st.booleans(),
 )
-def test_relax_is_grey_erosion_bit_for_bit(layers, rows, cols, seed, steps, by_length):
+def test_kernel_relaxation_is_grey_erosion_bit_for_bit(layers, rows, cols, seed, steps, by_length):
     rng = np.random.default_rng(seed)
     acc = (rng.random((layers, rows, cols)) * 100).astype(np.float32)
     acc[rng.random(acc.shape) < 0.2] = np.float32(1e9)  # cells no path reaches
@@ -138,7 +137,62 @@ def test_relax_is_grey_erosion_bit_for_bit(layers, rows, cols, seed, steps, by_l
     want = ndimage.grey_erosion(
         acc, structure=-costs.reshape(1, 3, 3), mode="constant", cval=np.float32(1e9)
     )
-    assert np.array_equal(_relax(acc, costs), want)
+    out = np.empty_like(acc)
+    kernels.advance(acc, out, np.zeros((layers, 2), np.int64), np.zeros(layers, bool), costs)
+    assert np.array_equal(out, want)
+
+
+def _moved(a: np.ndarray, sy: int, sx: int) -> np.ndarray:
+    """``a`` moved by (sy, sx) cells, what enters at 1e9 (the numpy formulation)."""
+    out = np.full_like(a, np.float32(1e9))
+    h, w = a.shape
+    ys, yd = (slice(0, h - sy), slice(sy, h)) if sy >= 0 else (slice(-sy, h), slice(0, h + sy))
+    xs, xd = (slice(0, w - sx), slice(sx, w)) if sx >= 0 else (slice(-sx, w), slice(0, w + sx))
+    out[yd, xd] = a[ys, xs]
+    return out
+
+
+@settings(max_examples=examples(30), deadline=None)
+@given(st.integers(1, 4), st.integers(2, 7), st.integers(2, 7), st.integers(0, 2**32 - 1))
+def test_kernel_frame_step_is_the_numpy_formulation_bit_for_bit(layers, rows, cols, seed):
+    # one frame of the layers' recursion: shift (or restart), relax, ring of yaws, doors,
+    # emissions, against the numpy passes the kernels replaced
+    rng = np.random.default_rng(seed)
+    acc = (rng.random((layers, rows, cols)) * 30).astype(np.float32)
+    whole = rng.integers(-1, 2, (layers, 2))
+    restart = rng.random(layers) < 0.3
+    steps = np.float32([2, 1, 2, 1, 0, 1, 2, 1, 2]) * np.float32(rng.random() * 3)
+    before = (rng.random(layers) * 20).astype(np.float32)
+    doors = (rng.random((rows, cols)) * 25).astype(np.float32)
+    em = (rng.random((rows, cols)) * 3).astype(np.float32)
+    tc, jump = np.float32(rng.random() * 40), np.float32(rng.random() * 150)
+    want = np.empty_like(acc)
+    for r in range(layers):
+        moved = (
+            np.full_like(acc[r], acc[r].min())
+            if restart[r]
+            else _moved(acc[r], int(whole[r, 1]), int(whole[r, 0]))
+        )
+        want[r] = ndimage.grey_erosion(
+            moved, structure=-steps.reshape(3, 3), mode="constant", cval=np.float32(1e9)
+        )
+    relaxed = np.empty_like(acc)
+    kernels.advance(acc, relaxed, whole, restart, steps)
+    assert np.array_equal(relaxed, want)
+    turn = np.minimum(np.roll(want, 1, axis=0), np.roll(want, -1, axis=0))
+    np.minimum(want, turn + tc, out=want)
+    np.minimum(want, want.min(axis=0) + jump, out=want)
+    np.minimum(want, before[:, None, None] + doors, out=want)
+    want += em
+    got, mins = np.empty_like(acc), np.empty(layers, np.float32)
+    kernels.layer_frame(relaxed, got, tc, jump, True, before, doors, True, em, mins)
+    assert np.array_equal(got, want)
+    assert np.array_equal(mins, want.min(axis=(1, 2)))
+    plain = relaxed + np.float32(3.0)
+    kernels.layer_frame(
+        relaxed, got, tc, jump, False, before, doors, False, np.full((1, 1), 3.0, np.float32), mins
+    )
+    assert np.array_equal(got, plain)
 
 
 @settings(max_examples=examples(30), deadline=None)
@@ -149,8 +203,6 @@ def test_predecessors_are_argmin_over_the_shifted_copies_bit_for_bit(rows, cols,
     acc[rng.random(acc.shape) < 0.2] = np.float32(1e9)
     acc[rng.random(acc.shape) < 0.3] = np.float32(5.0)  # ties: the first offset wins
     steps = rng.choice(np.float32([0.0, 0.5, 2.0]), 9)  # ties between offsets too
-    pad = np.full((rows + 2, cols + 2), np.float32(1e9), np.float32)
-    pad[1:-1, 1:-1] = acc
     stack = []
     for i, (dy, dx) in enumerate(_OFFS):
         moved = np.full_like(acc, np.float32(1e9))
@@ -162,7 +214,8 @@ def test_predecessors_are_argmin_over_the_shifted_copies_bit_for_bit(rows, cols,
         stack.append(moved + steps[i])
     want_back = np.argmin(np.stack(stack), axis=0)
     back = np.full((rows, cols), -7, np.int8)
-    best = _predecessors(pad, steps, back)
+    best = np.empty_like(acc)
+    kernels.predecessors(acc, 0, 0, steps, back, best)
     assert np.array_equal(back, want_back)
     assert np.array_equal(best, np.min(np.stack(stack), axis=0))
 

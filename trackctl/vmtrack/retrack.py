@@ -51,6 +51,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from trackctl.progress import Progress
+from trackctl.vmtrack import kernels
 from trackctl.vmtrack.align import AlignConfig, best_fit, lag_grid
 from trackctl.vmtrack.grid import SiteGrid, Visit
 from trackctl.vmtrack.identify import dead_reckoned, visual_velocity
@@ -260,8 +261,8 @@ def _reversed(away: float | np.ndarray) -> float | np.ndarray:
 _STEADY = 1e6
 """A change of yaw that a steady search does not make (the carry did not change)."""
 
-_OFFS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
-_BIG = np.float32(1e9)
+_OFFS = [(int(dy), int(dx)) for dy, dx in kernels.OFFSETS]
+_BIG = kernels.BIG
 
 
 def _slices(d: int, n: int) -> tuple[slice, slice]:
@@ -281,98 +282,6 @@ def _whole_cells(frac: np.ndarray, moves: np.ndarray, cell: float) -> np.ndarray
     whole = np.round(frac)  # half to even, as Python's round
     frac -= whole
     return whole.astype(int)
-
-
-def _shift_into(pad: np.ndarray, a: np.ndarray, sy: int, sx: int) -> None:
-    """``a`` (rows, columns) moved by (sy, sx) cells, written into the inside of ``pad`` (a
-    border of one cell around it): what enters stays as the caller set it (:data:`_BIG`,
-    unreachable)."""
-    ys, yd = _slices(sy, a.shape[0])
-    xs, xd = _slices(sx, a.shape[1])
-    pad[1:-1, 1:-1][yd, xd] = a[ys, xs]
-
-
-def _relax(acc: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """Each cell's cheapest predecessor: the minimum over the 3 x 3 neighbourhood of ``acc``
-    (layers, rows, columns) plus the step's cost (``steps``, in :data:`_OFFS` order), cells
-    off the grid at :data:`_BIG`. This is ``ndimage.grey_erosion`` with the structure
-    ``-steps`` (bit for bit), written as minima of shifted views: scipy's erosion with a
-    non-flat structure walks the structure per element and took half of the re-tracking's
-    time (3x slower, measured on 9 x 80 x 100 layers)."""
-    relax = _Relaxation(acc.shape)
-    relax.inside[:] = acc
-    return relax(steps)
-
-
-class _Relaxation:
-    """:func:`_relax` over layers of one shape, frame after frame, in buffers it keeps: the
-    caller writes each frame's layers into :attr:`pad` (border at :data:`_BIG`) and calls it.
-    Fresh temporaries of a few hundred kB each are mapped anew by the allocator, a page fault
-    per page; reused, the relaxation runs 2x faster (0.48 against 0.9-1.3 ms on 24 x 60 x 80
-    layers)."""
-
-    def __init__(self, shape: tuple[int, ...]) -> None:
-        n, h, w = shape
-        self.pad = np.full((n, h + 2, w + 2), _BIG, np.float32)
-        self.inside = self.pad[:, 1:-1, 1:-1]
-        self._out = np.empty((n, h, w), np.float32)
-        self._sides = np.empty((n, h, w), np.float32)
-        self._corners = np.empty((n, h, w), np.float32)
-        self._across = np.empty((n, h + 2, w), np.float32)
-
-    def __call__(self, steps: np.ndarray) -> np.ndarray:
-        """The relaxation of :attr:`pad`'s inside (valid until the next call)."""
-        pad, out, sides, corners, across = (
-            self.pad,
-            self._out,
-            self._sides,
-            self._corners,
-            self._across,
-        )
-        h, w = out.shape[1:]
-        c = steps.reshape(3, 3)
-        np.add(self.inside, c[1, 1], out=out)
-        edge, corner = c[[0, 1, 1, 2], [1, 0, 2, 1]], c[[0, 0, 2, 2], [0, 2, 0, 2]]
-        if (edge == edge[0]).all() and (corner == corner[0]).all():
-            # the random walk's steps cost by length only: rounding is monotone, so the
-            # minimum of (a + k, b + k) is the minimum of (a, b) plus k, bit for bit, and the
-            # four sides (and the four corners) take one addition; the corners come from
-            # the sides' row minima
-            np.minimum(pad[:, :, :-2], pad[:, :, 2:], out=across)
-            np.minimum(pad[:, :-2, 1:-1], pad[:, 2:, 1:-1], out=sides)
-            np.minimum(sides, across[:, 1:-1], out=sides)
-            np.minimum(across[:, :-2], across[:, 2:], out=corners)
-            np.add(sides, edge[0], out=sides)
-            np.add(corners, corner[0], out=corners)
-            np.minimum(out, sides, out=out)
-            np.minimum(out, corners, out=out)
-            return out
-        for dy, dx in _OFFS:
-            if dy or dx:
-                view = pad[:, 1 + dy : 1 + dy + h, 1 + dx : 1 + dx + w]
-                np.add(view, c[1 + dy, 1 + dx], out=sides)
-                np.minimum(out, sides, out=out)
-        return out
-
-
-def _predecessors(pad: np.ndarray, steps: np.ndarray, back: np.ndarray) -> np.ndarray:
-    """For one layer (``pad``: rows + 2, columns + 2, border at :data:`_BIG`), each cell's
-    cheapest predecessor's cost plus the step's, and which step it is (index into
-    :data:`_OFFS`, written into ``back``; the first of equals, as ``np.argmin`` over the
-    nine shifted copies: the same numbers without stacking them)."""
-    h, w = pad.shape[0] - 2, pad.shape[1] - 2
-
-    def shifted(i: int) -> np.ndarray:
-        dy, dx = _OFFS[i]
-        return pad[1 - dy : 1 - dy + h, 1 - dx : 1 - dx + w] + steps[i]
-
-    best = shifted(0)
-    back[:] = 0
-    for i in range(1, len(_OFFS)):
-        cand = shifted(i)
-        np.putmask(back, cand < best, i)
-        np.minimum(best, cand, out=best)
-    return best
 
 
 def _step_costs(
@@ -425,42 +334,41 @@ def _layer_costs(
     (:attr:`RetrackConfig.away_cost`)."""
     n_r = walks.shape[1]
     acc = np.zeros((n_r, *grid.shape), np.float32)
-    relax = _Relaxation(acc.shape)
-    pad = relax.pad
+    nxt = np.empty_like(acc)
     out = np.zeros(walks.shape)
     frac = np.zeros((n_r, 2))
     total = 0.0
+    mins = np.empty(n_r, np.float32)
+    doors = np.zeros((1, 1), np.float32) if visit is None else visit[0]
+    away_cost = _BIG if visit is None else visit[1]
+    aways = np.broadcast_to(np.asarray(away_cost, np.float32), (len(walks),))
+    before = np.zeros(n_r, np.float32)
+    after = np.full(n_r, _BIG, np.float32)
     if visit is not None:
-        doors = visit[0][None]
-        aways = np.broadcast_to(np.asarray(visit[1], np.float32), (len(walks),))
         acc += doors  # in view at the first frame: as if just come in
-        before = np.zeros(n_r, np.float32)
-        after = np.full(n_r, _BIG, np.float32)
     for k in range(len(walks)):
         if visit is not None:
-            away = aways[k]
-            after = np.minimum(after, (acc + doors).min(axis=(1, 2))) + away
-        # each layer shifted by its whole cells, straight into the relaxation's padded buffer
+            after = np.minimum(after, (acc + doors).min(axis=(1, 2))) + aways[k]
+        # each layer shifted by its whole cells and relaxed (compiled: kernels.advance)
         restart = np.isnan(walks[k])
         whole = _whole_cells(frac, walks[k], grid.cell)
-        pad.fill(_BIG)
-        for r in range(n_r):
-            if restart[r]:
-                pad[r, 1:-1, 1:-1] = acc[r].min()
-            else:
-                _shift_into(pad[r], acc[r], int(whole[r, 1]), int(whole[r, 0]))
-        acc = relax(steps)  # acc is the relaxation's buffer: its layers were copied to pad
-        if turn_cost is not None:
-            turn = np.minimum(np.roll(acc, 1, axis=0), np.roll(acc, -1, axis=0))
-            np.minimum(acc, turn + np.float32(turn_cost), out=acc)
-            jump = 0.0 if free is not None and free[k] else (jump_cost or 0.0)
-            np.minimum(acc, acc.min(axis=0) + np.float32(jump), out=acc)
+        kernels.advance(acc, nxt, whole, restart, steps)
+        jump = 0.0 if free is not None and free[k] else (jump_cost or 0.0)
+        kernels.layer_frame(
+            nxt,
+            acc,
+            np.float32(turn_cost or 0.0),
+            np.float32(jump),
+            turn_cost is not None,
+            before,
+            doors,
+            visit is not None,
+            _emission_grid(emissions[k]),
+            mins,
+        )
+        m = mins.copy()
         if visit is not None:
-            np.minimum(acc, before[:, None, None] + doors, out=acc)
-            before = before + away
-        acc += emissions[k]
-        m = acc.min(axis=(1, 2))
-        if visit is not None:
+            before = before + aways[k]
             m = np.minimum(m, np.minimum(before, after))
         low = np.float32(m.min())
         acc -= low
@@ -472,6 +380,14 @@ def _layer_costs(
             before -= low
             after -= low
     return out
+
+
+def _emission_grid(e: np.ndarray | float) -> np.ndarray:
+    """A frame's emissions as the kernels take them: float32 (rows, columns), or (1, 1) for
+    one cost everywhere."""
+    if isinstance(e, np.ndarray) and e.ndim == 2:
+        return e if e.dtype == np.float32 else e.astype(np.float32)
+    return np.full((1, 1), e, np.float32)
 
 
 def _viterbi_path(
@@ -488,7 +404,6 @@ def _viterbi_path(
     n = len(u)
     acc = np.zeros(grid.shape, np.float32)
     back = np.zeros((n, *grid.shape), np.int8)
-    pad = np.empty((grid.shape[0] + 2, grid.shape[1] + 2), np.float32)
     shifts = np.zeros((n, 2), int)
     frac = np.zeros((1, 2))
     restart: dict[int, tuple[int, int]] = {}
@@ -518,9 +433,9 @@ def _viterbi_path(
         else:
             sx, sy = (int(c) for c in _whole_cells(frac, np.array([uk]), grid.cell)[0])
             shifts[k] = (sy, sx)
-            pad.fill(_BIG)
-            _shift_into(pad, acc, sy, sx)
-            acc = _predecessors(pad, steps, back[k])
+            moved = np.empty_like(acc)
+            kernels.predecessors(acc, sy, sx, steps, back[k], moved)
+            acc = moved
             if visit is not None:
                 come_in = before + doors
                 new = come_in < acc
