@@ -21,7 +21,6 @@ STILL_OVER: dict[str, int] = {
     "trackctl/vmtrack/stitch.py::plan_publication": 39,
     "trackctl/vmtrack/online.py::OnlineTracker._associate": 38,
     "trackctl/vmtrack/identify.py::identify": 27,
-    "trackctl/vmtrack/retrack.py::_publish": 24,
     "trackctl/vmtrack/tracker.py::associate": 22,
     "trackctl/vmtrack/tracker.py::_agglomerate": 22,
     "trackctl/vmtrack/online.py::OnlineTracker._retire": 21,

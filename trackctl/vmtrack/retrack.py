@@ -887,41 +887,100 @@ def _publish(
     the next one starts (the carrier walked where no camera saw them). A published position
     is the phone's walk plus the detections' offset from it: smoothed over ``smooth_s`` at
     seen frames, linear between them."""
-    path = grid.xy(cells)
+    hits = _path_hits(points, grid.xy(cells), u, cfg.gate_m)
+    if not hits:
+        return {}, set(), hits, 0.0
+    walk = np.cumsum(np.nan_to_num(u, nan=0.0))
+    seg = np.cumsum(np.isnan(u))  # the walk restarts where the phone has none
+    t = frame_t / 1e9
+    kept = _stretches(np.array(sorted(hits)), t, seg, cfg)
+    withheld = 0.0
+    if cfg.min_evidence is not None:
+        kept, withheld = _with_evidence(kept, frame_t, hits, walk, cfg, radio_gain)
+    if not kept:
+        return {}, set(), hits, withheld
+    seen = np.concatenate(kept)
+    smooth = _smoothed_offsets(seen, hits, walk, t, seg, cfg.smooth_s)
+    every = np.unique(np.concatenate(_published_frames(kept, smooth, walk, t, seg, cfg)))
+    offsets = np.interp(every, seen, smooth.real) + 1j * np.interp(every, seen, smooth.imag)
+    xy = walk[every] + offsets
+    out = {int(k): (float(p.real), float(p.imag)) for k, p in zip(every, xy, strict=True)}
+    return out, set(int(k) for k in seen), hits, withheld
+
+
+def _path_hits(
+    points: Sequence[np.ndarray], path: np.ndarray, u: np.ndarray, gate_m: float
+) -> dict[int, np.ndarray]:
+    """The detection nearest the path at each frame where the phone walks, within ``gate_m``
+    (frame index -> xy)."""
     hits: dict[int, np.ndarray] = {}
     for k, p in enumerate(points):
         if np.isnan(u[k]):
             continue
-        j = _nearest(p, path[k], cfg.gate_m)
+        j = _nearest(p, path[k], gate_m)
         if j is not None:
             hits[k] = p[j]
-    if not hits:
-        return {}, set(), hits, 0.0
-    ks = np.array(sorted(hits))
-    walk = np.cumsum(np.nan_to_num(u, nan=0.0))
-    seg = np.cumsum(np.isnan(u))  # the walk restarts where the phone has none
-    t = frame_t / 1e9
-    # stretches of seen frames, the short ones dropped
+    return hits
+
+
+def _stretches(
+    ks: np.ndarray, t: np.ndarray, seg: np.ndarray, cfg: RetrackConfig
+) -> list[np.ndarray]:
+    """The seen frames ``ks`` cut into stretches (gaps over ``fill_s`` or a restart of the
+    walk), those shorter than ``min_stretch_s`` dropped."""
     cut = np.flatnonzero((np.diff(t[ks]) > cfg.fill_s) | (np.diff(seg[ks]) != 0)) + 1
-    kept = [r for r in np.split(ks, cut) if t[r[-1]] - t[r[0]] >= cfg.min_stretch_s]
-    withheld = 0.0
-    if cfg.min_evidence is not None:
-        track = np.column_stack([frame_t.astype(float), walk.real, walk.imag])
-        judged = [
-            (r, _evidence(frame_t, r, hits, track, cfg, radio_gain) >= cfg.min_evidence)
-            for r in kept
-        ]
-        withheld = float(sum(t[r[-1]] - t[r[0]] for r, ok in judged if not ok))
-        kept = [r for r, ok in judged if ok]
-    if not kept:
-        return {}, set(), hits, withheld
-    seen = np.concatenate(kept)
+    return [r for r in np.split(ks, cut) if t[r[-1]] - t[r[0]] >= cfg.min_stretch_s]
+
+
+def _with_evidence(
+    kept: list[np.ndarray],
+    frame_t: np.ndarray,
+    hits: dict[int, np.ndarray],
+    walk: np.ndarray,
+    cfg: RetrackConfig,
+    radio_gain: np.ndarray | None,
+) -> tuple[list[np.ndarray], float]:
+    """The stretches with at least ``min_evidence`` (:func:`_evidence`), and the seconds of
+    those without."""
+    t = frame_t / 1e9
+    track = np.column_stack([frame_t.astype(float), walk.real, walk.imag])
+    judged = [
+        (r, _evidence(frame_t, r, hits, track, cfg, radio_gain) >= cfg.min_evidence) for r in kept
+    ]
+    withheld = float(sum(t[r[-1]] - t[r[0]] for r, ok in judged if not ok))
+    return [r for r, ok in judged if ok], withheld
+
+
+def _smoothed_offsets(
+    seen: np.ndarray,
+    hits: dict[int, np.ndarray],
+    walk: np.ndarray,
+    t: np.ndarray,
+    seg: np.ndarray,
+    smooth_s: float,
+) -> np.ndarray:
+    """The detections' offset from the phone's walk at each seen frame, Gaussian-smoothed over
+    ``smooth_s`` within one stretch of walk (complex)."""
     off = np.array([complex(*hits[k]) for k in seen]) - walk[seen]
     smooth = np.empty(len(seen), complex)
     for i, k in enumerate(seen):
-        near = (np.abs(t[seen] - t[k]) <= 3 * cfg.smooth_s) & (seg[seen] == seg[k])
-        w = np.exp(-0.5 * ((t[seen][near] - t[k]) / cfg.smooth_s) ** 2)
+        near = (np.abs(t[seen] - t[k]) <= 3 * smooth_s) & (seg[seen] == seg[k])
+        w = np.exp(-0.5 * ((t[seen][near] - t[k]) / smooth_s) ** 2)
         smooth[i] = (w * off[near]).sum() / w.sum()
+    return smooth
+
+
+def _published_frames(
+    kept: list[np.ndarray],
+    smooth: np.ndarray,
+    walk: np.ndarray,
+    t: np.ndarray,
+    seg: np.ndarray,
+    cfg: RetrackConfig,
+) -> list[np.ndarray]:
+    """The frames of each stretch, and of each gap between two the phone's walk bridges: at most
+    ``unseen_s`` long, in one stretch of walk, landing within ``unseen_m`` (+ 15 % of the walk)
+    of where the next stretch starts."""
     frames = [np.arange(r[0], r[-1] + 1) for r in kept]
     pos = np.cumsum([0] + [len(r) for r in kept])
     for j in range(len(kept) - 1):
@@ -934,11 +993,7 @@ def _publish(
             and drift <= cfg.unseen_m + 0.15 * walked
         ):
             frames.append(np.arange(a_ + 1, b_))
-    every = np.unique(np.concatenate(frames))
-    offsets = np.interp(every, seen, smooth.real) + 1j * np.interp(every, seen, smooth.imag)
-    xy = walk[every] + offsets
-    out = {int(k): (float(p.real), float(p.imag)) for k, p in zip(every, xy, strict=True)}
-    return out, set(int(k) for k in seen), hits, withheld
+    return frames
 
 
 def _evidence(
