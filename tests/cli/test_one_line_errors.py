@@ -137,7 +137,8 @@ def test_fail_if_syntax_error_before_the_run(sample_log: Path, tmp_path: Path) -
         ["vm-track", str(sample_log), "--fail-if", "idf1<<1"], "--fail-if: cannot parse"
     )
     _one_line_error(
-        ["vm-track", str(sample_log), "--visits", "twice"], "--visits 'twice': expected one or many"
+        ["vm-track", str(sample_log), "--refine", "twice"],
+        "--refine 'twice': expected auto or full",
     )
 
 

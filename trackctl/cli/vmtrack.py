@@ -74,15 +74,6 @@ def vm_track(
             "simulated lobby IDF1 moved by < 0.001).",
         ),
     ] = "auto",
-    visits: Annotated[
-        str,
-        typer.Option(
-            help="Re-tracking: one (each phone's carrier comes into view once in the log, as "
-            "people who cross a scene; strangers who walk like the phone before or after are "
-            "not taken for them) or many (carriers come and go: the path stays in the site "
-            "and stretches are published on evidence of shared turns and stops).",
-        ),
-    ] = "one",
     rssi: Annotated[
         bool,
         typer.Option(
@@ -112,13 +103,9 @@ def vm_track(
         raise InputError(f"--search {search!r}: expected predicted or full")
     if refine not in ("auto", "full"):
         raise InputError(f"--refine {refine!r}: expected auto or full")
-    if visits not in ("one", "many"):
-        raise InputError(f"--visits {visits!r}: expected one or many")
     retrack_cfg = RetrackConfig(enabled=retrack, radio=RadioConfig(enabled=rssi))
     if refine == "full":
         retrack_cfg = replace(retrack_cfg, trust_clear_share=None)
-    if visits == "many":
-        retrack_cfg = replace(retrack_cfg, away_cost=None)
     proc = VmTrackProcessor(
         VmTrackConfig(
             mode=mode_value,

@@ -11,7 +11,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-__all__ = ["DoorModel", "SiteGrid", "Visit"]
+__all__ = ["DoorModel", "SiteGrid", "Visit", "occupancy_steadiness"]
 
 
 class DoorModel(Protocol):
@@ -92,12 +92,7 @@ class SiteGrid:
         gaps and filled), ``wall_cost`` inside it. The doors are its edge, or where the edge
         sees people come and go (:attr:`~trackctl.vmtrack.retrack.RetrackConfig.door_ratio`)."""
         seen = self._counts(points)
-        r = max(int(round(1.0 / self.cell)), 1)
-        covered = ndimage.binary_closing(seen > 0, structure=np.ones((2 * r + 1, 2 * r + 1)))
-        covered = ndimage.binary_fill_holes(covered)
-        depth = ndimage.distance_transform_edt(np.pad(covered, 1), sampling=self.cell)[1:-1, 1:-1]
-        edge = covered & (depth <= cfg.edge_m)
-        inner = covered & ~edge
+        covered, edge, inner = self._areas(seen, cfg.edge_m)
         if cfg.door_ratio is None or seen[inner].sum() == 0:
             return np.where(inner, cfg.wall_cost, cfg.door_cost).astype(np.float32)
         ends = self._counts(points, cfg)
@@ -112,6 +107,31 @@ class SiteGrid:
         reach = max(int(round((cfg.edge_m + 2.0) / self.cell)), 1)
         door |= ~covered & ndimage.binary_dilation(door, iterations=reach)
         return np.where(door, cfg.door_cost, cfg.wall_cost).astype(np.float32)
+
+    def edge_turnover(self, points: Sequence[np.ndarray], cfg: DoorModel) -> float | None:
+        """How many times as often a detection begins or ends a walk (nobody within
+        ``door_link_m`` in the ``door_frames`` frames before, or after) at the edge of the area
+        the cameras cover as inside it: high where people cross the view (they come and go at
+        its edge), low where they stay in it and the edge is only where the cameras' fields end.
+        Infinite when nothing begins or ends inside; None without detections on both."""
+        seen = self._counts(points)
+        _, edge, inner = self._areas(seen, cfg.edge_m)
+        if seen[edge].sum() == 0 or seen[inner].sum() == 0:
+            return None
+        ends = self._counts(points, cfg)
+        at_edge = ends[edge].sum() / seen[edge].sum()
+        inside = ends[inner].sum() / seen[inner].sum()
+        return float(at_edge / inside) if inside > 0 else float("inf")
+
+    def _areas(self, seen: np.ndarray, edge_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The covered area (every cell a detection fell in, closed over 1 m gaps and filled),
+        its edge (within ``edge_m`` of its border) and its inside."""
+        r = max(int(round(1.0 / self.cell)), 1)
+        covered = ndimage.binary_closing(seen > 0, structure=np.ones((2 * r + 1, 2 * r + 1)))
+        covered = ndimage.binary_fill_holes(covered)
+        depth = ndimage.distance_transform_edt(np.pad(covered, 1), sampling=self.cell)[1:-1, 1:-1]
+        edge = covered & (depth <= edge_m)
+        return covered, edge, covered & ~edge
 
     def _counts(self, points: Sequence[np.ndarray], ends: DoorModel | None = None) -> np.ndarray:
         """Detections per cell over the log; with ``ends``, how many of them begin or end
@@ -137,3 +157,21 @@ class SiteGrid:
                         near |= tree.query(p[ok])[0] < ends.door_link_m
                 np.add.at(out, at, (~near).astype(float) / 2)
         return out
+
+
+def occupancy_steadiness(
+    frame_t: np.ndarray, points: Sequence[np.ndarray], window_s: float
+) -> float | None:
+    """How steady the number of people in view is: the 5th over the 95th percentile of the
+    detections per frame, averaged over ``window_s`` (misses and occlusions average out). Near 1
+    where the same people are in view all log (a closed room), low where they come and go.
+    None for a log shorter than four windows (too few to tell) or without detections."""
+    if len(frame_t) < 2:
+        return None
+    dt = float(np.median(np.diff(frame_t))) / 1e9
+    k = max(int(round(window_s / dt)), 1) if dt > 0 else len(points) + 1
+    counts = np.array([len(p) for p in points], float)
+    if len(counts) < 4 * k or not counts.any():
+        return None
+    mean = np.convolve(counts, np.ones(k) / k, mode="valid")
+    return float(np.percentile(mean, 5) / np.percentile(mean, 95))

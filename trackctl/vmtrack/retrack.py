@@ -53,12 +53,12 @@ import numpy as np
 from trackctl.progress import Progress
 from trackctl.vmtrack import kernels
 from trackctl.vmtrack.align import AlignConfig, best_fit, lag_grid
-from trackctl.vmtrack.grid import SiteGrid, Visit
+from trackctl.vmtrack.grid import SiteGrid, Visit, occupancy_steadiness
 from trackctl.vmtrack.identify import dead_reckoned, visual_velocity
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.radio import PathLoss, RadioConfig, RadioEvidence
 
-__all__ = ["RetrackConfig", "PhoneTrack", "Retracked", "retrack"]
+__all__ = ["PhoneTrack", "RetrackConfig", "Retracked", "VisitReading", "read_visits", "retrack"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -107,6 +107,17 @@ class RetrackConfig:
     door_link_m: float = 1.2
     door_frames: int = 3
     door_smooth_m: float = 1.5
+    turnover_min: float | None = 20.0
+    steadiness_min: float = 0.8
+    steadiness_window_s: float = 30.0
+    """The visit model is read from the log (:class:`VisitReading`): a scene people cross (a
+    shop front, an entrance) has each carrier's path come into view once (``away_cost``); a
+    closed room, where the same people stay in view, keeps the path in view throughout. A room
+    is closed when both its edge turnover (:meth:`~trackctl.vmtrack.grid.SiteGrid.
+    edge_turnover`) is below ``turnover_min`` and its occupancy's steadiness (:func:`~trackctl.
+    vmtrack.grid.occupancy_steadiness` over ``steadiness_window_s``) at least
+    ``steadiness_min``: nobody is seen coming and going, neither at the edge nor in number.
+    None: one visit whatever the log. See docs/vmtrack.md (stage 8) for the figures."""
     min_evidence: float | None = 5.0
     evidence_lag_s: float = 2.0
     evidence_sigma_mps: float = 0.3
@@ -241,6 +252,16 @@ class PhoneTrack:
     carrier, all within ``gate_m`` of it (a group walking together)."""
 
 
+@dataclass(frozen=True, slots=True)
+class VisitReading:
+    """What the log says of how people come and go (:attr:`RetrackConfig.turnover_min`)."""
+
+    edge_turnover: float | None = None
+    steadiness: float | None = None
+    one_visit: bool = True
+    """Each path comes into view once (False: in view throughout)."""
+
+
 class Retracked(dict[str, PhoneTrack]):
     """Each phone's re-tracked carrier (MID -> track), with what the re-tracking fitted of the
     site: each AP's path loss (empty without RSSI or its fit), and the phones searched again
@@ -252,6 +273,8 @@ class Retracked(dict[str, PhoneTrack]):
         self.searched_again: list[str] = []
         self.searched: list[str] = []
         """The phones whose alignment was searched (the rest started from their identity's)."""
+        self.visits = VisitReading()
+        """The visit model the log called for (:attr:`RetrackConfig.turnover_min`)."""
 
 
 def _reversed(away: float | np.ndarray) -> float | np.ndarray:
@@ -896,7 +919,9 @@ def _publish(
     kept = _stretches(np.array(sorted(hits)), t, seg, cfg)
     withheld = 0.0
     if cfg.min_evidence is not None:
-        kept, withheld = _with_evidence(kept, frame_t, hits, walk, cfg, radio_gain)
+        kept, withheld = _with_evidence(
+            kept, frame_t, hits, walk, cfg, radio_gain, cfg.min_evidence
+        )
     if not kept:
         return {}, set(), hits, withheld
     seen = np.concatenate(kept)
@@ -939,14 +964,13 @@ def _with_evidence(
     walk: np.ndarray,
     cfg: RetrackConfig,
     radio_gain: np.ndarray | None,
+    least: float,
 ) -> tuple[list[np.ndarray], float]:
-    """The stretches with at least ``min_evidence`` (:func:`_evidence`), and the seconds of
+    """The stretches with at least ``least`` evidence (:func:`_evidence`), and the seconds of
     those without."""
     t = frame_t / 1e9
     track = np.column_stack([frame_t.astype(float), walk.real, walk.imag])
-    judged = [
-        (r, _evidence(frame_t, r, hits, track, cfg, radio_gain) >= cfg.min_evidence) for r in kept
-    ]
+    judged = [(r, _evidence(frame_t, r, hits, track, cfg, radio_gain) >= least) for r in kept]
     withheld = float(sum(t[r[-1]] - t[r[0]] for r, ok in judged if not ok))
     return [r for r, ok in judged if ok], withheld
 
@@ -1071,7 +1095,9 @@ def retrack(
     n = len(frame_t)
     if n < 2:
         return out
-    grid = SiteGrid(points, cfg.cell_m).with_visits(points, cfg)
+    grid = SiteGrid(points, cfg.cell_m)
+    cfg, out.visits = read_visits(grid, frame_t, points, cfg)
+    grid.with_visits(points, cfg)
     # the frames' distance grids (float32), the search's coarser ones, one path's back-pointers
     coarse = (cfg.cell_m / cfg.search_cell_m) ** 2
     need = int(n * grid.shape[0] * grid.shape[1] * (4 + 4 * coarse + 1))
@@ -1108,6 +1134,25 @@ def retrack(
     if cfg.exclusive:
         _exclusive(follow, out, final)
     return out
+
+
+def read_visits(
+    grid: SiteGrid, frame_t: np.ndarray, points: Sequence[np.ndarray], cfg: RetrackConfig
+) -> tuple[RetrackConfig, VisitReading]:
+    """``cfg`` with the visit model the log calls for (in view throughout: ``away_cost`` None),
+    and what it was read from (nothing when one visit is asked for whatever the log)."""
+    if cfg.away_cost is None or cfg.turnover_min is None:
+        return cfg, VisitReading(one_visit=cfg.away_cost is not None)
+    turnover = grid.edge_turnover(points, cfg)
+    steady = occupancy_steadiness(frame_t, points, cfg.steadiness_window_s)
+    closed = (
+        turnover is not None
+        and steady is not None
+        and turnover < cfg.turnover_min
+        and steady >= cfg.steadiness_min
+    )
+    reading = VisitReading(turnover, steady, one_visit=not closed)
+    return (replace(cfg, away_cost=None) if closed else cfg), reading
 
 
 def _shared(
