@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from collections.abc import Container
+from collections.abc import Container, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -447,60 +447,115 @@ def _frame_tracks(
     retracked = carriers[0] if carriers is not None else {}
     tracks: list[Track] = []
     names: set[str] = set()
+    _add_rows(tracks, names, fr, plan, positions, ids, retracked)
+    _add_fills(tracks, names, fr.t_ns, plan, ids, retracked)
+    if carriers is not None:
+        _place_carriers(tracks, names, *carriers)
+    if ids is not None:
+        _add_unseen(tracks, names, ids.unseen.get(fr.t_ns, ()), retracked)
+    return tracks
+
+
+def _add_rows(
+    tracks: list[Track],
+    names: set[str],
+    fr: FrameOut,
+    plan: Publication,
+    positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+    ids: Identities | None,
+    retracked: dict[str, PhoneTrack],
+) -> None:
+    """Append (in place) the frame's online rows the clean-up keeps, each under an id no other
+    track of the frame has taken."""
     # tracks bound now name first: one phone (MID) is never on two tracks in one frame, so a
     # back-dated identity gives way to the binding of the moment
     rows = sorted(fr.rows, key=lambda r: r[1] is None)
     for trk, mid_now, state, k in rows:
         if (id(trk), fr.t_ns) in plan.hidden:
             continue
-        out_id = plan.name.get(id(trk), trk.vid)
-        if ids is not None:
-            out_id = _chain_mid(ids, plan.head.get(id(trk), id(trk)), fr.t_ns, retracked, out_id)
-        elif mid_now is not None:
-            out_id = mid_now
-        elif trk.first_mid is not None and trk.identity_from_ns <= fr.t_ns < (
-            trk.first_bound_ns or 0
-        ):
-            # online identity, offline back-dated: the identity found later holds back to
-            # where the track's motion stops agreeing with the phone
-            out_id = trk.first_mid
-        if out_id in names:
-            out_id = plan.name.get(id(trk), trk.vid)
-            if out_id in names:
-                out_id = trk.vid
+        out_id = _row_id(trk, mid_now, fr.t_ns, plan, ids, retracked)
+        out_id = _unclaimed_id(out_id, trk, plan, names)
         # entry k of a track's history is its state at this frame (snapshotted before the
         # next frame's prediction, or when the log ends)
         tracks.append(_track_message(out_id, trk, state, positions.get((id(trk), k))))
         names.add(out_id)
-    for name, xy, v in plan.fills.get(fr.t_ns, ()):
+
+
+def _row_id(
+    trk: GroundTrack,
+    mid_now: str | None,
+    t_ns: int,
+    plan: Publication,
+    ids: Identities | None,
+    retracked: dict[str, PhoneTrack],
+) -> str:
+    """The id an online row would be published under at ``t_ns``: the offline identity's MID,
+    else the online binding's (or its back-dated identity), else the track's published name."""
+    name = plan.name.get(id(trk), trk.vid)
+    if ids is not None:
+        return _chain_mid(ids, plan.head.get(id(trk), id(trk)), t_ns, retracked, name)
+    if mid_now is not None:
+        return mid_now
+    if trk.first_mid is not None and trk.identity_from_ns <= t_ns < (trk.first_bound_ns or 0):
+        # online identity, offline back-dated: the identity found later holds back to
+        # where the track's motion stops agreeing with the phone
+        return trk.first_mid
+    return name
+
+
+def _unclaimed_id(out_id: str, trk: GroundTrack, plan: Publication, names: set[str]) -> str:
+    """``out_id`` unless another track of the frame has it; then the track's published name,
+    or its visual id if that is taken too."""
+    if out_id not in names:
+        return out_id
+    out_id = plan.name.get(id(trk), trk.vid)
+    return trk.vid if out_id in names else out_id
+
+
+def _add_fills(
+    tracks: list[Track],
+    names: set[str],
+    t_ns: int,
+    plan: Publication,
+    ids: Identities | None,
+    retracked: dict[str, PhoneTrack],
+) -> None:
+    """Append (in place) the positions interpolated across stitched gaps at ``t_ns`` (under
+    their chain's MID when the offline identity gives one), where the id is still free."""
+    for name, xy, v in plan.fills.get(t_ns, ()):
         out_id = name
         if ids is not None:
-            out_id = _chain_mid(ids, plan.head_of_name.get(name, -1), fr.t_ns, retracked, name)
+            out_id = _chain_mid(ids, plan.head_of_name.get(name, -1), t_ns, retracked, name)
         if out_id not in names:
             names.add(out_id)
-            tracks.append(
-                Track(
-                    out_id,
-                    Vec3(float(xy[0]), float(xy[1]), 0.0),
-                    Vec3(float(v[0]), float(v[1]), 0.0),
-                    state=TrackState.PREDICTED,
-                )
-            )
-    if carriers is not None:
-        _place_carriers(tracks, names, *carriers)
-    # carriers no camera showed, walked on their phone between two stretches of their chains
-    for mid, (ux, uy), (vx, vy) in ids.unseen.get(fr.t_ns, ()) if ids is not None else ():
+            tracks.append(_coasting_track(out_id, xy, v))
+
+
+def _add_unseen(
+    tracks: list[Track],
+    names: set[str],
+    unseen: Iterable[tuple[str, tuple[float, float], tuple[float, float]]],
+    retracked: dict[str, PhoneTrack],
+) -> None:
+    """Append (in place) the carriers no camera showed, walked on their phone between two
+    stretches of their chains (not a MID already published, nor a re-tracked one)."""
+    for mid, xy, v in unseen:
         if mid not in names and mid not in retracked:
             names.add(mid)
-            tracks.append(
-                Track(
-                    mid,
-                    Vec3(float(ux), float(uy), 0.0),
-                    Vec3(float(vx), float(vy), 0.0),
-                    state=TrackState.PREDICTED,
-                )
-            )
-    return tracks
+            tracks.append(_coasting_track(mid, xy, v))
+
+
+def _coasting_track(
+    out_id: str, xy: np.ndarray | tuple[float, float], v: np.ndarray | tuple[float, float]
+) -> Track:
+    """A ``predicted`` trackctl.Track at ground position ``xy`` with velocity ``v`` (no
+    covariance)."""
+    return Track(
+        out_id,
+        Vec3(float(xy[0]), float(xy[1]), 0.0),
+        Vec3(float(v[0]), float(v[1]), 0.0),
+        state=TrackState.PREDICTED,
+    )
 
 
 def _chain_mid(
