@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from collections.abc import Container
+from collections.abc import Container, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -447,60 +447,115 @@ def _frame_tracks(
     retracked = carriers[0] if carriers is not None else {}
     tracks: list[Track] = []
     names: set[str] = set()
+    _add_rows(tracks, names, fr, plan, positions, ids, retracked)
+    _add_fills(tracks, names, fr.t_ns, plan, ids, retracked)
+    if carriers is not None:
+        _place_carriers(tracks, names, *carriers)
+    if ids is not None:
+        _add_unseen(tracks, names, ids.unseen.get(fr.t_ns, ()), retracked)
+    return tracks
+
+
+def _add_rows(
+    tracks: list[Track],
+    names: set[str],
+    fr: FrameOut,
+    plan: Publication,
+    positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+    ids: Identities | None,
+    retracked: dict[str, PhoneTrack],
+) -> None:
+    """Append (in place) the frame's online rows the clean-up keeps, each under an id no other
+    track of the frame has taken."""
     # tracks bound now name first: one phone (MID) is never on two tracks in one frame, so a
     # back-dated identity gives way to the binding of the moment
     rows = sorted(fr.rows, key=lambda r: r[1] is None)
     for trk, mid_now, state, k in rows:
         if (id(trk), fr.t_ns) in plan.hidden:
             continue
-        out_id = plan.name.get(id(trk), trk.vid)
-        if ids is not None:
-            out_id = _chain_mid(ids, plan.head.get(id(trk), id(trk)), fr.t_ns, retracked, out_id)
-        elif mid_now is not None:
-            out_id = mid_now
-        elif trk.first_mid is not None and trk.identity_from_ns <= fr.t_ns < (
-            trk.first_bound_ns or 0
-        ):
-            # online identity, offline back-dated: the identity found later holds back to
-            # where the track's motion stops agreeing with the phone
-            out_id = trk.first_mid
-        if out_id in names:
-            out_id = plan.name.get(id(trk), trk.vid)
-            if out_id in names:
-                out_id = trk.vid
+        out_id = _row_id(trk, mid_now, fr.t_ns, plan, ids, retracked)
+        out_id = _unclaimed_id(out_id, trk, plan, names)
         # entry k of a track's history is its state at this frame (snapshotted before the
         # next frame's prediction, or when the log ends)
         tracks.append(_track_message(out_id, trk, state, positions.get((id(trk), k))))
         names.add(out_id)
-    for name, xy, v in plan.fills.get(fr.t_ns, ()):
+
+
+def _row_id(
+    trk: GroundTrack,
+    mid_now: str | None,
+    t_ns: int,
+    plan: Publication,
+    ids: Identities | None,
+    retracked: dict[str, PhoneTrack],
+) -> str:
+    """The id an online row would be published under at ``t_ns``: the offline identity's MID,
+    else the online binding's (or its back-dated identity), else the track's published name."""
+    name = plan.name.get(id(trk), trk.vid)
+    if ids is not None:
+        return _chain_mid(ids, plan.head.get(id(trk), id(trk)), t_ns, retracked, name)
+    if mid_now is not None:
+        return mid_now
+    if trk.first_mid is not None and trk.identity_from_ns <= t_ns < (trk.first_bound_ns or 0):
+        # online identity, offline back-dated: the identity found later holds back to
+        # where the track's motion stops agreeing with the phone
+        return trk.first_mid
+    return name
+
+
+def _unclaimed_id(out_id: str, trk: GroundTrack, plan: Publication, names: set[str]) -> str:
+    """``out_id`` unless another track of the frame has it; then the track's published name,
+    or its visual id if that is taken too."""
+    if out_id not in names:
+        return out_id
+    out_id = plan.name.get(id(trk), trk.vid)
+    return trk.vid if out_id in names else out_id
+
+
+def _add_fills(
+    tracks: list[Track],
+    names: set[str],
+    t_ns: int,
+    plan: Publication,
+    ids: Identities | None,
+    retracked: dict[str, PhoneTrack],
+) -> None:
+    """Append (in place) the positions interpolated across stitched gaps at ``t_ns`` (under
+    their chain's MID when the offline identity gives one), where the id is still free."""
+    for name, xy, v in plan.fills.get(t_ns, ()):
         out_id = name
         if ids is not None:
-            out_id = _chain_mid(ids, plan.head_of_name.get(name, -1), fr.t_ns, retracked, name)
+            out_id = _chain_mid(ids, plan.head_of_name.get(name, -1), t_ns, retracked, name)
         if out_id not in names:
             names.add(out_id)
-            tracks.append(
-                Track(
-                    out_id,
-                    Vec3(float(xy[0]), float(xy[1]), 0.0),
-                    Vec3(float(v[0]), float(v[1]), 0.0),
-                    state=TrackState.PREDICTED,
-                )
-            )
-    if carriers is not None:
-        _place_carriers(tracks, names, *carriers)
-    # carriers no camera showed, walked on their phone between two stretches of their chains
-    for mid, (ux, uy), (vx, vy) in ids.unseen.get(fr.t_ns, ()) if ids is not None else ():
+            tracks.append(_coasting_track(out_id, xy, v))
+
+
+def _add_unseen(
+    tracks: list[Track],
+    names: set[str],
+    unseen: Iterable[tuple[str, tuple[float, float], tuple[float, float]]],
+    retracked: dict[str, PhoneTrack],
+) -> None:
+    """Append (in place) the carriers no camera showed, walked on their phone between two
+    stretches of their chains (not a MID already published, nor a re-tracked one)."""
+    for mid, xy, v in unseen:
         if mid not in names and mid not in retracked:
             names.add(mid)
-            tracks.append(
-                Track(
-                    mid,
-                    Vec3(float(ux), float(uy), 0.0),
-                    Vec3(float(vx), float(vy), 0.0),
-                    state=TrackState.PREDICTED,
-                )
-            )
-    return tracks
+            tracks.append(_coasting_track(mid, xy, v))
+
+
+def _coasting_track(
+    out_id: str, xy: np.ndarray | tuple[float, float], v: np.ndarray | tuple[float, float]
+) -> Track:
+    """A ``predicted`` trackctl.Track at ground position ``xy`` with velocity ``v`` (no
+    covariance)."""
+    return Track(
+        out_id,
+        Vec3(float(xy[0]), float(xy[1]), 0.0),
+        Vec3(float(v[0]), float(v[1]), 0.0),
+        state=TrackState.PREDICTED,
+    )
 
 
 def _chain_mid(
@@ -558,21 +613,35 @@ def _write_and_score(
 ) -> dict[str, float | int | str | None]:
     """Stages 4-5: write tracks and the 3-D scene per frame; score them against the ground
     truth when the log has it (metrics only: nothing above reads the truth)."""
-    frames, raw_points, stats = online.frames, online.raw_points, online.identity.stats
-    users_acc = MotAccumulator(cfg.eval_threshold_m)
-    all_acc = MotAccumulator(cfg.eval_threshold_m)
-    errors: list[float] = []
-    det_err: list[float] = []
-    det_hits = det_people = 0
-    followed = InitialIdentity(cfg.eval_threshold_m)
-    people: set[str] = set()
-    users: set[str] = set()
-    ok_since: dict[str, bool] = {}
-    loss_events = 0
-    recovery: list[float] = []
-    lost_at: dict[str, int] = {}
-    first_loss: dict[str, float] = {}
-    t_start = frames[0].t_ns if frames else 0
+    offline = _offline_stages(online, positions, phones, cfg, mode, progress)
+    score = _TruthScore(truth, online, cfg.eval_threshold_m, mode, set(phones))
+    tally = _write_frames(
+        writer, online.frames, positions, offline, phones, cfg.retrack.gate_m, progress, score
+    )
+    return _report(online, phones, mode, offline, score, tally)
+
+
+@dataclass(frozen=True)
+class _Offline:
+    """What the offline stages give the writing: the publication plan (stitching, clean-up),
+    the offline identity (None unless asked) and the re-tracked carriers (empty unless run)."""
+
+    plan: Publication
+    ids: Identities | None
+    retracked: Retracked
+
+
+def _offline_stages(
+    online: OnlineTracker,
+    positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+    phones: dict[str, PhoneMotion],
+    cfg: VmTrackConfig,
+    mode: Mode,
+    progress: Progress,
+) -> _Offline:
+    """The offline stages: the publication plan, then (VM with the offline identity) the
+    identities, then (when enabled) the re-tracking."""
+    frames = online.frames
     offline = mode is Mode.VM and cfg.identity is Identity.OFFLINE
     deaths = np.array(online.static_death_log, float).reshape(-1, 2)
     progress(0, None, "stitching and identifying")
@@ -582,121 +651,285 @@ def _write_and_score(
         if offline
         else None
     )
-    retracked = Retracked()
-    if ids is not None and cfg.retrack.enabled:
-        frame_t = np.array([fr.t_ns for fr in frames], np.int64)
-        points = [raw_points.get(int(t), np.empty((0, 2))) for t in frame_t]
-        model = (cfg.rssi_at_1m_dbm, cfg.path_loss_exponent)
-        radio = RadioEvidence(frame_t, online.rssi_log, model, cfg.retrack.radio)
-        retracked = retrack(
-            frame_t,
-            points,
-            phones,
-            ids.known,
-            cfg.align,
-            cfg.retrack,
-            cfg.phones_aligned,
-            radio,
-            progress,
-            _trusted(ids, cfg.retrack.trust_clear_share),
-        )
-        _take_retrack_alignments(ids.alignments, retracked)
-    published: dict[str, int] = {}
-    coasting = shown = 0
-    wrong_s = 0.0
-    frame_s = (frames[-1].t_ns - frames[0].t_ns) / 1e9 / max(len(frames) - 1, 1) if frames else 0.0
+    if ids is None or not cfg.retrack.enabled:
+        return _Offline(plan, ids, Retracked())
+    return _Offline(plan, ids, _retrack(online, ids, phones, cfg, progress))
+
+
+def _retrack(
+    online: OnlineTracker,
+    ids: Identities,
+    phones: dict[str, PhoneMotion],
+    cfg: VmTrackConfig,
+    progress: Progress,
+) -> Retracked:
+    """The identified phones' carriers re-tracked over the raw detections (and RSSI); their
+    alignments replace the identity's in ``ids`` (for the report)."""
+    frame_t = np.array([fr.t_ns for fr in online.frames], np.int64)
+    points = [online.raw_points.get(int(t), np.empty((0, 2))) for t in frame_t]
+    model = (cfg.rssi_at_1m_dbm, cfg.path_loss_exponent)
+    radio = RadioEvidence(frame_t, online.rssi_log, model, cfg.retrack.radio)
+    retracked = retrack(
+        frame_t,
+        points,
+        phones,
+        ids.known,
+        cfg.align,
+        cfg.retrack,
+        cfg.phones_aligned,
+        radio,
+        progress,
+        _trusted(ids, cfg.retrack.trust_clear_share),
+    )
+    _take_retrack_alignments(ids.alignments, retracked)
+    return retracked
+
+
+@dataclass
+class _Tally:
+    """The tracks written: frames published per id, track-frames coasting, track-frames."""
+
+    published: dict[str, int] = field(default_factory=dict)
+    coasting: int = 0
+    shown: int = 0
+
+    def add(self, tracks: list[Track]) -> None:
+        """Count one frame's published tracks."""
+        for msg in tracks:
+            self.published[msg.track_id] = self.published.get(msg.track_id, 0) + 1
+            self.coasting += msg.state is TrackState.PREDICTED
+        self.shown += len(tracks)
+
+
+def _write_frames(
+    writer: LogWriter,
+    frames: list[FrameOut],
+    positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+    offline: _Offline,
+    phones: dict[str, PhoneMotion],
+    gate_m: float,
+    progress: Progress,
+    score: _TruthScore,
+) -> _Tally:
+    """Each frame's published tracks and 3-D scene written, counted and scored; returns the
+    count."""
+    tally = _Tally()
     for k_fr, fr in enumerate(frames):
         progress(k_fr, len(frames), "writing tracks")
-        placed = (retracked, k_fr, cfg.retrack.gate_m) if retracked else None
-        tracks = _frame_tracks(fr, plan, positions, ids, placed)
-        hyp = {m.track_id: (m.position_m.x, m.position_m.y) for m in tracks}
-        for msg in tracks:
-            published[msg.track_id] = published.get(msg.track_id, 0) + 1
-            coasting += msg.state is TrackState.PREDICTED
-        shown += len(tracks)
+        placed = (offline.retracked, k_fr, gate_m) if offline.retracked else None
+        tracks = _frame_tracks(fr, offline.plan, positions, offline.ids, placed)
+        tally.add(tracks)
         writer.write(TRACKS_TOPIC, Tracks(fr.t_ns, tuple(tracks)))
         writer.write(SCENE_TOPIC, scene_update(fr.t_ns, tracks, set(phones)), fr.t_ns)
-        gt = truth.get(fr.t_ns)
+        score.add_frame(fr.t_ns, tracks)
+    return tally
+
+
+class _TruthScore:
+    """The published tracks scored against the ground truth, frame by frame (the only reader
+    of the truth): MOT over everybody and over the phone users, each carrier's position error,
+    its losses and recoveries of identity (VM), and the raw detections' error and recall."""
+
+    def __init__(
+        self,
+        truth: dict[int, GroundTruth],
+        online: OnlineTracker,
+        threshold_m: float,
+        mode: Mode,
+        mids: set[str],
+    ) -> None:
+        self.truth = truth
+        self.raw_points = online.raw_points
+        self.threshold = threshold_m
+        self.mode = mode
+        self.mids = mids
+        frames = online.frames
+        self.t_start = frames[0].t_ns if frames else 0
+        self.frame_s = (
+            (frames[-1].t_ns - frames[0].t_ns) / 1e9 / max(len(frames) - 1, 1) if frames else 0.0
+        )
+        self.users_acc = MotAccumulator(threshold_m)
+        self.all_acc = MotAccumulator(threshold_m)
+        self.followed = InitialIdentity(threshold_m)
+        self.people: set[str] = set()
+        self.users: set[str] = set()
+        self.errors: list[float] = []
+        self.det_err: list[float] = []
+        self.det_hits = self.det_people = 0
+        self.ok_since: dict[str, bool] = {}
+        self.lost_at: dict[str, int] = {}
+        self.first_loss: dict[str, float] = {}
+        self.recovery: list[float] = []
+        self.loss_events = 0
+        self.wrong_s = 0.0
+
+    def add_frame(self, t_ns: int, tracks: list[Track]) -> None:
+        """Score the tracks published at ``t_ns`` (nothing when the truth has no such frame)."""
+        gt = self.truth.get(t_ns)
         if gt is None:
-            continue
+            return
+        hyp = {m.track_id: (m.position_m.x, m.position_m.y) for m in tracks}
         gtf = {e.entity_id: (e.position_m.x, e.position_m.y) for e in gt.entities}
         carriers = {e.entity_id: e.electronic_id for e in gt.entities if e.electronic_id}
-        people.update(gtf)
-        users.update(carriers)
-        pts = raw_points.get(fr.t_ns)
+        self.people.update(gtf)
+        self.users.update(carriers)
+        self._score_detections(self.raw_points.get(t_ns), gtf)
+        self.all_acc.update(gtf, hyp)
+        nonusers = [p for p in gtf if p not in carriers]
+        if self.mode is Mode.VM:
+            self._score_phones(t_ns, gtf, carriers, hyp, nonusers)
+        else:
+            self._score_visual(gtf, carriers, hyp, nonusers)
+
+    def _score_detections(
+        self, pts: np.ndarray | None, gtf: dict[str, tuple[float, float]]
+    ) -> None:
+        """The raw detections' distance to the nearest person (within 2 m) and the people with
+        a detection within the evaluation threshold."""
         if pts is not None and len(pts) and gtf:
             g = np.array(list(gtf.values()))
             d = np.linalg.norm(pts[:, None, :] - g[None, :, :], axis=2).min(axis=1)
-            det_err.extend(float(x) for x in d if x < 2.0)
+            self.det_err.extend(float(x) for x in d if x < 2.0)
             # recall: people with a raw detection within the evaluation threshold
             near = np.linalg.norm(g[:, None, :] - pts[None, :, :], axis=2).min(axis=1)
-            det_hits += int(np.sum(near < cfg.eval_threshold_m))
-        det_people += len(gtf)
-        all_acc.update(gtf, hyp)
-        nonusers = [p for p in gtf if p not in carriers]
-        if mode is Mode.VM:
-            # identity is the phone: only tracks carrying a MID claim to be a user; anonymous
-            # tracks (non-users, users not yet identified) make no identity claim
-            mids = set(phones)
-            user_hyp = {h: xy for h, xy in hyp.items() if h in mids}
-            users_acc.update({p: gtf[p] for p in carriers}, user_hyp, ignore=nonusers)
-            for person, mid in carriers.items():
-                xy = hyp.get(mid)
-                t_rel = (fr.t_ns - t_start) / 1e9
-                good = xy is not None and math.dist(xy, gtf[person]) < cfg.eval_threshold_m
-                if xy is not None:
-                    errors.append(math.dist(xy, gtf[person]))
-                    # bound to somebody else: another person is nearer the MID's track
-                    if not good and any(
-                        math.dist(xy, pos) < cfg.eval_threshold_m
-                        for other, pos in gtf.items()
-                        if other != person
-                    ):
-                        wrong_s += frame_s
-                if ok_since.get(person) and not good:
-                    loss_events += 1
-                    lost_at[person] = fr.t_ns
-                    first_loss.setdefault(person, t_rel)
-                if good and person in lost_at:
-                    recovery.append((fr.t_ns - lost_at.pop(person)) / 1e9)
-                ok_since[person] = good
-        else:
-            # visual-only tracks name nobody: tracks on non-users are don't-care, not false
-            # positives (they must be in the truth given, to be matched and ignored)
-            users_acc.update(gtf, hyp, ignore=nonusers)
-            for person in carriers:
-                err = followed.error(person, gtf[person], hyp)
-                if err is not None:
-                    errors.append(err)
-    s_users = users_acc.summary()
-    s_all = all_acc.summary()
+            self.det_hits += int(np.sum(near < self.threshold))
+        self.det_people += len(gtf)
+
+    def _score_phones(
+        self,
+        t_ns: int,
+        gtf: dict[str, tuple[float, float]],
+        carriers: dict[str, str],
+        hyp: dict[str, tuple[float, float]],
+        nonusers: list[str],
+    ) -> None:
+        """VM: the users' MOT over the tracks naming a phone, and each carrier followed by its
+        phone's MID."""
+        # identity is the phone: only tracks carrying a MID claim to be a user; anonymous
+        # tracks (non-users, users not yet identified) make no identity claim
+        user_hyp = {h: xy for h, xy in hyp.items() if h in self.mids}
+        self.users_acc.update({p: gtf[p] for p in carriers}, user_hyp, ignore=nonusers)
+        for person, mid in carriers.items():
+            self._follow(t_ns, person, hyp.get(mid), gtf)
+
+    def _follow(
+        self,
+        t_ns: int,
+        person: str,
+        xy: tuple[float, float] | None,
+        gtf: dict[str, tuple[float, float]],
+    ) -> None:
+        """One carrier at one frame, its MID's track at ``xy`` (None: not published): the
+        error, time bound to somebody else, a loss (its track no longer on it) or recovery."""
+        good = xy is not None and math.dist(xy, gtf[person]) < self.threshold
+        if xy is not None:
+            self.errors.append(math.dist(xy, gtf[person]))
+            if not good and self._near_another(xy, person, gtf):
+                self.wrong_s += self.frame_s
+        if self.ok_since.get(person) and not good:
+            self.loss_events += 1
+            self.lost_at[person] = t_ns
+            self.first_loss.setdefault(person, (t_ns - self.t_start) / 1e9)
+        if good and person in self.lost_at:
+            self.recovery.append((t_ns - self.lost_at.pop(person)) / 1e9)
+        self.ok_since[person] = good
+
+    def _near_another(
+        self, xy: tuple[float, float], person: str, gtf: dict[str, tuple[float, float]]
+    ) -> bool:
+        """Whether a person other than ``person`` is within the threshold of ``xy`` (the MID's
+        track is bound to somebody else)."""
+        return any(
+            math.dist(xy, pos) < self.threshold for other, pos in gtf.items() if other != person
+        )
+
+    def _score_visual(
+        self,
+        gtf: dict[str, tuple[float, float]],
+        carriers: dict[str, str],
+        hyp: dict[str, tuple[float, float]],
+        nonusers: list[str],
+    ) -> None:
+        """V-AF: the users' MOT over every track, and each carrier's error on the track first
+        matched to it."""
+        # visual-only tracks name nobody: tracks on non-users are don't-care, not false
+        # positives (they must be in the truth given, to be matched and ignored)
+        self.users_acc.update(gtf, hyp, ignore=nonusers)
+        for person in carriers:
+            err = self.followed.error(person, gtf[person], hyp)
+            if err is not None:
+                self.errors.append(err)
+
+    def people_metrics(self, n_phones: int) -> dict[str, float | int | None]:
+        """People and users seen, and the users' position error (m)."""
+        return {
+            "people": len(self.people),
+            "users": len(self.users) if self.users else n_phones,
+            "error_m_mean": _rounded_mean(self.errors, 4),
+            "error_m_median": round(float(np.median(self.errors)), 4) if self.errors else None,
+        }
+
+    def mot_metrics(self) -> dict[str, float | int | None]:
+        """IDF1 and MOTA over the users (and their identity switches), then over everybody."""
+        s_users = self.users_acc.summary()
+        s_all = self.all_acc.summary()
+        return {
+            "idf1": round(s_users.idf1, 4) if s_users.gt else None,
+            "mota": round(s_users.mota, 4) if s_users.gt else None,
+            "id_switches": s_users.id_switches,
+            "idf1_all": round(s_all.idf1, 4) if s_all.gt else None,
+            "mota_all": round(s_all.mota, 4) if s_all.gt else None,
+        }
+
+    def recovery_metrics(self) -> dict[str, float | None]:
+        """Mean time to recover a lost identity, and mean time to a carrier's first loss (s)."""
+        return {
+            "recovery_s_mean": _rounded_mean(self.recovery, 3),
+            "first_loss_s_mean": _rounded_mean(list(self.first_loss.values()), 3),
+        }
+
+    def detection_metrics(self) -> dict[str, float | None]:
+        """The raw detections' mean error (m) and recall, and (VM) the time a MID's track was
+        on somebody else (s)."""
+        return {
+            "det_error_m_mean": _rounded_mean(self.det_err, 4),
+            "det_recall": round(self.det_hits / self.det_people, 4) if self.det_people else None,
+            "wrong_binding_s": round(self.wrong_s, 3)
+            if self.mode is Mode.VM and self.people
+            else None,
+        }
+
+
+def _rounded_mean(values: list[float], digits: int) -> float | None:
+    """The mean of ``values`` rounded to ``digits`` (None without values)."""
+    return round(float(np.mean(values)), digits) if values else None
+
+
+def _report(
+    online: OnlineTracker,
+    phones: dict[str, PhoneMotion],
+    mode: Mode,
+    offline: _Offline,
+    score: _TruthScore,
+    tally: _Tally,
+) -> dict[str, float | int | str | None]:
+    """The run's figures: against the ground truth, then those a log without it can give."""
+    stats = online.identity.stats
     return {
         "system": "vm-tracking",
         "mode": mode.value,
         "frames": online.frame_count,
-        "people": len(people),
-        "users": len(users) if users else len(phones),
-        "error_m_mean": round(float(np.mean(errors)), 4) if errors else None,
-        "error_m_median": round(float(np.median(errors)), 4) if errors else None,
-        "idf1": round(s_users.idf1, 4) if s_users.gt else None,
-        "mota": round(s_users.mota, 4) if s_users.gt else None,
-        "id_switches": s_users.id_switches,
-        "idf1_all": round(s_all.idf1, 4) if s_all.gt else None,
-        "mota_all": round(s_all.mota, 4) if s_all.gt else None,
-        "loss_events": loss_events if mode is Mode.VM else stats.losses,
-        "recovery_s_mean": round(float(np.mean(recovery)), 3) if recovery else None,
-        "first_loss_s_mean": round(float(np.mean(list(first_loss.values()))), 3)
-        if first_loss
-        else None,
+        **score.people_metrics(len(phones)),
+        **score.mot_metrics(),
+        "loss_events": score.loss_events if mode is Mode.VM else stats.losses,
+        **score.recovery_metrics(),
         "bindings": stats.bindings,
         "checkpoint_bindings": stats.checkpoint_bindings,
         "offline_bindings": stats.offline_bindings,
-        "det_error_m_mean": round(float(np.mean(det_err)), 4) if det_err else None,
-        "det_recall": round(det_hits / det_people, 4) if det_people else None,
-        "wrong_binding_s": round(wrong_s, 3) if mode is Mode.VM and people else None,
-        **_no_truth_metrics(online, published, coasting, shown, plan),
-        **_identity_metrics(ids, stats, phones, retracked),
-        **_radio_metrics(retracked),
+        **score.detection_metrics(),
+        **_no_truth_metrics(online, tally.published, tally.coasting, tally.shown, offline.plan),
+        **_identity_metrics(offline.ids, stats, phones, offline.retracked),
+        **_radio_metrics(offline.retracked),
     }
 
 
