@@ -263,6 +263,7 @@ def test_no_retrack_through_the_cli(office_log: Path, tmp_path: Path) -> None:
     (report,) = [m.message for m in LogReader(out).messages(["/metrics/vm-track"])]
     assert report.params["retrack"] is False
     assert json.loads(result.stdout)["idf1"] > 0.85
+    assert report.metrics["visits"] is None and "visits" in report.unmeasured
 
 
 def test_no_rssi_through_the_cli(office_log: Path, tmp_path: Path) -> None:
@@ -275,6 +276,16 @@ def test_no_rssi_through_the_cli(office_log: Path, tmp_path: Path) -> None:
     assert report.params["rssi"] is False and report.params["retrack"] is True
     assert json.loads(result.stdout)["idf1"] > 0.85
     assert not [k for k in report.metrics if k.startswith("rssi_at_1m_dbm/")]
+
+
+def test_the_visit_model_read_from_the_log_is_reported(
+    office_run: tuple[dict[str, object], Path],
+) -> None:
+    # the office: nobody's walk begins or ends inside the covered area (an unbounded edge
+    # turnover, null), people cross it: one visit per phone
+    m, _ = office_run
+    assert m["visits"] == "one"
+    assert m["edge_turnover"] is None
 
 
 def test_each_aps_path_loss_is_fitted_and_reported(

@@ -50,7 +50,7 @@ from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.online import OnlineTracker
 from trackctl.vmtrack.radio import RadioEvidence
-from trackctl.vmtrack.retrack import PhoneTrack, Retracked, retrack
+from trackctl.vmtrack.retrack import PhoneTrack, Retracked, VisitReading, retrack
 from trackctl.vmtrack.scene import scene_update
 from trackctl.vmtrack.stitch import Publication, plan_publication
 from trackctl.vmtrack.tracker import GroundTrack, TrackerConfig
@@ -320,7 +320,15 @@ def _silent(done: int, total: int | None, stage: str | None = None) -> None:
     """No progress to report to."""
 
 
-_RETRACK_ONLY = ("withheld_s/", "ambiguous_s/", "grouped_s/", "searched/")
+_RETRACK_ONLY = (
+    "withheld_s/",
+    "ambiguous_s/",
+    "grouped_s/",
+    "searched/",
+    "visits",
+    "edge_turnover",
+    "occupancy_steadiness",
+)
 _BINDINGS = ("bindings", "checkpoint_bindings", "offline_bindings")
 
 
@@ -930,6 +938,22 @@ def _report(
         **_no_truth_metrics(online, tally.published, tally.coasting, tally.shown, offline.plan),
         **_identity_metrics(offline.ids, stats, phones, offline.retracked),
         **_radio_metrics(offline.retracked),
+        **_visit_metrics(offline.retracked.visits),
+    }
+
+
+def _visit_metrics(reading: VisitReading | None) -> dict[str, float | int | str | None]:
+    """The visit model the re-tracking read from the log and what it read it from (null: not
+    read; an edge turnover is null too where no walk begins or ends inside, unbounded)."""
+    if reading is None:
+        return dict.fromkeys(("visits", "edge_turnover", "occupancy_steadiness"))
+    turnover = reading.edge_turnover
+    finite = turnover is not None and math.isfinite(turnover)
+    steady = reading.steadiness
+    return {
+        "visits": "one" if reading.one_visit else "throughout",
+        "edge_turnover": round(turnover, 1) if finite and turnover is not None else None,
+        "occupancy_steadiness": round(steady, 2) if steady is not None else None,
     }
 
 

@@ -273,8 +273,9 @@ class Retracked(dict[str, PhoneTrack]):
         self.searched_again: list[str] = []
         self.searched: list[str] = []
         """The phones whose alignment was searched (the rest started from their identity's)."""
-        self.visits = VisitReading()
-        """The visit model the log called for (:attr:`RetrackConfig.turnover_min`)."""
+        self.visits: VisitReading | None = None
+        """The visit model the log called for (:attr:`RetrackConfig.turnover_min`); None
+        before it is read."""
 
 
 def _reversed(away: float | np.ndarray) -> float | np.ndarray:
