@@ -298,19 +298,53 @@ def identify(
     lag_ns = np.round(lags * 1e9).astype(np.int64)
     chains = _chains(frames, plan, cfg.velocity_window_s / 2)
     frame_t = np.array([fr.t_ns for fr in frames], np.int64)
-    index = {int(t): i for i, t in enumerate(frame_t)}
-    n_f = len(frame_t)
-    rows = [np.array([index[int(t)] for t in c.times], int) for c in chains]
-    paths: dict[str, np.ndarray] = {}
-    costs: dict[str, np.ndarray] = {}
-    half_v = cfg.velocity_window_s / 2
+    rows = _chain_rows(chains, frame_t)
     walks = {mid: dead_reckoned(phone) for mid, phone in phones.items()}
+    paths, costs, known = _phone_paths(
+        phones, walks, chains, rows, frame_t, lags, lag_ns, acfg, cfg, aligned
+    )
+    ambiguous = np.zeros(len(frame_t), bool)
+    for mid, path in paths.items():
+        cost = costs[mid]
+        out.clear[mid] = (int((path >= 0).sum()), int((_clear_path(path, cost, cfg) >= 0).sum()))
+        ambiguous |= _ambiguous_frames(path, cost, cfg)
+        _drop_unanchored(path, cost, cfg, out)
+    _place_owners(paths, costs, chains, frame_t, out)
+    out.ambiguous_frames = int(ambiguous.sum())
+    out.alignments = _alignments(out, chains, walks, lags, lag_ns, acfg, cfg.velocity_window_s / 2)
+    _publish_known(known, out, chains, frame_t, walks, lags, cfg)
+    return out
+
+
+def _chain_rows(chains: list[_Chain], frame_t: np.ndarray) -> list[np.ndarray]:
+    """Per chain, the index in ``frame_t`` of each of its frame times."""
+    index = {int(t): i for i, t in enumerate(frame_t)}
+    return [np.array([index[int(t)] for t in c.times], int) for c in chains]
+
+
+def _phone_paths(
+    phones: dict[str, PhoneMotion],
+    walks: dict[str, np.ndarray],
+    chains: list[_Chain],
+    rows: list[np.ndarray],
+    frame_t: np.ndarray,
+    lags: np.ndarray,
+    lag_ns: np.ndarray,
+    acfg: AlignConfig,
+    cfg: IdentifyConfig,
+    aligned: bool,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, tuple[int, np.ndarray] | None]]:
+    """Per phone (in MID order): its bridged path over the chains, its cost matrix and its
+    alignment (:func:`_phone_path`)."""
+    n_f = len(frame_t)
     present = np.zeros((n_f, len(chains)), bool)
     for c, r in enumerate(rows):
         present[r, c] = True
     frame_s = float(np.median(np.diff(frame_t))) / 1e9 if n_f > 1 else 1.0
     near = _encounters(chains, rows, frame_t, cfg.encounter_m)
     coast = _coasting(chains, rows, n_f, cfg)  # the chains' own: the same for every phone
+    paths: dict[str, np.ndarray] = {}
+    costs: dict[str, np.ndarray] = {}
     known: dict[str, tuple[int, np.ndarray] | None] = {}
     for mid in sorted(phones):
         paths[mid], costs[mid], known[mid] = _phone_path(
@@ -328,20 +362,33 @@ def identify(
             coast,
         )
         _bridge(paths[mid], present, chains, frame_t, int(cfg.bridge_s / frame_s), cfg.bridge_m)
-    ambiguous = np.zeros(n_f, bool)
-    for mid, path in paths.items():
-        cost = costs[mid]
-        out.clear[mid] = (int((path >= 0).sum()), int((_clear_path(path, cost, cfg) >= 0).sum()))
-        for f in np.flatnonzero(path >= 0):
-            row = cost[f]
-            mine = row[path[f]]
-            rivals = np.delete(row, path[f])
-            if len(rivals) and np.min(rivals) <= cfg.ratio * mine + 0.02 and mine < cfg.none_cost:
-                ambiguous[f] = True
-        _drop_unanchored(path, cost, cfg, out)
-    # one phone per chain and frame: the better fit keeps it
+    return paths, costs, known
+
+
+def _ambiguous_frames(path: np.ndarray, cost: np.ndarray, cfg: IdentifyConfig) -> np.ndarray:
+    """Per frame: the path puts the phone on a chain that fits, and another fits within
+    ``ratio`` of it."""
+    out = np.zeros(len(path), bool)
+    for f in np.flatnonzero(path >= 0):
+        row = cost[f]
+        mine = row[path[f]]
+        rivals = np.delete(row, path[f])
+        if len(rivals) and np.min(rivals) <= cfg.ratio * mine + 0.02 and mine < cfg.none_cost:
+            out[f] = True
+    return out
+
+
+def _place_owners(
+    paths: dict[str, np.ndarray],
+    costs: dict[str, np.ndarray],
+    chains: list[_Chain],
+    frame_t: np.ndarray,
+    out: Identities,
+) -> None:
+    """Fills ``out.mid_at`` and ``out.placed``: one phone per chain and frame, the better fit
+    keeps it."""
     keys = [c.key for c in chains]
-    for fi in range(n_f):
+    for fi in range(len(frame_t)):
         owner: dict[int, tuple[float, str]] = {}
         for mid, path in paths.items():
             c = int(path[fi])
@@ -354,15 +401,26 @@ def identify(
             t_ns = int(frame_t[fi])
             out.mid_at[(keys[c], t_ns)] = mid
             out.placed.setdefault(mid, []).append((t_ns, *chains[c].xy_at(t_ns)))
-    out.ambiguous_frames = int(ambiguous.sum())
-    out.alignments = _alignments(out, chains, walks, lags, lag_ns, acfg, half_v)
-    for mid in sorted(phones):
+
+
+def _publish_known(
+    known: dict[str, tuple[int, np.ndarray] | None],
+    out: Identities,
+    chains: list[_Chain],
+    frame_t: np.ndarray,
+    walks: dict[str, np.ndarray],
+    lags: np.ndarray,
+    cfg: IdentifyConfig,
+) -> None:
+    """Fills ``out.known`` with each phone's fitted alignment (in MID order) and, with
+    ``unseen_s``, walks its carrier through the gaps no chain shows."""
+    for mid in sorted(known):
         al = known[mid]
-        if al is not None:
-            out.known[mid] = (float(lags[al[0]]), al[1])
-        if al is not None and cfg.unseen_s > 0:
+        if al is None:
+            continue
+        out.known[mid] = (float(lags[al[0]]), al[1])
+        if cfg.unseen_s > 0:
             _carry_through_unseen(mid, out, chains, frame_t, walks[mid], lags, al, cfg)
-    return out
 
 
 def _carry_through_unseen(

@@ -435,36 +435,48 @@ class IdentityBinder:
         consistent pairs first; a track goes to at most one phone. The identity then holds back
         along the track as far as its motion agreed with the phone (:meth:`_backdate_identity`).
         """
-        cfg, by_vid = self.cfg, self.by_vid
-        ever_bound = {trk.first_mid for trk in by_vid.values() if trk.first_mid is not None}
+        ever_bound = {trk.first_mid for trk in self.by_vid.values() if trk.first_mid is not None}
         pairs = []
         for mid, cands in (self.evidence or {}).items():
             if mid not in self.phones or mid in ever_bound or not len(cands):
                 continue
-            score = cands.scores(cfg.align) + cands.rssi_penalty(_RSSI_WEIGHT)
-            frames = cands.frames()
-            scored = sorted(
-                (float(score[i]), vid)
-                for i, vid in enumerate(cands.vids)
-                if by_vid[vid].first_mid is None and frames[i] >= cfg.bind_frames_free
-            )
-            if not scored or scored[0][0] > cfg.offline_reject_mps**2:
-                continue
-            if len(scored) > 1 and scored[1][0] <= cfg.ratio * scored[0][0] + 0.02:
-                continue  # ambiguous (people walking together): leave the phone unbound
-            pairs.append((scored[0][0], mid, scored[0][1]))
+            best = self._clear_offline_best(cands)
+            if best is not None:
+                pairs.append((best[0], mid, best[1]))
         made = 0
         for _, mid, vid in sorted(pairs):
-            trk = by_vid[vid]
-            if trk.first_mid is not None:
+            if self.by_vid[vid].first_mid is not None:
                 continue
-            trk.first_mid = mid
-            trk.first_bound_ns = trk.t_ns + 1  # the identity covers the whole track (back-dated)
-            al = (self.evidence or {})[mid].evidence(vid).fit(cfg.align, self.lags)
-            if al is not None:
-                self.last_align[mid] = al
+            self._bind_offline(mid, vid)
             made += 1
         return made
+
+    def _clear_offline_best(self, cands: CandidateTable) -> tuple[float, str] | None:
+        """(score, VID) of the anonymous track that best fits a phone's whole-log evidence;
+        None when it is outside the offline gate or the runner-up fits within ``ratio``."""
+        cfg = self.cfg
+        score = cands.scores(cfg.align) + cands.rssi_penalty(_RSSI_WEIGHT)
+        frames = cands.frames()
+        scored = sorted(
+            (float(score[i]), vid)
+            for i, vid in enumerate(cands.vids)
+            if self.by_vid[vid].first_mid is None and frames[i] >= cfg.bind_frames_free
+        )
+        if not scored or scored[0][0] > cfg.offline_reject_mps**2:
+            return None
+        if len(scored) > 1 and scored[1][0] <= cfg.ratio * scored[0][0] + 0.02:
+            return None  # ambiguous (people walking together): leave the phone unbound
+        return scored[0]
+
+    def _bind_offline(self, mid: str, vid: str) -> None:
+        """Give track ``vid`` phone ``mid``'s identity over its whole life, and the phone the
+        alignment its evidence on the track fits."""
+        trk = self.by_vid[vid]
+        trk.first_mid = mid
+        trk.first_bound_ns = trk.t_ns + 1  # the identity covers the whole track (back-dated)
+        al = (self.evidence or {})[mid].evidence(vid).fit(self.cfg.align, self.lags)
+        if al is not None:
+            self.last_align[mid] = al
 
     def _backdate_identity(self, trk: GroundTrack) -> None:
         """Set how far back before its binding a track carries its phone's identity.

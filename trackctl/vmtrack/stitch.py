@@ -22,7 +22,7 @@ motion-sensor prediction and is published).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -227,15 +227,10 @@ def _gap_fills(
     return fills, links
 
 
-def plan_publication(
-    frames: Sequence[FrameOut],
-    positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
-    cfg: StitchConfig,
-    all_tracks: bool = False,
-    static_deaths: np.ndarray | None = None,
-) -> Publication:
-    """Coasting tails, stitched identities and short identities of visual-only tracks (of every
-    track with ``all_tracks``: the offline identity stage names them afterwards)."""
+def _candidate_rows(
+    frames: Sequence[FrameOut], all_tracks: bool
+) -> tuple[dict[int, list[tuple[int, int]]], dict[int, GroundTrack]]:
+    """(frame ns, row key) of every track the clean-up plans, by ``id(track)``; and the tracks."""
     rows: dict[int, list[tuple[int, int]]] = {}
     tracks: dict[int, GroundTrack] = {}
     for fr in frames:
@@ -243,37 +238,56 @@ def plan_publication(
             if all_tracks or (mid_now is None and trk.first_mid is None):
                 rows.setdefault(id(trk), []).append((fr.t_ns, k))
                 tracks[id(trk)] = trk
-    hidden: set[tuple[int, int]] = set()
-    spots = _clutter_spots(tracks, cfg, static_deaths)
-    spot_tree = cKDTree(spots) if len(spots) else None
-    tracklets = []
-    for key, seq in rows.items():
-        trk = tracks[key]
-        last_hit = trk.hit_ns[-1]
-        if not cfg.publish_coasting_tails:
-            hidden.update((key, t) for t, _ in seq if t > last_hit)
-        parked = _parked_at_clutter(trk, np.array([t for t, _ in seq], float), spot_tree, cfg)
-        if parked.any():
-            hidden.update((key, t) for (t, _), p in zip(seq, parked, strict=True) if p)
-            seq = [row for row, p in zip(seq, parked, strict=True) if not p]
-            if not seq:
-                continue
-        shown = [(t, k) for t, k in seq if t <= last_hit] or seq[:1]
+    return rows, tracks
 
-        def state(t_k: tuple[int, int], trk: GroundTrack = trk) -> np.ndarray:
-            est = positions.get((id(trk), t_k[1]))
-            return trk.kf.x[:, 0] if est is None else est[0]
 
-        s0, s1 = state(shown[0]), state(shown[-1])
-        hits = sum(1 for t in trk.hit_ns if shown[0][0] <= t <= shown[-1][0])
-        tracklets.append(
-            Tracklet(
-                key, hits, shown[0][0], shown[-1][0], s0[:2], s1[:2], s0[2:4], s1[2:4], trk.moved_m
-            )
-        )
-    clutter = {key for key in rows if key not in {t.key for t in tracklets}}
-    heads = stitch(tracklets, cfg) if cfg.enabled else {t.key: t.key for t in tracklets}
-    heads.update({key: key for key in clutter})
+def _hide_tail_and_parked(
+    key: int,
+    seq: list[tuple[int, int]],
+    trk: GroundTrack,
+    spot_tree: cKDTree | None,
+    cfg: StitchConfig,
+    hidden: set[tuple[int, int]],
+) -> list[tuple[int, int]]:
+    """The rows of ``seq`` not parked at clutter; adds the coasting tail (unless published)
+    and the parked rows to ``hidden``."""
+    last_hit = trk.hit_ns[-1]
+    if not cfg.publish_coasting_tails:
+        hidden.update((key, t) for t, _ in seq if t > last_hit)
+    parked = _parked_at_clutter(trk, np.array([t for t, _ in seq], float), spot_tree, cfg)
+    if not parked.any():
+        return seq
+    hidden.update((key, t) for (t, _), p in zip(seq, parked, strict=True) if p)
+    return [row for row, p in zip(seq, parked, strict=True) if not p]
+
+
+def _tracklet(
+    key: int,
+    seq: list[tuple[int, int]],
+    trk: GroundTrack,
+    positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+) -> Tracklet:
+    """The tracklet of a track's rows ``seq``: from its first to its last detected row (its
+    first row when none is), states from ``positions`` (else the filter's state)."""
+    last_hit = trk.hit_ns[-1]
+    shown = [(t, k) for t, k in seq if t <= last_hit] or seq[:1]
+
+    def state(t_k: tuple[int, int]) -> np.ndarray:
+        est = positions.get((id(trk), t_k[1]))
+        return trk.kf.x[:, 0] if est is None else est[0]
+
+    s0, s1 = state(shown[0]), state(shown[-1])
+    hits = sum(1 for t in trk.hit_ns if shown[0][0] <= t <= shown[-1][0])
+    return Tracklet(
+        key, hits, shown[0][0], shown[-1][0], s0[:2], s1[:2], s0[2:4], s1[2:4], trk.moved_m
+    )
+
+
+def _short_or_still_chains(
+    tracklets: Sequence[Tracklet], heads: dict[int, int], cfg: StitchConfig
+) -> set[int]:
+    """Chain heads whose chain has fewer than ``min_hits`` detections or never got
+    ``min_motion_m`` from where it started."""
     chain_hits: dict[int, int] = {}
     chain_moved: dict[int, float] = {}
     chain_start: dict[int, np.ndarray] = {}
@@ -283,10 +297,43 @@ def plan_publication(
         start = chain_start.setdefault(h, t.first_xy)
         far = max(t.moved_m, float(np.linalg.norm(t.last_xy - start)))
         chain_moved[h] = max(chain_moved.get(h, 0.0), far)
-    name = {key: tracks[heads[key]].vid for key in rows}
-    dropped = {
+    return {
         h for h, n in chain_hits.items() if n < cfg.min_hits or chain_moved[h] < cfg.min_motion_m
-    } | clutter
+    }
+
+
+def _chain_heads(
+    keys: Iterable[int], tracklets: Sequence[Tracklet], cfg: StitchConfig
+) -> tuple[dict[int, int], set[int]]:
+    """Chain head of every planned track (stitched when enabled; a track left without a
+    tracklet, all its rows at clutter, heads itself); and those clutter tracks."""
+    clutter = {key for key in keys if key not in {t.key for t in tracklets}}
+    heads = stitch(tracklets, cfg) if cfg.enabled else {t.key: t.key for t in tracklets}
+    heads.update({key: key for key in clutter})
+    return heads, clutter
+
+
+def plan_publication(
+    frames: Sequence[FrameOut],
+    positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
+    cfg: StitchConfig,
+    all_tracks: bool = False,
+    static_deaths: np.ndarray | None = None,
+) -> Publication:
+    """Coasting tails, stitched identities and short identities of visual-only tracks (of every
+    track with ``all_tracks``: the offline identity stage names them afterwards)."""
+    rows, tracks = _candidate_rows(frames, all_tracks)
+    hidden: set[tuple[int, int]] = set()
+    spots = _clutter_spots(tracks, cfg, static_deaths)
+    spot_tree = cKDTree(spots) if len(spots) else None
+    tracklets = []
+    for key, seq in rows.items():
+        kept = _hide_tail_and_parked(key, seq, tracks[key], spot_tree, cfg, hidden)
+        if kept:
+            tracklets.append(_tracklet(key, kept, tracks[key], positions))
+    heads, clutter = _chain_heads(rows, tracklets, cfg)
+    name = {key: tracks[heads[key]].vid for key in rows}
+    dropped = _short_or_still_chains(tracklets, heads, cfg) | clutter
     for key, seq in rows.items():
         if heads[key] in dropped:
             hidden.update((key, t) for t, _ in seq)
