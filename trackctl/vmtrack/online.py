@@ -262,29 +262,43 @@ class OnlineTracker:
     def _retire(self, t_ns: int) -> None:
         """Drop tentative tracks that missed, and tracks unseen for too long; then start tracks
         on unmatched detections that are not a duplicate view (overlapping cameras) of a track."""
-        tcfg = self.tcfg
         keep = []
         owner = self.identity.owners()
         for trk in self.tracks:
-            age = (t_ns - trk.last_hit_ns) / 1e9
             mid = owner.get(id(trk))
-            limit = tcfg.lose_bound_after_s if mid else tcfg.drop_unbound_after_s
-            if (trk.state is TrackState.TENTATIVE and trk.last_hit_ns != t_ns) or age > limit:
-                if mid:
-                    self.identity.release(mid)
-                if trk.moved_m < self.cfg.clutter_radius_m and trk.born_xy is not None:
-                    bx, by = float(trk.born_xy[0]), float(trk.born_xy[1])
-                    self._static_deaths.append((t_ns, bx, by))
-                    self.static_death_log.append((float(trk.born_xy[0]), float(trk.born_xy[1])))
+            if self._is_lost(trk, t_ns, mid):
+                self._bury(trk, t_ns, mid)
                 continue
             keep.append(trk)
         self.tracks[:] = keep
         memory = int(self.cfg.clutter_memory_s * 1e9)
         while self._static_deaths and self._static_deaths[0][0] < t_ns - memory:
             self._static_deaths.popleft()
-        if not self._pending_new:
-            return
-        tree = cKDTree(np.array([trk.kf.x[:2, 0] for trk in keep])) if keep else None
+        if self._pending_new:
+            self._spawn(t_ns, len(keep))
+
+    def _is_lost(self, trk: GroundTrack, t_ns: int, mid: str | None) -> bool:
+        """Returns whether the track ends now: tentative and missed, or unseen for longer than
+        its limit (longer for a track with a phone)."""
+        age = (t_ns - trk.last_hit_ns) / 1e9
+        limit = self.tcfg.lose_bound_after_s if mid else self.tcfg.drop_unbound_after_s
+        return (trk.state is TrackState.TENTATIVE and trk.last_hit_ns != t_ns) or age > limit
+
+    def _bury(self, trk: GroundTrack, t_ns: int, mid: str | None) -> None:
+        """End a track: release its phone; a track that never moved marks its birth place in
+        the clutter map."""
+        if mid:
+            self.identity.release(mid)
+        if trk.moved_m < self.cfg.clutter_radius_m and trk.born_xy is not None:
+            bx, by = float(trk.born_xy[0]), float(trk.born_xy[1])
+            self._static_deaths.append((t_ns, bx, by))
+            self.static_death_log.append((float(trk.born_xy[0]), float(trk.born_xy[1])))
+
+    def _spawn(self, t_ns: int, n_kept: int) -> None:
+        """Start tracks on the pending detections that are neither a duplicate view of a track
+        (the first ``n_kept`` are the surviving ones) nor in clutter."""
+        kept = self.tracks[:n_kept]
+        tree = cKDTree(np.array([trk.kf.x[:2, 0] for trk in kept])) if kept else None
         deaths = np.array([d[1:] for d in self._static_deaths]).reshape(-1, 2)
         for det, cov in self._pending_new:
             # a detection near a track (or near one started just now) is a duplicate view
@@ -292,15 +306,19 @@ class OnlineTracker:
                 continue
             # a spot where tracks keep being born and dying without moving is clutter (a
             # poster, a plant): no new track there; people walking past keep their own tracks
-            near = np.sum(np.sum((deaths - det) ** 2, axis=1) < self.cfg.clutter_radius_m**2)
-            if near >= self.cfg.clutter_min:
+            if self._in_clutter(det, deaths):
                 self.clutter_suppressed += 1
                 continue
             if any(
-                np.linalg.norm(trk.xy - det) <= self.cfg.spawn_m for trk in self.tracks[len(keep) :]
+                np.linalg.norm(trk.xy - det) <= self.cfg.spawn_m for trk in self.tracks[n_kept:]
             ):
                 continue
-            self.tracks.append(GroundTrack.start(self._new_vid(), det, t_ns, tcfg, cov))
+            self.tracks.append(GroundTrack.start(self._new_vid(), det, t_ns, self.tcfg, cov))
+
+    def _in_clutter(self, det: np.ndarray, deaths: np.ndarray) -> bool:
+        """Returns whether enough never-moving tracks died near ``det`` (rows of ``deaths``)."""
+        near = np.sum(np.sum((deaths - det) ** 2, axis=1) < self.cfg.clutter_radius_m**2)
+        return bool(near >= self.cfg.clutter_min)
 
     def _prune_duplicates(self) -> None:
         """Two tracks on one person: keep the bound one, else the older one."""
