@@ -277,32 +277,10 @@ def associate(
         return [], list(range(len(tracks))), list(range(len(dets)))
     if covs is None:
         covs = np.broadcast_to(np.eye(2) * cfg.det_sigma_m**2, (len(dets), 2, 2))
-    r2 = np.trace(covs, axis1=1, axis2=2) / 2  # per-axis variance, for the fusion weights
-    if predicted is None:
-        preds = [trk.predicted(dt[i], cfg) for i, trk in enumerate(tracks)]
-        pv = np.array([p for p, _ in preds])
-        sv2 = np.array([v for _, v in preds])
-    else:
-        pv, sv2 = predicted
+    pv, sv2 = predicted if predicted is not None else _visual_predictions(tracks, dt, cfg)
     q = np.exp(-0.5 * _mahalanobis2(dets[None, :, :] - pv[:, None, :], sv2, covs))
-    prob = q
-    moving = [i for i, v in enumerate(v_m) if v is not None]
-    if moving:
-        mp = [tracks[i].motion_predicted(dt[i], v_m[i], cfg) for i in moving]  # type: ignore[arg-type]
-        pm = np.array([p for p, _ in mp])
-        sm2 = np.array([v for _, v in mp])
-        r = np.exp(-0.5 * _mahalanobis2(dets[None, :, :] - pm[:, None, :], sm2, covs))
-        sv = sv2[moving][:, None] + r2[None, :]
-        sm = sm2[:, None] + r2[None, :]
-        prob = q.copy()
-        prob[moving] = fused_probability(q[moving], r, sv, sm)
-    cost = np.where(prob >= cfg.gate_p, -np.log(np.maximum(prob, 1e-300)), 1e6)
-    rows, cols = linear_sum_assignment(cost)
-    pairs = [
-        (int(i), int(j), float(prob[i, j]))
-        for i, j in zip(rows, cols, strict=True)
-        if cost[i, j] < 1e6
-    ]
+    prob = _with_motion(q, tracks, dets, dt, v_m, cfg, covs, sv2)
+    pairs = _gated_assignment(prob, cfg.gate_p)
     mt = {i for i, _, _ in pairs}
     md = {j for _, j, _ in pairs}
     return (
@@ -310,6 +288,53 @@ def associate(
         [i for i in range(len(tracks)) if i not in mt],
         [j for j in range(len(dets)) if j not in md],
     )
+
+
+def _visual_predictions(
+    tracks: list[GroundTrack], dt: list[float], cfg: TrackerConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """Returns the tracks' visual-only predicted positions (n, 2) and per-axis variances (n,)."""
+    preds = [trk.predicted(dt[i], cfg) for i, trk in enumerate(tracks)]
+    return np.array([p for p, _ in preds]), np.array([v for _, v in preds])
+
+
+def _with_motion(
+    q: np.ndarray,
+    tracks: list[GroundTrack],
+    dets: np.ndarray,
+    dt: list[float],
+    v_m: list[np.ndarray | None],
+    cfg: TrackerConfig,
+    covs: np.ndarray,
+    sv2: np.ndarray,
+) -> np.ndarray:
+    """Returns the association probabilities: ``q`` (visual), fused with the motion-sensor
+    likelihood in the rows of tracks with a phone velocity."""
+    moving = [i for i, v in enumerate(v_m) if v is not None]
+    if not moving:
+        return q
+    r2 = np.trace(covs, axis1=1, axis2=2) / 2  # per-axis variance, for the fusion weights
+    mp = [tracks[i].motion_predicted(dt[i], v_m[i], cfg) for i in moving]  # type: ignore[arg-type]
+    pm = np.array([p for p, _ in mp])
+    sm2 = np.array([v for _, v in mp])
+    r = np.exp(-0.5 * _mahalanobis2(dets[None, :, :] - pm[:, None, :], sm2, covs))
+    sv = sv2[moving][:, None] + r2[None, :]
+    sm = sm2[:, None] + r2[None, :]
+    prob = q.copy()
+    prob[moving] = fused_probability(q[moving], r, sv, sm)
+    return prob
+
+
+def _gated_assignment(prob: np.ndarray, gate_p: float) -> list[tuple[int, int, float]]:
+    """Returns the Hungarian assignment's (track, detection, probability) pairs that pass the
+    probability gate."""
+    cost = np.where(prob >= gate_p, -np.log(np.maximum(prob, 1e-300)), 1e6)
+    rows, cols = linear_sum_assignment(cost)
+    return [
+        (int(i), int(j), float(prob[i, j]))
+        for i, j in zip(rows, cols, strict=True)
+        if cost[i, j] < 1e6
+    ]
 
 
 def merge_detections(points: list[tuple[str, np.ndarray]], merge_m: float) -> np.ndarray:
