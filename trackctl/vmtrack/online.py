@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -32,6 +33,50 @@ __all__ = ["OnlineTracker", "Prediction"]
 
 Prediction = tuple[np.ndarray, float, bool]
 """Where a track can be: ground xy, search radius (m), undetected in the last frame."""
+
+
+@dataclass(frozen=True, slots=True)
+class _VisualPrediction:
+    """The tracks' batched visual-only prediction: states and covariances (None without
+    tracks) and the positions and per-axis variances the association scores with."""
+
+    x: np.ndarray | None
+    p: np.ndarray | None
+    scored: tuple[np.ndarray, np.ndarray]
+
+
+@dataclass(frozen=True, slots=True)
+class _FusedMeasurements:
+    """One fused measurement per track that took detections: the tracks' indices (ascending),
+    the information-weighted mean points and their covariances, row for row."""
+
+    track_idx: list[int]
+    xy: np.ndarray
+    cov: np.ndarray
+
+
+def _fuse_measurements(
+    given: dict[int, list[int]], xy_all: np.ndarray, covs: np.ndarray | None, det_sigma_m: float
+) -> _FusedMeasurements:
+    """Returns each track's information-weighted mean of the points its cameras gave it."""
+    # all tracks at once: sums of information matrices and vectors by track
+    took_idx = sorted(given)
+    slot = {i: k for k, i in enumerate(took_idx)}
+    det_k = np.array([k for i in took_idx for k in given[i]], int)
+    det_slot = np.array([slot[i] for i in took_idx for _ in given[i]], int)
+    cov_k = (
+        np.broadcast_to(np.eye(2) * det_sigma_m**2, (len(det_k), 2, 2))
+        if covs is None
+        else covs[det_k]
+    )
+    info = np.linalg.inv(cov_k)
+    info_sum = np.zeros((len(took_idx), 2, 2))
+    vec_sum = np.zeros((len(took_idx), 2))
+    np.add.at(info_sum, det_slot, info)
+    np.add.at(vec_sum, det_slot, np.einsum("nij,nj->ni", info, xy_all[det_k]))
+    fused_cov = np.linalg.inv(info_sum) if len(took_idx) else info_sum
+    fused = np.einsum("nij,nj->ni", fused_cov, vec_sum)
+    return _FusedMeasurements(took_idx, fused, fused_cov)
 
 
 class OnlineTracker:
@@ -107,22 +152,52 @@ class OnlineTracker:
         few decimetres off, it fuses two people walking a metre apart into one point between
         them, and the tracks swap on it. Assigned per camera, the tracks' predictions decide
         which detection is whose."""
-        tcfg, tracks = self.tcfg, self.tracks
+        tracks = self.tracks
         xy_all = np.array([xy for _, xy in points], float).reshape(-1, 2)
         owner = self.identity.owners()
         v_m = [self.identity.velocity(owner.get(id(trk)), t_ns) for trk in tracks]
         dts = [(t_ns - trk.t_ns) / 1e9 for trk in tracks]
+        pred = self._predict_visual(dts)
+        given, left = self._assign_per_camera(points, xy_all, dts, v_m, covs, pred.scored)
+        meas = _fuse_measurements(given, xy_all, covs, self.tcfg.det_sigma_m)
+        lost_idx = [i for i in range(len(tracks)) if i not in given]
+        rest = [points[k] for k in left]
+        dets, new_covs = merge_with_covariance(
+            rest, None if covs is None else covs[left], self.cfg.merge_m
+        )
+        self._step_filters(t_ns, v_m, pred)
+        self._correct_with(t_ns, meas)
+        for i in lost_idx:
+            if tracks[i].state is not TrackState.TENTATIVE:
+                tracks[i].state = TrackState.PREDICTED
+        self._pending_new = [
+            (dets[j], None if new_covs is None else new_covs[j]) for j in range(len(dets))
+        ]
+
+    def _predict_visual(self, dts: list[float]) -> _VisualPrediction:
+        """Returns every track's visual-only prediction, all filters stepped at once."""
         # every track's filter steps at once (a crowd is many tracks): the visual-only
         # prediction scores the association and is the new state of tracks without a phone
-        x_pred = p_pred = None
-        if tracks:
-            x0 = np.stack([trk.kf.x for trk in tracks])
-            p0 = np.stack([trk.kf.P for trk in tracks])
-            x_pred, p_pred = predict_many(x0, p0, np.array(dts), tcfg.accel_sigma_mps2)
-            sv2 = (p_pred[:, 0, 0] + p_pred[:, 1, 1]) / 2
-            predicted = (x_pred[:, :2, 0], sv2)
-        else:
-            predicted = (np.empty((0, 2)), np.empty(0))
+        tracks = self.tracks
+        if not tracks:
+            return _VisualPrediction(None, None, (np.empty((0, 2)), np.empty(0)))
+        x0 = np.stack([trk.kf.x for trk in tracks])
+        p0 = np.stack([trk.kf.P for trk in tracks])
+        x_pred, p_pred = predict_many(x0, p0, np.array(dts), self.tcfg.accel_sigma_mps2)
+        sv2 = (p_pred[:, 0, 0] + p_pred[:, 1, 1]) / 2
+        return _VisualPrediction(x_pred, p_pred, (x_pred[:, :2, 0], sv2))
+
+    def _assign_per_camera(
+        self,
+        points: list[tuple[str, np.ndarray]],
+        xy_all: np.ndarray,
+        dts: list[float],
+        v_m: list[np.ndarray | None],
+        covs: np.ndarray | None,
+        predicted: tuple[np.ndarray, np.ndarray],
+    ) -> tuple[dict[int, list[int]], list[int]]:
+        """Returns the detections (indices into ``points``) each track took, camera by camera,
+        and the detections no track took."""
         by_cam: dict[str, list[int]] = {}
         for k, (cam, _) in enumerate(points):
             by_cam.setdefault(cam, []).append(k)
@@ -131,96 +206,99 @@ class OnlineTracker:
         for cam in sorted(by_cam):
             idx = by_cam[cam]
             cam_pairs, _, cam_new = associate(
-                tracks, xy_all[idx], dts, v_m, tcfg, None if covs is None else covs[idx], predicted
+                self.tracks,
+                xy_all[idx],
+                dts,
+                v_m,
+                self.tcfg,
+                None if covs is None else covs[idx],
+                predicted,
             )
             for i, j, _ in cam_pairs:
                 given.setdefault(i, []).append(idx[j])
             left.extend(idx[j] for j in cam_new)
-        # one fused measurement per track: information-weighted mean of its cameras' points
-        # (all tracks at once: sums of information matrices and vectors by track)
-        took_idx = sorted(given)
-        slot = {i: k for k, i in enumerate(took_idx)}
-        det_k = np.array([k for i in took_idx for k in given[i]], int)
-        det_slot = np.array([slot[i] for i in took_idx for _ in given[i]], int)
-        cov_k = (
-            np.broadcast_to(np.eye(2) * tcfg.det_sigma_m**2, (len(det_k), 2, 2))
-            if covs is None
-            else covs[det_k]
-        )
-        info = np.linalg.inv(cov_k)
-        info_sum = np.zeros((len(took_idx), 2, 2))
-        vec_sum = np.zeros((len(took_idx), 2))
-        np.add.at(info_sum, det_slot, info)
-        np.add.at(vec_sum, det_slot, np.einsum("nij,nj->ni", info, xy_all[det_k]))
-        fused_cov = np.linalg.inv(info_sum) if len(took_idx) else info_sum
-        fused = np.einsum("nij,nj->ni", fused_cov, vec_sum)
-        pairs = [(i, k) for k, i in enumerate(took_idx)]
-        lost_idx = [i for i in range(len(tracks)) if i not in given]
-        rest = [points[k] for k in left]
-        dets, new_covs = merge_with_covariance(
-            rest, None if covs is None else covs[left], self.cfg.merge_m
-        )
-        for i, trk in enumerate(tracks):
+        return given, left
+
+    def _step_filters(
+        self, t_ns: int, v_m: list[np.ndarray | None], pred: _VisualPrediction
+    ) -> None:
+        """Move every track to ``t_ns``: the visual-only prediction for tracks without a
+        phone, the phone's velocity fused first for the others."""
+        for i, trk in enumerate(self.tracks):
             # no copies: filterpy's predict and update (and the batched step) assign new state
             # arrays, never write into them
             trk.history.append((trk.t_ns, trk.kf.x, trk.kf.P, False))
             if v_m[i] is None:
-                assert x_pred is not None and p_pred is not None
-                trk.kf.x, trk.kf.P = x_pred[i], p_pred[i]
+                assert pred.x is not None and pred.p is not None
+                trk.kf.x, trk.kf.P = pred.x[i], pred.p[i]
                 trk.t_ns = t_ns
             else:
-                trk.advance(t_ns, tcfg, v_m[i])
-        if pairs:
-            took = [tracks[i] for i, _ in pairs]
-            cols = [j for _, j in pairs]
-            x1, p1 = update_many(
-                np.stack([trk.kf.x for trk in took]),
-                np.stack([trk.kf.P for trk in took]),
-                fused[cols][:, :, None],
-                fused_cov[cols],
-                took[0].kf.H,
-            )
-            for k, (trk, j) in enumerate(zip(took, cols, strict=True)):
-                trk.kf.x, trk.kf.P = x1[k], p1[k]
-                trk.took(fused[j])
-                trk.hits += 1
-                trk.last_hit_ns = t_ns
-                trk.hit_ns.append(t_ns)
-                if trk.hits >= tcfg.confirm_hits:
-                    trk.state = TrackState.TRACKED
-        for i in lost_idx:
-            if tracks[i].state is not TrackState.TENTATIVE:
-                tracks[i].state = TrackState.PREDICTED
-        self._pending_new = [
-            (dets[j], None if new_covs is None else new_covs[j]) for j in range(len(dets))
-        ]
+                trk.advance(t_ns, self.tcfg, v_m[i])
+
+    def _correct_with(self, t_ns: int, meas: _FusedMeasurements) -> None:
+        """Correct the tracks that took detections with their fused measurements (all at
+        once), count the hits and confirm tracks with enough of them."""
+        pairs = [(i, k) for k, i in enumerate(meas.track_idx)]
+        if not pairs:
+            return
+        took = [self.tracks[i] for i, _ in pairs]
+        cols = [j for _, j in pairs]
+        x1, p1 = update_many(
+            np.stack([trk.kf.x for trk in took]),
+            np.stack([trk.kf.P for trk in took]),
+            meas.xy[cols][:, :, None],
+            meas.cov[cols],
+            took[0].kf.H,
+        )
+        for k, (trk, j) in enumerate(zip(took, cols, strict=True)):
+            trk.kf.x, trk.kf.P = x1[k], p1[k]
+            trk.took(meas.xy[j])
+            trk.hits += 1
+            trk.last_hit_ns = t_ns
+            trk.hit_ns.append(t_ns)
+            if trk.hits >= self.tcfg.confirm_hits:
+                trk.state = TrackState.TRACKED
 
     def _retire(self, t_ns: int) -> None:
         """Drop tentative tracks that missed, and tracks unseen for too long; then start tracks
         on unmatched detections that are not a duplicate view (overlapping cameras) of a track."""
-        tcfg = self.tcfg
         keep = []
         owner = self.identity.owners()
         for trk in self.tracks:
-            age = (t_ns - trk.last_hit_ns) / 1e9
             mid = owner.get(id(trk))
-            limit = tcfg.lose_bound_after_s if mid else tcfg.drop_unbound_after_s
-            if (trk.state is TrackState.TENTATIVE and trk.last_hit_ns != t_ns) or age > limit:
-                if mid:
-                    self.identity.release(mid)
-                if trk.moved_m < self.cfg.clutter_radius_m and trk.born_xy is not None:
-                    bx, by = float(trk.born_xy[0]), float(trk.born_xy[1])
-                    self._static_deaths.append((t_ns, bx, by))
-                    self.static_death_log.append((float(trk.born_xy[0]), float(trk.born_xy[1])))
+            if self._is_lost(trk, t_ns, mid):
+                self._bury(trk, t_ns, mid)
                 continue
             keep.append(trk)
         self.tracks[:] = keep
         memory = int(self.cfg.clutter_memory_s * 1e9)
         while self._static_deaths and self._static_deaths[0][0] < t_ns - memory:
             self._static_deaths.popleft()
-        if not self._pending_new:
-            return
-        tree = cKDTree(np.array([trk.kf.x[:2, 0] for trk in keep])) if keep else None
+        if self._pending_new:
+            self._spawn(t_ns, len(keep))
+
+    def _is_lost(self, trk: GroundTrack, t_ns: int, mid: str | None) -> bool:
+        """Returns whether the track ends now: tentative and missed, or unseen for longer than
+        its limit (longer for a track with a phone)."""
+        age = (t_ns - trk.last_hit_ns) / 1e9
+        limit = self.tcfg.lose_bound_after_s if mid else self.tcfg.drop_unbound_after_s
+        return (trk.state is TrackState.TENTATIVE and trk.last_hit_ns != t_ns) or age > limit
+
+    def _bury(self, trk: GroundTrack, t_ns: int, mid: str | None) -> None:
+        """End a track: release its phone; a track that never moved marks its birth place in
+        the clutter map."""
+        if mid:
+            self.identity.release(mid)
+        if trk.moved_m < self.cfg.clutter_radius_m and trk.born_xy is not None:
+            bx, by = float(trk.born_xy[0]), float(trk.born_xy[1])
+            self._static_deaths.append((t_ns, bx, by))
+            self.static_death_log.append((float(trk.born_xy[0]), float(trk.born_xy[1])))
+
+    def _spawn(self, t_ns: int, n_kept: int) -> None:
+        """Start tracks on the pending detections that are neither a duplicate view of a track
+        (the first ``n_kept`` are the surviving ones) nor in clutter."""
+        kept = self.tracks[:n_kept]
+        tree = cKDTree(np.array([trk.kf.x[:2, 0] for trk in kept])) if kept else None
         deaths = np.array([d[1:] for d in self._static_deaths]).reshape(-1, 2)
         for det, cov in self._pending_new:
             # a detection near a track (or near one started just now) is a duplicate view
@@ -228,15 +306,19 @@ class OnlineTracker:
                 continue
             # a spot where tracks keep being born and dying without moving is clutter (a
             # poster, a plant): no new track there; people walking past keep their own tracks
-            near = np.sum(np.sum((deaths - det) ** 2, axis=1) < self.cfg.clutter_radius_m**2)
-            if near >= self.cfg.clutter_min:
+            if self._in_clutter(det, deaths):
                 self.clutter_suppressed += 1
                 continue
             if any(
-                np.linalg.norm(trk.xy - det) <= self.cfg.spawn_m for trk in self.tracks[len(keep) :]
+                np.linalg.norm(trk.xy - det) <= self.cfg.spawn_m for trk in self.tracks[n_kept:]
             ):
                 continue
-            self.tracks.append(GroundTrack.start(self._new_vid(), det, t_ns, tcfg, cov))
+            self.tracks.append(GroundTrack.start(self._new_vid(), det, t_ns, self.tcfg, cov))
+
+    def _in_clutter(self, det: np.ndarray, deaths: np.ndarray) -> bool:
+        """Returns whether enough never-moving tracks died near ``det`` (rows of ``deaths``)."""
+        near = np.sum(np.sum((deaths - det) ** 2, axis=1) < self.cfg.clutter_radius_m**2)
+        return bool(near >= self.cfg.clutter_min)
 
     def _prune_duplicates(self) -> None:
         """Two tracks on one person: keep the bound one, else the older one."""

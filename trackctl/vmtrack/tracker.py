@@ -277,32 +277,10 @@ def associate(
         return [], list(range(len(tracks))), list(range(len(dets)))
     if covs is None:
         covs = np.broadcast_to(np.eye(2) * cfg.det_sigma_m**2, (len(dets), 2, 2))
-    r2 = np.trace(covs, axis1=1, axis2=2) / 2  # per-axis variance, for the fusion weights
-    if predicted is None:
-        preds = [trk.predicted(dt[i], cfg) for i, trk in enumerate(tracks)]
-        pv = np.array([p for p, _ in preds])
-        sv2 = np.array([v for _, v in preds])
-    else:
-        pv, sv2 = predicted
+    pv, sv2 = predicted if predicted is not None else _visual_predictions(tracks, dt, cfg)
     q = np.exp(-0.5 * _mahalanobis2(dets[None, :, :] - pv[:, None, :], sv2, covs))
-    prob = q
-    moving = [i for i, v in enumerate(v_m) if v is not None]
-    if moving:
-        mp = [tracks[i].motion_predicted(dt[i], v_m[i], cfg) for i in moving]  # type: ignore[arg-type]
-        pm = np.array([p for p, _ in mp])
-        sm2 = np.array([v for _, v in mp])
-        r = np.exp(-0.5 * _mahalanobis2(dets[None, :, :] - pm[:, None, :], sm2, covs))
-        sv = sv2[moving][:, None] + r2[None, :]
-        sm = sm2[:, None] + r2[None, :]
-        prob = q.copy()
-        prob[moving] = fused_probability(q[moving], r, sv, sm)
-    cost = np.where(prob >= cfg.gate_p, -np.log(np.maximum(prob, 1e-300)), 1e6)
-    rows, cols = linear_sum_assignment(cost)
-    pairs = [
-        (int(i), int(j), float(prob[i, j]))
-        for i, j in zip(rows, cols, strict=True)
-        if cost[i, j] < 1e6
-    ]
+    prob = _with_motion(q, tracks, dets, dt, v_m, cfg, covs, sv2)
+    pairs = _gated_assignment(prob, cfg.gate_p)
     mt = {i for i, _, _ in pairs}
     md = {j for _, j, _ in pairs}
     return (
@@ -312,10 +290,152 @@ def associate(
     )
 
 
+def _visual_predictions(
+    tracks: list[GroundTrack], dt: list[float], cfg: TrackerConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """Returns the tracks' visual-only predicted positions (n, 2) and per-axis variances (n,)."""
+    preds = [trk.predicted(dt[i], cfg) for i, trk in enumerate(tracks)]
+    return np.array([p for p, _ in preds]), np.array([v for _, v in preds])
+
+
+def _with_motion(
+    q: np.ndarray,
+    tracks: list[GroundTrack],
+    dets: np.ndarray,
+    dt: list[float],
+    v_m: list[np.ndarray | None],
+    cfg: TrackerConfig,
+    covs: np.ndarray,
+    sv2: np.ndarray,
+) -> np.ndarray:
+    """Returns the association probabilities: ``q`` (visual), fused with the motion-sensor
+    likelihood in the rows of tracks with a phone velocity."""
+    moving = [i for i, v in enumerate(v_m) if v is not None]
+    if not moving:
+        return q
+    r2 = np.trace(covs, axis1=1, axis2=2) / 2  # per-axis variance, for the fusion weights
+    mp = [tracks[i].motion_predicted(dt[i], v_m[i], cfg) for i in moving]  # type: ignore[arg-type]
+    pm = np.array([p for p, _ in mp])
+    sm2 = np.array([v for _, v in mp])
+    r = np.exp(-0.5 * _mahalanobis2(dets[None, :, :] - pm[:, None, :], sm2, covs))
+    sv = sv2[moving][:, None] + r2[None, :]
+    sm = sm2[:, None] + r2[None, :]
+    prob = q.copy()
+    prob[moving] = fused_probability(q[moving], r, sv, sm)
+    return prob
+
+
+def _gated_assignment(prob: np.ndarray, gate_p: float) -> list[tuple[int, int, float]]:
+    """Returns the Hungarian assignment's (track, detection, probability) pairs that pass the
+    probability gate."""
+    cost = np.where(prob >= gate_p, -np.log(np.maximum(prob, 1e-300)), 1e6)
+    rows, cols = linear_sum_assignment(cost)
+    return [
+        (int(i), int(j), float(prob[i, j]))
+        for i, j in zip(rows, cols, strict=True)
+        if cost[i, j] < 1e6
+    ]
+
+
 def merge_detections(points: list[tuple[str, np.ndarray]], merge_m: float) -> np.ndarray:
     """Merge detections of one instant seen by several cameras (overlapping views): points from
     different cameras closer than ``merge_m`` are averaged (greedy, nearest pairs first)."""
     return merge_with_covariance(points, None, merge_m)[0]
+
+
+_Candidate = tuple[float, int, int, int, int]
+"""A heap entry of the agglomeration: distance, lower index, higher index, their versions."""
+
+
+@dataclass(slots=True)
+class _Clusters:
+    """The agglomeration's clusters, keyed by their first point, as Python numbers: linked
+    neighbours, versions (bumped by each merge), cameras as bits, fused centroids (cx, cy),
+    information matrices (a, b; b, d) and vectors (s, t)."""
+
+    nb: dict[int, set[int]]
+    ver: dict[int, int]
+    bits: dict[int, int]
+    cx: dict[int, float]
+    cy: dict[int, float]
+    im: dict[int, tuple[float, float, float]]
+    iv: dict[int, tuple[float, float]]
+
+    @classmethod
+    def linked(
+        cls,
+        pairs: np.ndarray,
+        cent: np.ndarray,
+        sums: np.ndarray,
+        info: np.ndarray,
+        codes: list[int],
+    ) -> _Clusters:
+        """Returns one cluster per point that ``pairs`` links, with its neighbours."""
+        nb: dict[int, set[int]] = {}
+        for i, j in pairs.tolist():
+            nb.setdefault(i, set()).add(j)
+            nb.setdefault(j, set()).add(i)
+        return cls(
+            nb,
+            dict.fromkeys(nb, 0),
+            {i: 1 << codes[i] for i in nb},
+            {i: float(cent[i, 0]) for i in nb},
+            {i: float(cent[i, 1]) for i in nb},
+            {i: (float(info[i, 0, 0]), float(info[i, 0, 1]), float(info[i, 1, 1])) for i in nb},
+            {i: (float(sums[i, 0]), float(sums[i, 1])) for i in nb},
+        )
+
+    def first_candidates(
+        self, pairs: np.ndarray, cent: np.ndarray, merge_m: float
+    ) -> list[_Candidate]:
+        """Returns the linked pairs of points closer than ``merge_m`` from different cameras,
+        as heap entries (all at once)."""
+        bits = self.bits
+        lo, hi = pairs.min(axis=1), pairs.max(axis=1)
+        d0 = np.hypot(cent[lo, 0] - cent[hi, 0], cent[lo, 1] - cent[hi, 1])
+        return [
+            (d, i, j, 0, 0)
+            for d, i, j in zip(d0.tolist(), lo.tolist(), hi.tolist(), strict=True)
+            if d < merge_m and not bits[i] & bits[j]  # not one camera's two people
+        ]
+
+    def merge(self, a: int, b: int) -> None:
+        """Fold cluster ``b`` into ``a``: sum their information, solve for the centroid, join
+        their cameras and neighbours."""
+        (p, q, r), (p2, q2, r2) = self.im[a], self.im[b]
+        (s_, t_), (s2, t2) = self.iv[a], self.iv[b]
+        p, q, r, s_, t_ = p + p2, q + q2, r + r2, s_ + s2, t_ + t2
+        self.im[a], self.iv[a] = (p, q, r), (s_, t_)
+        det = p * r - q * q
+        self.cx[a], self.cy[a] = (r * s_ - q * t_) / det, (p * t_ - q * s_) / det  # 2x2 solve
+        self.bits[a] |= self.bits[b]
+        self.ver[a] += 1
+        nb = self.nb
+        nb[a] = (nb[a] | nb.pop(b)) - {a, b}
+        for k in nb[a]:
+            nb[k].discard(b)
+            nb[k].add(a)
+
+    def candidates_of(self, a: int, merge_m: float) -> list[_Candidate]:
+        """Returns heap entries for the neighbours of cluster ``a`` (ascending) it may merge
+        with: closer than ``merge_m`` and seen by none of its cameras."""
+        xa, ya, ba, v = self.cx[a], self.cy[a], self.bits[a], self.ver[a]
+        out = []
+        for k in sorted(self.nb[a]):
+            if ba & self.bits[k]:
+                continue  # same camera: two people
+            d = math.hypot(xa - self.cx[k], ya - self.cy[k])
+            if d < merge_m:
+                out.append((d, a, k, v, self.ver[k]) if a < k else (d, k, a, self.ver[k], v))
+        return out
+
+    def write_back(self, cent: np.ndarray, info: np.ndarray, alive: np.ndarray) -> None:
+        """Put the merged clusters' centroids and information matrices into the arrays."""
+        for i in self.nb:
+            if alive[i] and self.ver[i]:
+                cent[i] = self.cx[i], self.cy[i]
+                p, q, r = self.im[i]
+                info[i] = ((p, q), (q, r))
 
 
 def _agglomerate(
@@ -336,54 +456,18 @@ def _agglomerate(
     cameras is a single linked group of ~100 points). The loop runs on Python numbers (the 2x2
     information solve in closed form), several times cheaper than numpy scalars and LAPACK
     calls one at a time; the clusters' centroids and information go back into the arrays."""
-    nb: dict[int, set[int]] = {}
-    for i, j in pairs.tolist():
-        nb.setdefault(i, set()).add(j)
-        nb.setdefault(j, set()).add(i)
-    ver = dict.fromkeys(nb, 0)
-    bits = {i: 1 << codes[i] for i in nb}  # cameras of each cluster, as bits
-    cx: dict[int, float] = {i: float(cent[i, 0]) for i in nb}
-    cy: dict[int, float] = {i: float(cent[i, 1]) for i in nb}
-    # information matrices (a, b; b, d) and vectors (s, t) of the clusters
-    im = {i: (float(info[i, 0, 0]), float(info[i, 0, 1]), float(info[i, 1, 1])) for i in nb}
-    iv = {i: (float(sums[i, 0]), float(sums[i, 1])) for i in nb}
-    # the first candidates at once, (distance, lower index, higher index, versions)
-    lo, hi = pairs.min(axis=1), pairs.max(axis=1)
-    d0 = np.hypot(cent[lo, 0] - cent[hi, 0], cent[lo, 1] - cent[hi, 1])
-    heap = [
-        (d, i, j, 0, 0)
-        for d, i, j in zip(d0.tolist(), lo.tolist(), hi.tolist(), strict=True)
-        if d < merge_m and not bits[i] & bits[j]  # not one camera's two people
-    ]
+    clusters = _Clusters.linked(pairs, cent, sums, info, codes)
+    heap = clusters.first_candidates(pairs, cent, merge_m)
     heapq.heapify(heap)
     while heap:
         _, a, b, va, vb = heapq.heappop(heap)
-        if not (alive[a] and alive[b]) or va != ver[a] or vb != ver[b]:
+        if not (alive[a] and alive[b]) or va != clusters.ver[a] or vb != clusters.ver[b]:
             continue
-        (p, q, r), (p2, q2, r2) = im[a], im[b]
-        (s_, t_), (s2, t2) = iv[a], iv[b]
-        p, q, r, s_, t_ = p + p2, q + q2, r + r2, s_ + s2, t_ + t2
-        im[a], iv[a] = (p, q, r), (s_, t_)
-        det = p * r - q * q
-        cx[a], cy[a] = (r * s_ - q * t_) / det, (p * t_ - q * s_) / det  # 2x2 solve
-        bits[a] |= bits[b]
+        clusters.merge(a, b)
         alive[b] = False
-        ver[a] += 1
-        nb[a] = (nb[a] | nb.pop(b)) - {a, b}
-        xa, ya, ba, v = cx[a], cy[a], bits[a], ver[a]
-        for k in sorted(nb[a]):
-            nb[k].discard(b)
-            nb[k].add(a)
-            if ba & bits[k]:
-                continue  # same camera: two people
-            d = math.hypot(xa - cx[k], ya - cy[k])
-            if d < merge_m:
-                heapq.heappush(heap, (d, a, k, v, ver[k]) if a < k else (d, k, a, ver[k], v))
-    for i in nb:
-        if alive[i] and ver[i]:
-            cent[i] = cx[i], cy[i]
-            p, q, r = im[i]
-            info[i] = ((p, q), (q, r))
+        for entry in clusters.candidates_of(a, merge_m):
+            heapq.heappush(heap, entry)
+    clusters.write_back(cent, info, alive)
 
 
 def merge_with_covariance(
