@@ -244,11 +244,11 @@ class RadioEvidence:
         return out
 
     def emissions(
-        self, mid: str, grid: SiteGrid, base: Sequence[np.ndarray | float]
+        self, mid: str, grid: SiteGrid, base: Sequence[np.ndarray | float], every: int = 1
     ) -> Sequence[np.ndarray | float]:
-        """``base`` (each frame's cost per cell) with this phone's scans added (computed when a
-        frame is read: one phone's grids are not all held)."""
-        return _WithRadio(self, mid, grid, base, np.arange(len(base)))
+        """``base`` (each frame's cost per cell; of every ``every``-th frame) with this phone's
+        scans added (computed when a frame is read: one phone's grids are not all held)."""
+        return _WithRadio(self, mid, grid, base, np.arange(len(base)), every)
 
     def cost(self, mid: str, grid: SiteGrid, k: int) -> np.ndarray | None:
         """The in-view cost per cell of frame ``k``'s scans of phone ``mid``; None without."""
@@ -331,7 +331,8 @@ def _heard_cost(
 
 
 class _WithRadio(Sequence[np.ndarray | float]):
-    """Frames' emissions with one phone's radio costs added as they are read."""
+    """Frames' emissions with one phone's radio costs added as they are read (``base[j]`` is
+    the emission of frame ``j * every``)."""
 
     def __init__(
         self,
@@ -340,8 +341,10 @@ class _WithRadio(Sequence[np.ndarray | float]):
         grid: SiteGrid,
         base: Sequence[np.ndarray | float],
         order: np.ndarray,
+        every: int = 1,
     ) -> None:
         self.radio, self.mid, self.grid, self.base, self.order = radio, mid, grid, base, order
+        self.every = every
 
     def __len__(self) -> int:
         return len(self.order)
@@ -354,9 +357,9 @@ class _WithRadio(Sequence[np.ndarray | float]):
 
     def __getitem__(self, k: int | slice) -> np.ndarray | float | _WithRadio:
         if isinstance(k, slice):
-            return _WithRadio(self.radio, self.mid, self.grid, self.base, self.order[k])
+            return _WithRadio(self.radio, self.mid, self.grid, self.base, self.order[k], self.every)
         j = int(self.order[k])
-        extra = self.radio.cost(self.mid, self.grid, j)
+        extra = self.radio.cost(self.mid, self.grid, j * self.every)
         return self.base[j] if extra is None else self.base[j] + extra
 
     def __iter__(self) -> Iterator[np.ndarray | float]:

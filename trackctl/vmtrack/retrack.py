@@ -44,6 +44,7 @@ cell), about 6 bytes per 0.2 m cell and frame in all: a 20 x 15 m lobby (with 2 
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field, replace
@@ -150,6 +151,12 @@ class RetrackConfig:
     """Clock offsets are searched on this grid over the range the alignment allows."""
     search_const_lag_step_s: float = 1.0
     """The one-yaw search tries every yaw at clock offsets this far apart."""
+    search_max_hz: float | None = 3.5
+    """The search sees every k-th frame, k the smallest that brings the log's frame rate to at
+    most this (a 7 Hz video: every second frame); the path and the alignment are then found
+    again on every frame. The search is the re-tracking's cost, and what it finds (a clock
+    offset on a 0.5 s grid, a yaw 15 deg apart, a step scale 0.1 apart) does not need more
+    frames than the benchmarks' 3 Hz. None: every frame."""
     search_first_scales: tuple[float, ...] = (0.8, 1.0, 1.2)
     """Step scales at which the one-yaw search chooses the yaw of each stretch between carry
     changes (at every clock offset): a step 20 % off the nominal drifts 6 m over 20 s in view,
@@ -514,11 +521,12 @@ def _backtrack(
 
 
 def _search_field(
-    points: Sequence[np.ndarray], cfg: RetrackConfig
+    points: Sequence[np.ndarray], cfg: RetrackConfig, every: int = 1
 ) -> tuple[SiteGrid, list[np.ndarray | float]]:
-    """The search's coarser grid and every frame's emissions on it (the same for all phones)."""
+    """The search's coarser grid and the emissions on it of every ``every``-th frame (the same
+    for all phones)."""
     grid = SiteGrid(points, cfg.search_cell_m).with_visits(points, cfg)
-    return grid, [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
+    return grid, [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points[::every]]
 
 
 @dataclass
@@ -1060,14 +1068,16 @@ def _with_radio(
     mid: str,
     grid: SiteGrid,
     emissions: Sequence[np.ndarray | float],
+    every: int = 1,
 ) -> tuple[Sequence[np.ndarray | float], Visit | None]:
-    """The frames' emissions and the visit's costs of one phone: with its RSSI when there is."""
+    """The frames' emissions and the visit's costs of one phone: with its RSSI when there is
+    (``emissions`` of every ``every``-th frame: the scans of those frames)."""
     if not radio or not radio.cfg.enabled:
         return emissions, grid.visit
     visit = grid.visit
     if visit is not None:
-        visit = (visit[0], radio.away(mid, float(np.mean(visit[1]))))
-    return radio.emissions(mid, grid, emissions), visit
+        visit = (visit[0], radio.away(mid, float(np.mean(visit[1])))[::every])
+    return radio.emissions(mid, grid, emissions, every), visit
 
 
 def retrack(
@@ -1263,6 +1273,19 @@ def _moved(a: PhoneTrack, b: PhoneTrack, within_m: float) -> float:
     return 1.0 - same / len(frames)
 
 
+def _search_every(dt: float, max_hz: float | None) -> int:
+    """The smallest k for which every k-th frame, ``dt`` s apart, is at most ``max_hz``."""
+    if max_hz is None or dt <= 0:
+        return 1
+    return max(int(math.ceil(1.0 / (dt * max_hz) - 1e-9)), 1)
+
+
+def _held(a: np.ndarray, every: int, n: int) -> np.ndarray:
+    """Per-frame values found on every ``every``-th of ``n`` frames, held over the frames
+    between."""
+    return a if every == 1 else a[np.arange(n) // every]
+
+
 class _Follower:
     """Follows one phone's carrier through the detections: the search (or a given alignment),
     then the path and the alignment refitted from it, ``refine_passes`` times."""
@@ -1280,6 +1303,8 @@ class _Follower:
         self.frame_t, self.points, self.phones, self.grid = frame_t, points, phones, grid
         self.acfg, self.cfg, self.aligned = acfg, cfg, aligned
         self.dt = float(np.median(np.diff(frame_t))) / 1e9
+        self.every = _search_every(self.dt, cfg.search_max_hz)
+        """The search sees every this many frames (:attr:`RetrackConfig.search_max_hz`)."""
         self.steps = _step_costs(grid.cell, self.dt, cfg)
         self.settle_steps = (
             self.steps
@@ -1326,23 +1351,7 @@ class _Follower:
         points, emissions = self._frames(mid)
         phone_em, visit = _with_radio(radio, mid, grid, emissions)
         if search:
-            if self.space is None:
-                self.space = _search_field(self.points, cfg)
-            changes = self.phones[mid].carry_changes
-            coarse_em, coarse_visit = _with_radio(radio, mid, *self.space)
-            self.alternatives[mid] = []
-            found = _search(
-                frame_t,
-                points,
-                track,
-                lag,
-                self.acfg,
-                cfg,
-                changes,
-                (self.space[0], coarse_em),
-                coarse_visit,
-                self.alternatives[mid],
-            )
+            found = self._search(mid, lag, points, radio)
             if found is None:
                 return None
             lag, a = found
@@ -1362,6 +1371,32 @@ class _Follower:
             lag, a = fit
         velocity = np.column_stack([u.real, u.imag]) / self.dt
         return PhoneTrack(xy, seen, velocity, lag, a, withheld)
+
+    def _search(
+        self, mid: str, lag: float, points: Sequence[np.ndarray], radio: RadioEvidence | None
+    ) -> tuple[float, np.ndarray] | None:
+        """Phone ``mid``'s alignment searched (:func:`_search`) on every k-th frame
+        (:attr:`RetrackConfig.search_max_hz`), held over the frames between; its other
+        alignments kept in :attr:`alternatives` the same way."""
+        if self.space is None:
+            self.space = _search_field(self.points, self.cfg, self.every)
+        coarse_em, coarse_visit = _with_radio(radio, mid, *self.space, every=self.every)
+        alternatives: list[tuple[float, np.ndarray]] = []
+        found = _search(
+            self.frame_t[:: self.every],
+            points[:: self.every],
+            self.walks[mid],
+            lag,
+            self.acfg,
+            self.cfg,
+            self.phones[mid].carry_changes,
+            (self.space[0], coarse_em),
+            coarse_visit,
+            alternatives,
+        )
+        n = len(self.frame_t)
+        self.alternatives[mid] = [(lg, _held(a, self.every, n)) for lg, a in alternatives]
+        return None if found is None else (found[0], _held(found[1], self.every, n))
 
     def cost(
         self,
