@@ -9,6 +9,7 @@ from trackctl.cli.bridgeloc import bridgeloc_app, simulate_bridgeloc
 from trackctl.cli.calib import calib_app
 from trackctl.cli.common import TrackctlGroup
 from trackctl.cli.evmatch import ev_match, simulate_ev
+from trackctl.cli.export import export_cmd
 from trackctl.cli.info import info
 from trackctl.cli.process import process, report
 from trackctl.cli.record import filter_cmd, record, recover
@@ -50,6 +51,7 @@ app.command("filter")(filter_cmd)
 app.command()(replay)
 app.command()(process)
 app.command()(report)
+app.command("export")(export_cmd)
 app.command("vm-track")(vm_track)
 simulate_app.command("vm")(simulate_vm)
 app.command("ev-match")(ev_match)
