@@ -27,10 +27,12 @@ from trackctl.vmtrack.retrack import (
     _displacements,
     _exclusive,
     _Follower,
+    _held,
     _layer_costs,
     _publish,
     _refit,
     _search,
+    _search_every,
     _settle_disputes,
     _shared,
     _step_costs,
@@ -846,3 +848,26 @@ def test_the_cheapest_refined_alignment_becomes_the_path(sigma):
         assert _share_on(settled.xy, carrier, n) > 0.9
         assert settled.ambiguous_s == 0.0
         assert settled.lag_s == 0.0 and np.allclose(settled.a, 1.0, atol=0.02)
+
+
+@given(st.floats(0.5, 60.0), st.floats(0.5, 10.0))
+@settings(max_examples=examples(100))
+def test_the_search_sees_the_fewest_frames_skipped_for_its_rate(fps: float, max_hz: float) -> None:
+    every = _search_every(1.0 / fps, max_hz)
+    assert every >= 1
+    assert fps / every <= max_hz * (1 + 1e-6)
+    if every > 1:
+        assert fps / (every - 1) > max_hz  # one frame fewer skipped would be over the rate
+
+
+def test_the_benchmarks_3_hz_is_searched_on_every_frame_and_7_hz_on_every_second() -> None:
+    assert _search_every(1 / 3.0, 3.5) == 1
+    assert _search_every(1 / 7.0, 3.5) == 2
+    assert _search_every(1 / 7.0, None) == 1
+
+
+def test_an_alignment_found_on_every_kth_frame_is_held_between() -> None:
+    a = np.array([1 + 0j, 2 + 0j, 3 + 0j])
+    assert _held(a, 2, 6).tolist() == [1, 1, 2, 2, 3, 3]
+    assert _held(a, 2, 5).tolist() == [1, 1, 2, 2, 3]
+    assert _held(a, 1, 3) is a
