@@ -66,6 +66,19 @@ def record(
             "/NAME/camera_model.",
         ),
     ] = None,
+    detections: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--detections",
+            metavar="CAM=FILE",
+            help="MOTChallenge det.txt (frame,id,bb_left,bb_top,bb_width,bb_height,conf,x,y,z) "
+            "-> /CAM/detections; needs --fps and --calib CAM=...",
+        ),
+    ] = None,
+    min_score: Annotated[
+        float | None,
+        typer.Option(help="Drop --detections boxes whose conf is below this (default: keep all)."),
+    ] = None,
     ros2: Annotated[
         Path | None,
         typer.Option(
@@ -94,8 +107,9 @@ def record(
     fps: Annotated[
         float | None,
         typer.Option(
-            help="Frame rate of image folders; for a video, restamps every frame at this rate "
-            "(a file with a wrong rate; to keep fewer frames use --rate or --every)."
+            help="Frame rate of image folders and --detections files; for a video, restamps "
+            "every frame at this rate (a file with a wrong rate; to keep fewer frames use "
+            "--rate or --every)."
         ),
     ] = None,
     every: Annotated[
@@ -133,7 +147,10 @@ def record(
     ] = "s",
     video_start: Annotated[
         float,
-        typer.Option(help="Log time of the first video frame, seconds (align video with CSV t_s)."),
+        typer.Option(
+            help="Log time of the first video frame and of --detections frame 1, seconds "
+            "(align video with CSV t_s)."
+        ),
     ] = 0.0,
     stdin: Annotated[
         bool, typer.Option("--stdin", help="Record JSON lines from stdin until EOF or Ctrl-C.")
@@ -156,6 +173,9 @@ def record(
     """Ingest video, calibration, IMU/RSSI/odometry CSV or live JSON lines into an MCAP log.
 
     Example: trackctl record run.mcap --video cam0=walk.avi --calib cam0=cam0.yaml --imu p1=p1.csv
+
+    Public detections: trackctl record det.mcap --detections cam0=det.txt --calib cam0=cam0.yaml
+    --fps 30
     """
     # Imported here: OpenCV/pandas/SciPy cost ~0.5 s and other commands do not need them.
     from trackctl.ingest.record import IngestPlan, ingest
@@ -166,6 +186,8 @@ def record(
         odom=odom,
         video=video,
         calib=calib,
+        detections=detections,
+        min_score=min_score,
         ros2=ros2,
         ros2_map=ros2_map,
         site=site,
@@ -198,6 +220,8 @@ def _files_config(
     odom: list[str] | None,
     video: list[str] | None,
     calib: list[str] | None,
+    detections: list[str] | None,
+    min_score: float | None,
     ros2: Path | None,
     ros2_map: list[str] | None,
     site: Path | None,
@@ -228,6 +252,8 @@ def _files_config(
         odom=parse_named(odom or [], "--odom"),
         video=parse_named(video or [], "--video"),
         calib=parse_named(calib or [], "--calib"),
+        detections=parse_named(detections or [], "--detections"),
+        min_score=min_score,
         fps=fps,
         video_start_s=video_start,
         selection=FrameSelection(every, rate, start, end),
@@ -269,12 +295,14 @@ def _print_summary(summary: IngestSummary, *, json_out: bool, quiet: bool) -> No
                 "metadata": summary.metadata,
                 "attachments": summary.attachments,
                 "interrupted": summary.interrupted,
+                "skipped_lines": dict(summary.skipped),
             }
         )
     elif not quiet:
         stderr.print(
             f"wrote {summary.messages} messages on {len(summary.topics)} topics to {summary.out}"
             + (f", rejected {summary.rejected}" if summary.live else "")
+            + (f", skipped {bad} bad lines" if (bad := sum(summary.skipped.values())) else "")
             + (" (stopped by interrupt)" if summary.interrupted else "")
         )
 

@@ -21,6 +21,7 @@ from typing import Any
 from trackctl.errors import InputError, TrackctlError
 from trackctl.geometry.calib import camera_problems
 from trackctl.ingest.calibration import read_calibration, to_foxglove_calibration
+from trackctl.ingest.mot import read_mot_detections
 from trackctl.ingest.ros2 import TopicPlan, read_ros2
 from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv, seconds_to_ns
 from trackctl.ingest.video import FrameSelection, frame_size, read_frames
@@ -53,6 +54,10 @@ class RecordConfig:
     odom: Mapping[str, Path] = field(default_factory=dict)
     video: Mapping[str, Path] = field(default_factory=dict)
     calib: Mapping[str, Path] = field(default_factory=dict)
+    detections: Mapping[str, Path] = field(default_factory=dict)
+    """MOTChallenge det.txt per camera (:mod:`trackctl.ingest.mot`) -> ``/<CAM>/detections``."""
+    min_score: float | None = None
+    """Boxes of ``detections`` with a lower raw ``conf`` are dropped (None: keep all)."""
     fps: float | None = None
     video_start_s: float = 0.0
     selection: FrameSelection = field(default_factory=FrameSelection)
@@ -77,7 +82,15 @@ class RecordConfig:
     @property
     def empty(self) -> bool:
         """True when no file source is given."""
-        return not (self.imu or self.rssi or self.odom or self.video or self.calib or self.ros2)
+        return not (
+            self.imu
+            or self.rssi
+            or self.odom
+            or self.video
+            or self.calib
+            or self.detections
+            or self.ros2
+        )
 
     @property
     def inputs(self) -> tuple[Path, ...]:
@@ -88,6 +101,7 @@ class RecordConfig:
             *self.odom.values(),
             *self.video.values(),
             *self.calib.values(),
+            *self.detections.values(),
             *((self.ros2,) if self.ros2 is not None else ()),
             *((self.site,) if self.site is not None else ()),
         )
@@ -145,36 +159,65 @@ def write_site(writer: LogWriter, cfg: RecordConfig) -> None:
         writer.add_attachment(f"site/{cfg.site.name}", data, "application/x-yaml", 0)
 
 
+def _check_cameras(cfg: RecordConfig) -> None:
+    """Every calibration has a camera (video or detections); every detections file its
+    calibration and a frame rate."""
+    cameras = set(cfg.video) | set(cfg.detections)
+    unknown = set(cfg.calib) - cameras
+    if unknown:
+        raise InputError(
+            f"--calib {sorted(unknown)[0]}=...: no --video or --detections with that camera name "
+            f"(cameras: {', '.join(sorted(cameras)) or 'none'})"
+        )
+    uncalibrated = sorted(set(cfg.detections) - set(cfg.calib))
+    if uncalibrated:
+        cam = uncalibrated[0]
+        raise InputError(
+            f"--detections {cam}=...: camera {cam} has no --calib {cam}=FILE; vm-track needs its "
+            "calibration to place the boxes on the ground"
+        )
+    if cfg.detections and cfg.fps is None:
+        raise InputError("--detections needs --fps F (the sequence's frame rate, e.g. 30)")
+
+
+def _write_calibration(
+    writer: LogWriter, cfg: RecordConfig, name: str, path: Path, start_ns: int
+) -> None:
+    """One camera's calibration, checked against its video's frame size when it has one."""
+    model = read_calibration(path, name, cfg.calib_units)
+    model = replace(model, t_ns=start_ns)
+    size = frame_size(cfg.video[name], name) if name in cfg.video else None
+    errors, warns = camera_problems(model, size)
+    if errors:
+        raise InputError(f"{path} (camera {name}): {errors[0]}")
+    for w in warns:
+        warnings.warn(f"{path} (camera {name}): {w}", UserWarning, stacklevel=3)
+    writer.write(topics.calibration(name), to_foxglove_calibration(model), start_ns)
+    writer.write(topics.camera_model(name), model)
+    writer.add_attachment(
+        f"calibration/{name}{path.suffix}", path.read_bytes(), "application/x-yaml", start_ns
+    )
+
+
 def record_files(
-    writer: LogWriter, cfg: RecordConfig, progress: Callable[[int], None] | None = None
+    writer: LogWriter,
+    cfg: RecordConfig,
+    progress: Callable[[int], None] | None = None,
+    skipped: dict[str, int] | None = None,
 ) -> Counter[str]:
     """Write every file source of ``cfg`` into ``writer``, merged in time order.
+
+    ``skipped`` receives the unusable lines skipped per detections file.
 
     Returns:
         Message count per topic.
     """
     counts: Counter[str] = Counter()
-    unknown = set(cfg.calib) - set(cfg.video)
-    if unknown:
-        raise InputError(
-            f"--calib {sorted(unknown)[0]}=...: no --video with that camera name "
-            f"(cameras: {', '.join(sorted(cfg.video)) or 'none'})"
-        )
+    _check_cameras(cfg)
     start_ns = seconds_to_ns(cfg.video_start_s)
     cfg.selection.check()
     for name, path in cfg.calib.items():
-        model = read_calibration(path, name, cfg.calib_units)
-        model = replace(model, t_ns=start_ns)
-        errors, warns = camera_problems(model, frame_size(cfg.video[name], name))
-        if errors:
-            raise InputError(f"{path} (camera {name}): {errors[0]}")
-        for w in warns:
-            warnings.warn(f"{path} (camera {name}): {w}", UserWarning, stacklevel=2)
-        writer.write(topics.calibration(name), to_foxglove_calibration(model), start_ns)
-        writer.write(topics.camera_model(name), model)
-        writer.add_attachment(
-            f"calibration/{name}{path.suffix}", path.read_bytes(), "application/x-yaml", start_ns
-        )
+        _write_calibration(writer, cfg, name, path, start_ns)
         counts[topics.calibration(name)] += 1
         counts[topics.camera_model(name)] += 1
     streams: list[Iterator[Stamped]] = []
@@ -192,6 +235,12 @@ def record_files(
         order += 1
     for name, path in cfg.video.items():
         streams.append(_frames(path, name, cfg, order))
+        order += 1
+    for name, path in cfg.detections.items():
+        dets = read_mot_detections(path, name, cfg.fps or 0.0, start_ns, cfg.min_score)
+        if skipped is not None:
+            skipped[str(path)] = dets.skipped
+        streams.append(_stamped(dets.messages, topics.detections(name), order))
         order += 1
     if cfg.ros2 is not None:
         streams.append(read_ros2(cfg.ros2, cfg.ros2_plan, order))
@@ -392,7 +441,8 @@ class IngestPlan:
             raise InputError("--stdin and --udp are exclusive; record one live source at a time")
         if self.files.empty and not self.live:
             raise InputError(
-                "nothing to record: give --imu/--rssi/--odom/--video/--ros2, --stdin or --udp"
+                "nothing to record: give --imu/--rssi/--odom/--video/--detections/--ros2, "
+                "--stdin or --udp"
             )
 
 
@@ -410,6 +460,8 @@ class IngestSummary:
     attachments: int = 0
     interrupted: bool = False
     """The live recording was ended by Ctrl-C, SIGINT, SIGTERM or SIGHUP (the log is valid)."""
+    skipped: Mapping[str, int] = field(default_factory=dict)
+    """Unusable lines skipped per detections file (``--detections``)."""
 
     @property
     def messages(self) -> int:
@@ -470,6 +522,7 @@ def ingest(
     plan.check()
     cfg = plan.files
     counts: Counter[str] = Counter()
+    skipped: dict[str, int] = {}
     stats: LiveStats | None = None
     source = UdpSource(plan.udp) if plan.udp is not None else None
     try:
@@ -485,7 +538,7 @@ def ingest(
                 write_site(writer, cfg)
                 if not cfg.empty:
                     with (progress or _no_progress)() as bar:
-                        counts.update(record_files(writer, cfg, lambda n: bar(n, None)))
+                        counts.update(record_files(writer, cfg, lambda n: bar(n, None), skipped))
                 if plan.live:
                     stats = _record_source(writer, source, on_reject, on_live)
                     counts.update(stats.counts)
@@ -500,6 +553,7 @@ def ingest(
         metadata=stats.metadata if stats else 0,
         attachments=stats.attachments if stats else 0,
         interrupted=stats.interrupted if stats else False,
+        skipped=skipped,
     )
 
 
