@@ -11,8 +11,9 @@ recorded with it (``--calib CAM=...``).
 
 Hostile input never stops the recording: a line that does not parse (fewer than 7 or more than
 10 fields, a field that is not a number, NaN or infinity, a box of zero or negative size, a
-frame that is not an integer from 1 to :data:`MAX_FRAME`) is skipped and counted, and the file
-gets one warning naming the first such line and its column. A file with no usable line is an
+coordinate beyond :data:`MAX_PX`, a frame that is not an integer from 1 to :data:`MAX_FRAME`)
+is skipped and counted, and the file gets one warning naming the first such line and its
+column. A file with no usable line is an
 error. The file is read whole and its boxes sorted by frame (det.txt files are a few MB and
 sorted by frame in practice; unsorted ones come out in frame order too). Frames between the
 first and last with no box get an empty message (the camera saw nobody), except in gaps longer
@@ -39,6 +40,8 @@ COLUMNS = ("frame", "id", "bb_left", "bb_top", "bb_width", "bb_height", "conf", 
 MIN_FIELDS = 7
 MAX_FRAME = 10_000_000
 """Frames above this (3.8 days at 30 fps) are refused as junk."""
+MAX_PX = 1e6
+"""Box coordinates beyond +-this many pixels are refused as junk."""
 MAX_FILL_S = 10.0
 """Gaps between frames with boxes up to this long get empty messages."""
 
@@ -94,6 +97,9 @@ def parse_mot_line(line: str) -> MotBox:
         raise MotLineError(0, f"{len(fields)} fields, expected 7 to 10")
     values = [_number(text, k) for k, text in enumerate(fields, 1)]
     frame, _, left, top, width, height, conf = values[:MIN_FIELDS]
+    for k in range(2, 6):
+        if abs(values[k]) > MAX_PX:
+            raise MotLineError(k + 1, f"{fields[k][:20]} is beyond {MAX_PX:.0e} px")
     if not frame.is_integer() or not 1 <= frame <= MAX_FRAME:
         raise MotLineError(1, f"{fields[0][:20]!r} is not a frame number from 1 to {MAX_FRAME}")
     if width <= 0:
@@ -159,6 +165,29 @@ def _stamp(frame: int, fps: float, start_ns: int) -> int:
     return start_ns + round((frame - 1) * 1e9 / fps)
 
 
+def _collect(
+    path: Path, min_score: float | None
+) -> tuple[dict[int, list[MotBox]], int, int, str | None]:
+    """Boxes by frame, lines skipped, boxes below ``min_score``, the first problem."""
+    by_frame: dict[int, list[MotBox]] = defaultdict(list)
+    skipped = below = 0
+    first: str | None = None
+    for lineno, line in _lines(path):
+        if not line.strip():
+            continue
+        try:
+            box = parse_mot_line(line)
+        except MotLineError as err:
+            skipped += 1
+            first = first or f"{path}:{lineno}: {err.where()}: {err.reason}"
+            continue
+        if min_score is not None and box.conf < min_score:
+            below += 1
+            continue
+        by_frame[box.frame].append(box)
+    return by_frame, skipped, below, first
+
+
 def read_mot_detections(
     path: str | Path,
     camera: str,
@@ -178,22 +207,7 @@ def read_mot_detections(
         raise InputError(f"--fps {fps}: the detections' frame rate must be positive")
     if not path.is_file():
         raise InputError(f"{path}: no such file (--detections {camera})")
-    by_frame: dict[int, list[MotBox]] = defaultdict(list)
-    skipped = below = 0
-    first: str | None = None
-    for lineno, line in _lines(path):
-        if not line.strip():
-            continue
-        try:
-            box = parse_mot_line(line)
-        except MotLineError as err:
-            skipped += 1
-            first = first or f"{path}:{lineno}: {err.where()}: {err.reason}"
-            continue
-        if min_score is not None and box.conf < min_score:
-            below += 1
-            continue
-        by_frame[box.frame].append(box)
+    by_frame, skipped, below, first = _collect(path, min_score)
     if not by_frame:
         why = f"none at --min-score {min_score} or above" if below else "no usable line"
         hint = f"; first problem: {first}" if first else ""
