@@ -254,11 +254,14 @@ def run_trackctl(
 
 def accumulate(gt: PerFrame, hyp: PerFrame, frames: int) -> mm.MOTAccumulator:
     acc = mm.MOTAccumulator(auto_id=True)
+    ids: dict[str, int] = {}  # motmetrics 1.4 stores ids as floats
     for frame in range(1, frames + 1):
         g, h = gt.get(frame, []), hyp.get(frame, [])
         d = 1.0 - iou([b for _, b in g], [b for _, b in h])
         d[d > 0.5] = np.nan
-        acc.update([i for i, _ in g], [i for i, _ in h], d)
+        g_ids = [ids.setdefault(f"g{i}", len(ids)) for i, _ in g]
+        h_ids = [ids.setdefault(f"h{i}", len(ids)) for i, _ in h]
+        acc.update(g_ids, h_ids, d)
     return acc
 
 

@@ -139,11 +139,13 @@ def score(scene: MotScene, tracked: Path) -> tuple[MotSummary, int]:
     hyps: dict[int, dict[str, tuple[float, float]]] = {}
     for m in LogReader(tracked).messages(["/vmtrack/tracks"]):
         msg: Tracks = m.message
-        hyps[msg.t_ns] = {t.track_id: (t.position_m.x, t.position_m.y) for t in msg.tracks}
+        hyps[round(msg.t_ns * scene.fps / 1e9)] = {
+            t.track_id: (t.position_m.x, t.position_m.y) for t in msg.tracks
+        }
     acc = MotAccumulator(1.0)
     for gt in scene.truth:
         truth = {e.entity_id: (e.position_m.x, e.position_m.y) for e in gt.entities}
-        acc.update(truth, hyps.get(gt.t_ns, {}))
+        acc.update(truth, hyps.get(round(gt.t_ns * scene.fps / 1e9), {}))
     ids = {i for frame in hyps.values() for i in frame}
     return acc.summary(), len(ids)
 
@@ -156,8 +158,8 @@ def test_vm_track_follows_every_person_on_public_detections(
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         summary = ingest(IngestPlan(cfg), out)
-    assert [str(w.message).count("skipped") for w in caught] == [1]
-    assert summary.skipped == {str(scene.det["cam0"]): len(JUNK_LINES)}
+    assert len([w for w in caught if "unusable line" in str(w.message)]) == 1
+    assert summary.skipped == {str(scene.det["cam0"]): len(JUNK_LINES), str(scene.det["cam1"]): 0}
     reader = LogReader(out)
     dets = [m.message for m in reader.messages([topics.detections("cam0")])]
     assert dets and all(d.score > FALSE_SCORE for m in dets for d in m.detections)
@@ -174,9 +176,10 @@ def test_vm_track_follows_every_person_on_public_detections(
     assert rep.metrics["source"] == "detections"
     mot, n_tracks = score(scene, tracked)
     people = len({e.entity_id for gt in scene.truth for e in gt.entities})
-    # Exact boxes of 3 people in 2 cameras: a track per person, a spare one at most for a
-    # person who leaves both views and comes back; MOTA lost mostly in the first frames
-    # (a track is confirmed after a few hits) and where people cross.
-    assert people <= n_tracks <= people + 2, n_tracks
-    assert mot.mota > 0.8, mot
-    assert mot.idf1 > 0.7, mot
+    # Exact boxes of 3 people in 2 cameras (measured: 3 tracks, MOTA 0.987, IDF1 0.993, no ID
+    # switch). The bars leave room for a spare track (a person who leaves every view and comes
+    # back) and for the frames a track needs to be confirmed, not for a lost person or a broken
+    # track (a tenth of the frames missed fails MOTA; a switch in mid-scene fails IDF1).
+    assert people <= n_tracks <= people + 1, n_tracks
+    assert mot.mota > 0.9, mot
+    assert mot.idf1 > 0.9, mot
