@@ -329,6 +329,9 @@ def main(argv: list[str] | None = None) -> int:
             f"{label + ' overall':<16}{r.mota:>8.3f}{r.idf1:>8.3f}{int(r.num_switches):>6}"
             f"{int(r.num_false_positives):>6}{int(r.num_misses):>6}{int(r.num_unique_objects):>5}"
         )
+    n_ours = len({i for tr in ground.values() for i, _, _ in tr})
+    n_sort = {c: len({i for fr in s.values() for i, _ in fr}) for c, s in sorted(sorted_.items())}
+    print(f"track ids: trackctl {n_ours} (both cameras), SORT {n_sort}; people {args.people}")
     print(f"seconds: trackctl (record + vm-track) {t_ours:.2f}, SORT {t_sort:.2f}")
     return 0
 
