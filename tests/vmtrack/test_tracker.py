@@ -1,13 +1,27 @@
-"""Cross-camera merging: the heap agglomeration equals the definition (global nearest-first)."""
+"""Cross-camera merging: the heap agglomeration equals the definition (global nearest-first).
+The association's injected cost: a plugged-in cost decides the matches."""
 
 from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import examples
-from trackctl.vmtrack.tracker import merge_detections, merge_with_covariance
+from trackctl.vmtrack.config import Mode, VmTrackConfig
+from trackctl.vmtrack.cost import CostTrack, VisualCost, VisualMotionCost
+from trackctl.vmtrack.identity import IdentityBinder
+from trackctl.vmtrack.online import OnlineTracker
+from trackctl.vmtrack.tracker import (
+    GroundTrack,
+    TrackerConfig,
+    associate,
+    merge_detections,
+    merge_with_covariance,
+)
 
 
 def _reference(points: list[tuple[str, np.ndarray]], covs: np.ndarray, merge_m: float):
@@ -74,3 +88,60 @@ def test_one_camera_never_merges_and_two_cameras_fuse() -> None:
     assert len(merge_detections(pts, 0.6)) == 2
     pts = [("a", np.array([0.0, 0.0])), ("b", np.array([0.2, 0.0]))]
     np.testing.assert_allclose(merge_detections(pts, 0.6), [[0.1, 0.0]])
+
+
+@dataclass(frozen=True, slots=True)
+class _ForbidAll:
+    """A custom cost: no pair passes the gate."""
+
+    gate_p: float = 0.5
+
+    def probabilities(
+        self,
+        tracks: Sequence[CostTrack],
+        dets: np.ndarray,
+        covs: np.ndarray,
+        predicted: tuple[np.ndarray, np.ndarray],
+        dt: Sequence[float],
+        v_m: Sequence[np.ndarray | None],
+    ) -> np.ndarray:
+        return np.zeros((len(tracks), len(dets)))
+
+
+def _walk(cost: VisualCost | _ForbidAll, frames: int = 6) -> OnlineTracker:
+    cfg = VmTrackConfig(mode=Mode.V_AF)
+    online = OnlineTracker(cfg, IdentityBinder({}, cfg), Mode.V_AF, cost)
+    for k in range(frames):
+        # a slow walker, 0.6 m a second: the births of a forbidding cost are no clutter spot
+        online.process_frame(k * 1_000_000_000, [("cam0", np.array([0.6 * k, 0.0]))])
+    return online
+
+
+def test_a_plugged_in_cost_decides_the_association() -> None:
+    # the visual cost follows one walker with one track
+    assert _walk(VisualCost()).tracks_started == 1
+    # a cost that forbids every match: every detection starts a new track (the last one's
+    # tentative predecessor, which missed, retires first)
+    online = _walk(_ForbidAll())
+    assert online.tracks_started == 6 and online.clutter_suppressed == 0
+    assert [trk.vid for trk in online.tracks] == ["v6"]
+
+
+def test_the_phone_velocity_term_moves_the_match() -> None:
+    tcfg = TrackerConfig()
+    trk = GroundTrack.start("v1", np.array([0.0, 0.0]), 0, tcfg)
+    dets = np.array([[0.4, 0.0], [-0.6, 0.0]])
+    v_m = np.array([-1.2, 0.0])  # the phone walks towards the farther detection
+    visual = VisualCost(tcfg.gate_p)
+    fused = VisualMotionCost(tcfg.gate_p, tcfg.pdr_sigma_mps)
+    pairs, _, left = associate([trk], dets, [0.5], [v_m], tcfg, visual)
+    assert [(i, j) for i, j, _ in pairs] == [(0, 0)] and left == [1]
+    pairs, _, left = associate([trk], dets, [0.5], [v_m], tcfg, fused)
+    assert [(i, j) for i, j, _ in pairs] == [(0, 1)] and left == [0]
+    # without a phone velocity the two costs are one
+    covs = np.broadcast_to(np.eye(2) * tcfg.det_sigma_m**2, (2, 2, 2))
+    pred = (np.zeros((1, 2)), np.array([0.3]))
+    np.testing.assert_array_equal(
+        visual.probabilities([trk], dets, covs, pred, [0.5], [None]),
+        fused.probabilities([trk], dets, covs, pred, [0.5], [None]),
+    )

@@ -7,18 +7,20 @@ from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import ProcessorInfo, Progress
 from trackctl.vmtrack.align import AlignConfig, Alignment
 from trackctl.vmtrack.config import Identity, Mode, Source, VmTrackConfig
+from trackctl.vmtrack.cost import AssociationCost, VisualCost, VisualMotionCost, fused_probability
 from trackctl.vmtrack.detect import BackgroundModel, DetectorConfig, detect_people, predict_region
 from trackctl.vmtrack.frames import FrameConfig, FrameDetector
 from trackctl.vmtrack.identify import IdentifyConfig
 from trackctl.vmtrack.motion import MotionConfig, PhoneMotion
 from trackctl.vmtrack.pipeline import TRACKS_TOPIC, run
-from trackctl.vmtrack.tracker import TrackerConfig, fused_probability
+from trackctl.vmtrack.tracker import TrackerConfig
 
 __all__ = [
     "PROCESSOR",
     "TRACKS_TOPIC",
     "AlignConfig",
     "Alignment",
+    "AssociationCost",
     "BackgroundModel",
     "DetectorConfig",
     "FrameConfig",
@@ -32,6 +34,8 @@ __all__ = [
     "MotionConfig",
     "PhoneMotion",
     "TrackerConfig",
+    "VisualCost",
+    "VisualMotionCost",
     "VmTrackConfig",
     "VmTrackProcessor",
     "fused_probability",

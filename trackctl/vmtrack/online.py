@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 
 from trackctl.logs.messages import RssiScan, TrackState
 from trackctl.vmtrack.config import Mode, VmTrackConfig
+from trackctl.vmtrack.cost import AssociationCost
 from trackctl.vmtrack.identity import IdentityBinder
 from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.tracker import (
@@ -86,13 +87,18 @@ class OnlineTracker:
         cfg: the run's configuration.
         identity: the identity stage (its phones give tracks with a phone their prediction).
         mode: ``vm`` runs the identity stage every frame; ``v-af`` only tracks.
+        cost: the association's cost (:mod:`~trackctl.vmtrack.cost`): how likely each track
+            is to have made each detection, and the gate.
     """
 
-    def __init__(self, cfg: VmTrackConfig, identity: IdentityBinder, mode: Mode) -> None:
+    def __init__(
+        self, cfg: VmTrackConfig, identity: IdentityBinder, mode: Mode, cost: AssociationCost
+    ) -> None:
         self.cfg = cfg
         self.tcfg = cfg.tracker
         self.identity = identity
         self.mode = mode
+        self.cost = cost
         self.tracks: list[GroundTrack] = []
         self.frames: list[FrameOut] = []
         self.raw_points: dict[int, np.ndarray] = {}
@@ -211,6 +217,7 @@ class OnlineTracker:
                 dts,
                 v_m,
                 self.tcfg,
+                self.cost,
                 None if covs is None else covs[idx],
                 predicted,
             )

@@ -43,6 +43,7 @@ from trackctl.metrics.tracking import InitialIdentity, MotAccumulator
 from trackctl.processing.base import Progress
 from trackctl.vmtrack.align import Alignment
 from trackctl.vmtrack.config import Identity, Mode, Source, VmTrackConfig
+from trackctl.vmtrack.cost import AssociationCost, VisualCost, VisualMotionCost
 from trackctl.vmtrack.frames import FrameDetector, detections_topic, image_cameras
 from trackctl.vmtrack.identify import Identities, identify
 from trackctl.vmtrack.identity import BindingStats, IdentityBinder
@@ -264,6 +265,14 @@ def _detect_in_frame(
         covs.extend(ground_covs)
 
 
+def _association_cost(mode: Mode, cfg: VmTrackConfig) -> AssociationCost:
+    """Returns the association's cost for ``mode``: position only for ``v-af``, position and
+    the phones' velocities for ``vm``."""
+    if mode is Mode.V_AF:
+        return VisualCost(cfg.tracker.gate_p)
+    return VisualMotionCost(cfg.tracker.gate_p, cfg.tracker.pdr_sigma_mps)
+
+
 def run(
     reader: LogReader,
     writer: LogWriter,
@@ -281,7 +290,7 @@ def run(
     phones = _phone_motions(reader, inputs, cfg)
     clock.lap("motion")
     identity = IdentityBinder(phones, cfg)
-    online = OnlineTracker(cfg, identity, inputs.mode)
+    online = OnlineTracker(cfg, identity, inputs.mode, _association_cost(inputs.mode, cfg))
     truth = _track_log(reader, writer, inputs, online, progress)
     if inputs.mode is Mode.VM:
         identity.finish()

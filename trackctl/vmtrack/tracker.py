@@ -10,7 +10,9 @@ associated with detections by the paper's fused probability
 where q_ij is the likelihood of detection j under the visual-only prediction (variance sv2) and
 r_ij under the motion-sensor prediction (variance sm2). Assignment is global and one-to-one
 (scipy's Hungarian solver) with a probability gate. Tracks that are not bound to a phone (non-users,
-and everyone in V-AF mode) are associated by q_ij alone.
+and everyone in V-AF mode) are associated by q_ij alone. The probabilities are the injected
+cost's (:mod:`~trackctl.vmtrack.cost`: :class:`~trackctl.vmtrack.cost.VisualMotionCost` is
+this fusion, :class:`~trackctl.vmtrack.cost.VisualCost` q_ij alone).
 """
 
 from __future__ import annotations
@@ -27,12 +29,12 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
 from trackctl.logs.messages import TrackState
+from trackctl.vmtrack.cost import AssociationCost
 
 __all__ = [
     "TrackerConfig",
     "GroundTrack",
     "associate",
-    "fused_probability",
     "merge_detections",
     "merge_with_covariance",
 ]
@@ -59,14 +61,6 @@ _H_POS = np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0]])
 _H_VEL = np.array([[0, 0, 1.0, 0], [0, 0, 0, 1.0]])
 _H_POS.flags.writeable = False
 _H_VEL.flags.writeable = False
-
-
-def fused_probability(
-    q: np.ndarray, r: np.ndarray, sv2: float | np.ndarray, sm2: float | np.ndarray
-) -> np.ndarray:
-    """The paper's fusion of visual (q) and motion (r) association probabilities."""
-    a = sv2 / (sv2 + sm2)
-    return np.power(q, a) * np.power(r, 1.0 - a)
 
 
 @lru_cache(maxsize=64)
@@ -209,10 +203,11 @@ class GroundTrack:
         return x[:2, 0], float(np.trace(p[:2, :2]) / 2)
 
     def motion_predicted(
-        self, dt: float, v_m: np.ndarray, cfg: TrackerConfig
+        self, dt: float, v_m: np.ndarray, pdr_sigma_mps: float
     ) -> tuple[np.ndarray, float]:
-        """Motion-sensor prediction: last position + PDR velocity x dt."""
-        var = float(np.trace(self.kf.P[:2, :2]) / 2) + (cfg.pdr_sigma_mps * dt) ** 2
+        """Motion-sensor prediction: last position + PDR velocity x dt (its std
+        ``pdr_sigma_mps`` per axis)."""
+        var = float(np.trace(self.kf.P[:2, :2]) / 2) + (pdr_sigma_mps * dt) ** 2
         return self.xy + v_m * dt, var
 
     def advance(self, t_ns: int, cfg: TrackerConfig, v_m: np.ndarray | None) -> None:
@@ -242,33 +237,23 @@ class GroundTrack:
             self.moved_m = max(self.moved_m, d)
 
 
-def _mahalanobis2(diff: np.ndarray, var: np.ndarray, covs: np.ndarray) -> np.ndarray:
-    """Squared Mahalanobis distances of ``diff`` (n, m, 2) under ``var[i]`` I + ``covs[j]``
-    ((n,), (m, 2, 2)); the 2x2 inverse in closed form, for all pairs at once."""
-    a = covs[None, :, 0, 0] + var[:, None]
-    b = covs[None, :, 0, 1]
-    c = covs[None, :, 1, 1] + var[:, None]
-    det = a * c - b * b
-    dx, dy = diff[..., 0], diff[..., 1]
-    return np.asarray((c * dx * dx - 2 * b * dx * dy + a * dy * dy) / det)
-
-
 def associate(
     tracks: list[GroundTrack],
     dets: np.ndarray,
     dt: list[float],
     v_m: list[np.ndarray | None],
     cfg: TrackerConfig,
+    cost: AssociationCost,
     covs: np.ndarray | None = None,
     predicted: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[list[tuple[int, int, float]], list[int], list[int]]:
-    """Global one-to-one association of tracks and detections.
+    """Global one-to-one association of tracks and detections, scored by ``cost``.
 
     ``covs`` (N, 2, 2) are the detections' ground covariances (from the camera geometry); None
     takes ``det_sigma_m`` for every detection. ``predicted`` are the tracks' visual-only
     predicted positions (n, 2) and per-axis variances (n,) when the caller has them. The
-    probabilities of all pairs are computed at once (numpy); the assignment is scipy's
-    Hungarian solver.
+    probabilities of all pairs are the cost's (computed at once); the assignment is scipy's
+    Hungarian solver, gated by the cost's ``gate_p``.
 
     Returns:
         (track index, detection index, probability) pairs, unmatched track and detection indices.
@@ -277,10 +262,9 @@ def associate(
         return [], list(range(len(tracks))), list(range(len(dets)))
     if covs is None:
         covs = np.broadcast_to(np.eye(2) * cfg.det_sigma_m**2, (len(dets), 2, 2))
-    pv, sv2 = predicted if predicted is not None else _visual_predictions(tracks, dt, cfg)
-    q = np.exp(-0.5 * _mahalanobis2(dets[None, :, :] - pv[:, None, :], sv2, covs))
-    prob = _with_motion(q, tracks, dets, dt, v_m, cfg, covs, sv2)
-    pairs = _gated_assignment(prob, cfg.gate_p)
+    pred = predicted if predicted is not None else _visual_predictions(tracks, dt, cfg)
+    prob = cost.probabilities(tracks, dets, covs, pred, dt, v_m)
+    pairs = _gated_assignment(prob, cost.gate_p)
     mt = {i for i, _, _ in pairs}
     md = {j for _, j, _ in pairs}
     return (
@@ -296,33 +280,6 @@ def _visual_predictions(
     """Returns the tracks' visual-only predicted positions (n, 2) and per-axis variances (n,)."""
     preds = [trk.predicted(dt[i], cfg) for i, trk in enumerate(tracks)]
     return np.array([p for p, _ in preds]), np.array([v for _, v in preds])
-
-
-def _with_motion(
-    q: np.ndarray,
-    tracks: list[GroundTrack],
-    dets: np.ndarray,
-    dt: list[float],
-    v_m: list[np.ndarray | None],
-    cfg: TrackerConfig,
-    covs: np.ndarray,
-    sv2: np.ndarray,
-) -> np.ndarray:
-    """Returns the association probabilities: ``q`` (visual), fused with the motion-sensor
-    likelihood in the rows of tracks with a phone velocity."""
-    moving = [i for i, v in enumerate(v_m) if v is not None]
-    if not moving:
-        return q
-    r2 = np.trace(covs, axis1=1, axis2=2) / 2  # per-axis variance, for the fusion weights
-    mp = [tracks[i].motion_predicted(dt[i], v_m[i], cfg) for i in moving]  # type: ignore[arg-type]
-    pm = np.array([p for p, _ in mp])
-    sm2 = np.array([v for _, v in mp])
-    r = np.exp(-0.5 * _mahalanobis2(dets[None, :, :] - pm[:, None, :], sm2, covs))
-    sv = sv2[moving][:, None] + r2[None, :]
-    sm = sm2[:, None] + r2[None, :]
-    prob = q.copy()
-    prob[moving] = fused_probability(q[moving], r, sv, sm)
-    return prob
 
 
 def _gated_assignment(prob: np.ndarray, gate_p: float) -> list[tuple[int, int, float]]:
