@@ -198,7 +198,7 @@ def _chains(frames: Sequence[FrameOut], plan: Publication, velocity_half_s: floa
     members: dict[int, dict[int, GroundTrack]] = {}
     for fr in frames:
         for trk, _, _, _ in fr.rows:
-            key = id(trk)
+            key = trk.key
             if (key, fr.t_ns) in plan.hidden:
                 continue
             head = plan.head.get(key, key)

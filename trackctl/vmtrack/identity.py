@@ -119,8 +119,8 @@ class IdentityBinder:
         return next((m for m, tr in self.bound.items() if tr is trk), None)
 
     def owners(self) -> dict[int, str]:
-        """``id(track) -> MID`` of every bound track."""
-        return {id(tr): m for m, tr in self.bound.items()}
+        """``track key -> MID`` of every bound track."""
+        return {tr.key: m for m, tr in self.bound.items()}
 
     # -- online ---------------------------------------------------------------------------------
     def release(self, mid: str) -> None:

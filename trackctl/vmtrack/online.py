@@ -161,7 +161,7 @@ class OnlineTracker:
         tracks = self.tracks
         xy_all = np.array([xy for _, xy in points], float).reshape(-1, 2)
         owner = self.identity.owners()
-        v_m = [self.identity.velocity(owner.get(id(trk)), t_ns) for trk in tracks]
+        v_m = [self.identity.velocity(owner.get(trk.key), t_ns) for trk in tracks]
         dts = [(t_ns - trk.t_ns) / 1e9 for trk in tracks]
         pred = self._predict_visual(dts)
         given, left = self._assign_per_camera(points, xy_all, dts, v_m, covs, pred.scored)
@@ -272,7 +272,7 @@ class OnlineTracker:
         keep = []
         owner = self.identity.owners()
         for trk in self.tracks:
-            mid = owner.get(id(trk))
+            mid = owner.get(trk.key)
             if self._is_lost(trk, t_ns, mid):
                 self._bury(trk, t_ns, mid)
                 continue
@@ -320,7 +320,9 @@ class OnlineTracker:
                 np.linalg.norm(trk.xy - det) <= self.cfg.spawn_m for trk in self.tracks[n_kept:]
             ):
                 continue
-            self.tracks.append(GroundTrack.start(self._new_vid(), det, t_ns, self.tcfg, cov))
+            self.tracks.append(
+                GroundTrack.start(self._new_vid(), det, t_ns, self.tcfg, cov, key=self._next_vid)
+            )
 
     def _in_clutter(self, det: np.ndarray, deaths: np.ndarray) -> bool:
         """Returns whether enough never-moving tracks died near ``det`` (rows of ``deaths``)."""
@@ -339,19 +341,19 @@ class OnlineTracker:
         pairs = cKDTree(xy).query_pairs(self.cfg.duplicate_m, output_type="ndarray")
         for a, b in sorted(map(tuple, pairs.tolist())):
             ta, tb = tracks[a], tracks[b]
-            if id(ta) in doomed or id(tb) in doomed:
+            if ta.key in doomed or tb.key in doomed:
                 continue
-            if id(ta) in owner and id(tb) in owner:
+            if ta.key in owner and tb.key in owner:
                 continue  # two phones side by side: both stay
-            loser = tb if (id(ta) in owner or (id(tb) not in owner and ta.hits >= tb.hits)) else ta
-            doomed.add(id(loser))
+            loser = tb if (ta.key in owner or (tb.key not in owner and ta.hits >= tb.hits)) else ta
+            doomed.add(loser.key)
         if doomed:
-            tracks[:] = [tr for tr in tracks if id(tr) not in doomed]
+            tracks[:] = [tr for tr in tracks if tr.key not in doomed]
 
     def _snapshot(self, t_ns: int) -> None:
         owner = self.identity.owners()
         rows = [
-            (trk, owner.get(id(trk)), trk.state, len(trk.history))
+            (trk, owner.get(trk.key), trk.state, len(trk.history))
             for trk in self.tracks
             if trk.state is not TrackState.TENTATIVE
         ]
@@ -372,10 +374,10 @@ class OnlineTracker:
         owner = self.identity.owners()
         out = []
         for trk in self.tracks:
-            if moved_only and trk.moved_m < fcfg.protect_moved_m and id(trk) not in owner:
+            if moved_only and trk.moved_m < fcfg.protect_moved_m and trk.key not in owner:
                 continue
             dt = max(0.0, (t_ns - trk.t_ns) / 1e9)
-            v = self.identity.velocity(owner.get(id(trk)), t_ns)
+            v = self.identity.velocity(owner.get(trk.key), t_ns)
             sigma = self.tcfg.pdr_sigma_mps if v is not None else fcfg.visual_speed_sigma_mps
             v = trk.v if v is None else v
             var = float(np.trace(trk.kf.P[:2, :2]) / 2) + (sigma * dt) ** 2

@@ -409,7 +409,7 @@ def _positions(
     seen: dict[int, GroundTrack] = {}
     for fr in frames:
         for trk, _, _, _ in fr.rows:
-            seen[id(trk)] = trk
+            seen[trk.key] = trk
     for key, trk in seen.items():
         hist = trk.history
         if not hist:
@@ -488,13 +488,13 @@ def _add_rows(
     # back-dated identity gives way to the binding of the moment
     rows = sorted(fr.rows, key=lambda r: r[1] is None)
     for trk, mid_now, state, k in rows:
-        if (id(trk), fr.t_ns) in plan.hidden:
+        if (trk.key, fr.t_ns) in plan.hidden:
             continue
         out_id = _row_id(trk, mid_now, fr.t_ns, plan, ids, retracked)
         out_id = _unclaimed_id(out_id, trk, plan, names)
         # entry k of a track's history is its state at this frame (snapshotted before the
         # next frame's prediction, or when the log ends)
-        tracks.append(_track_message(out_id, trk, state, positions.get((id(trk), k))))
+        tracks.append(_track_message(out_id, trk, state, positions.get((trk.key, k))))
         names.add(out_id)
 
 
@@ -508,9 +508,9 @@ def _row_id(
 ) -> str:
     """The id an online row would be published under at ``t_ns``: the offline identity's MID,
     else the online binding's (or its back-dated identity), else the track's published name."""
-    name = plan.name.get(id(trk), trk.vid)
+    name = plan.name.get(trk.key, trk.vid)
     if ids is not None:
-        return _chain_mid(ids, plan.head.get(id(trk), id(trk)), t_ns, retracked, name)
+        return _chain_mid(ids, plan.head.get(trk.key, trk.key), t_ns, retracked, name)
     if mid_now is not None:
         return mid_now
     if trk.first_mid is not None and trk.identity_from_ns <= t_ns < (trk.first_bound_ns or 0):
@@ -525,7 +525,7 @@ def _unclaimed_id(out_id: str, trk: GroundTrack, plan: Publication, names: set[s
     or its visual id if that is taken too."""
     if out_id not in names:
         return out_id
-    out_id = plan.name.get(id(trk), trk.vid)
+    out_id = plan.name.get(trk.key, trk.vid)
     return trk.vid if out_id in names else out_id
 
 

@@ -137,9 +137,9 @@ class Publication:
     """What the writer publishes for visual-only tracks (the result of the clean-up)."""
 
     name: dict[int, str]
-    """Published id of a track (by ``id(track)``): its chain head's visual id."""
+    """Published id of a track (by track key): its chain head's visual id."""
     hidden: set[tuple[int, int]]
-    """(``id(track)``, frame ns) rows not published (coasting tails, dropped identities)."""
+    """(track key, frame ns) rows not published (coasting tails, dropped identities)."""
     fills: dict[int, list[tuple[str, np.ndarray, np.ndarray]]]
     """Frame ns -> (id, position, velocity) interpolated across stitched gaps."""
     dropped: int = 0
@@ -147,7 +147,7 @@ class Publication:
     links: int = 0
     """Fragments joined to an earlier one."""
     head: dict[int, int] = field(default_factory=dict)
-    """Chain head (``id`` of its first track) of every track in the plan."""
+    """Chain head (key of its first track) of every track in the plan."""
     head_of_name: dict[str, int] = field(default_factory=dict)
     """Chain head of every published name."""
 
@@ -230,14 +230,14 @@ def _gap_fills(
 def _candidate_rows(
     frames: Sequence[FrameOut], all_tracks: bool
 ) -> tuple[dict[int, list[tuple[int, int]]], dict[int, GroundTrack]]:
-    """(frame ns, row key) of every track the clean-up plans, by ``id(track)``; and the tracks."""
+    """(frame ns, row key) of every track the clean-up plans, by track key; and the tracks."""
     rows: dict[int, list[tuple[int, int]]] = {}
     tracks: dict[int, GroundTrack] = {}
     for fr in frames:
         for trk, mid_now, _, k in fr.rows:
             if all_tracks or (mid_now is None and trk.first_mid is None):
-                rows.setdefault(id(trk), []).append((fr.t_ns, k))
-                tracks[id(trk)] = trk
+                rows.setdefault(trk.key, []).append((fr.t_ns, k))
+                tracks[trk.key] = trk
     return rows, tracks
 
 
@@ -273,7 +273,7 @@ def _tracklet(
     shown = [(t, k) for t, k in seq if t <= last_hit] or seq[:1]
 
     def state(t_k: tuple[int, int]) -> np.ndarray:
-        est = positions.get((id(trk), t_k[1]))
+        est = positions.get((trk.key, t_k[1]))
         return trk.kf.x[:, 0] if est is None else est[0]
 
     s0, s1 = state(shown[0]), state(shown[-1])

@@ -114,7 +114,8 @@ class GroundTrack:
     vid: str
     kf: KalmanFilter
     t_ns: int
-    mid: str | None = None
+    key: int = 0
+    """The track's serial number in its run: what the stages key their data by."""
     hits: int = 1
     last_hit_ns: int = 0
     state: TrackState = TrackState.TENTATIVE
@@ -143,6 +144,7 @@ class GroundTrack:
         t_ns: int,
         cfg: TrackerConfig,
         cov: np.ndarray | None = None,
+        key: int = 0,
     ) -> GroundTrack:
         kf = KalmanFilter(dim_x=4, dim_z=2)
         kf.x = np.array([[xy[0]], [xy[1]], [0.0], [0.0]])
@@ -155,6 +157,7 @@ class GroundTrack:
             vid,
             kf,
             t_ns,
+            key=key,
             last_hit_ns=t_ns,
             hit_ns=[t_ns],
             born_xy=np.array(xy[:2], float),
