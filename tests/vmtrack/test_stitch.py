@@ -49,11 +49,11 @@ def test_a_person_who_stood_still_out_of_sight_is_linked() -> None:
 
 def test_publication_hides_tails_and_short_identities_and_fills_gaps() -> None:
     times = [int(k * 0.5 * S) for k in range(30)]
-    a = GroundTrack.start("v1", np.zeros(2), 0, TrackerConfig())
+    a = GroundTrack.start("v1", np.zeros(2), 0, TrackerConfig(), key=1)
     a.hit_ns = times[:10]  # seen 0-4.5 s, then coasts to 6 s
-    b = GroundTrack.start("v2", np.array([6.0, 0.0]), times[13], TrackerConfig())
+    b = GroundTrack.start("v2", np.array([6.0, 0.0]), times[13], TrackerConfig(), key=2)
     b.hit_ns = times[13:25]
-    ghost = GroundTrack.start("v3", np.array([50.0, 50.0]), times[2], TrackerConfig())
+    ghost = GroundTrack.start("v3", np.array([50.0, 50.0]), times[2], TrackerConfig(), key=3)
     ghost.hit_ns = times[2:5]
     frames, positions = [], {}
     for k, t in enumerate(times):
@@ -61,17 +61,17 @@ def test_publication_hides_tails_and_short_identities_and_fills_gaps() -> None:
         for trk, first, last, speed in ((a, 0, 12, 1.0), (b, 13, 27, 1.0), (ghost, 2, 4, 0.0)):
             if first <= k <= last:
                 x = np.array([k * 0.5 * speed if trk is not ghost else 50.0, 0.0, speed, 0.0])
-                positions[(id(trk), k)] = (x, np.eye(4) * 0.01)
+                positions[(trk.key, k)] = (x, np.eye(4) * 0.01)
                 rows.append((trk, None, TrackState.TRACKED, k))
         frames.append(FrameOut(t, rows))
     plan = plan_publication(frames, positions, StitchConfig())
     # v1's coasting after its last detection (frames 10-12) is hidden
-    assert {(id(a), times[k]) for k in (10, 11, 12)} <= plan.hidden
-    assert (id(a), times[9]) not in plan.hidden
+    assert {(a.key, times[k]) for k in (10, 11, 12)} <= plan.hidden
+    assert (a.key, times[9]) not in plan.hidden
     # v2 continues v1 and takes its name; the gap is filled at frames 10-12
-    assert plan.name[id(b)] == "v1" and plan.links == 1
+    assert plan.name[b.key] == "v1" and plan.links == 1
     assert sorted(plan.fills) == [times[10], times[11], times[12]]
     assert all(name == "v1" for t in plan.fills for name, _, _ in plan.fills[t])
     # b's tail after its last hit (frames 25-27) is hidden; the 3-hit ghost is dropped
-    assert (id(b), times[26]) in plan.hidden
-    assert plan.dropped == 1 and (id(ghost), times[3]) in plan.hidden
+    assert (b.key, times[26]) in plan.hidden
+    assert plan.dropped == 1 and (ghost.key, times[3]) in plan.hidden

@@ -301,3 +301,22 @@ def test_each_aps_path_loss_is_fitted_and_reported(
         assert m[f"rssi_at_1m_dbm/{ap}"] == pytest.approx(-40.0, abs=3.0)
         assert m[f"path_loss_exponent/{ap}"] == pytest.approx(2.5, abs=0.4)
         assert 3.0 <= m[f"rssi_sigma_db/{ap}"] <= 6.0  # type: ignore[operator]
+
+
+def test_run_stages_gives_the_written_tracks_and_the_report(
+    office_log: Path, tmp_path: Path
+) -> None:
+    """A library user gets the tracks and the report from ``run_stages`` without re-reading
+    the output log: the same tracks the log holds, and a table of them (V-AF: fast)."""
+    from trackctl.vmtrack.pipeline import run_stages
+
+    cfg = VmTrackConfig(mode=Mode.V_AF)
+    out = tmp_path / "stages.mcap"
+    with LogWriter(out) as writer:
+        result = run_stages(LogReader(office_log), writer, cfg)
+    written = [m.message for m in LogReader(out).messages(["/vmtrack/tracks"])]
+    assert len(result.tracks) > 10 and list(result.tracks) == written
+    table = result.table()
+    assert len(table) == sum(len(fr.tracks) for fr in written)
+    assert set(table["track_id"]) == {t.track_id for fr in written for t in fr.tracks}
+    assert result.report.metrics["tracks_published"] is not None

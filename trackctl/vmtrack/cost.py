@@ -39,9 +39,10 @@ class AssociationCost(Protocol):
     To plug a new cost in, write a class (a small frozen dataclass holding its parameters, as
     :class:`VisualCost`) with a ``gate_p`` and a ``probabilities`` of this signature, returning
     an (n tracks, m detections) array of probabilities in [0, 1]; pass it to ``OnlineTracker``
-    (or to ``tracker.associate``) and, for a run, choose it in ``pipeline.run`` (where
-    ``_association_cost`` picks one by mode). The association takes the one-to-one assignment
-    of least total ``-log p`` (scipy's Hungarian solver) among the pairs with ``p >= gate_p``;
+    (or to ``tracker.associate``) and, for a run, choose it in
+    :func:`trackctl.vmtrack.association.association_cost` (which picks one by mode). The
+    association takes the one-to-one assignment of least total ``-log p`` (scipy's Hungarian
+    solver) among the pairs with ``p >= gate_p``;
     a probability below the gate forbids the pair, and a detection no track takes becomes a
     candidate for a new track.
 
