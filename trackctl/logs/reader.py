@@ -49,6 +49,7 @@ from trackctl.logs.recovery import (
     Damage,
     ScanEnd,
     decode_chunk,
+    inflate_chunk,
     parse_message_index,
     rebuild_index,
     scan_damaged,
@@ -765,7 +766,7 @@ class IndexedWindowReader:
         self._chunks = sorted(self._summary.chunk_indexes, key=lambda c: c.message_start_time)
         self._starts = np.array([c.message_start_time for c in self._chunks], dtype=np.int64)
         self._ends = np.array([c.message_end_time for c in self._chunks], dtype=np.int64)
-        self._cache: dict[int, bytes] = {}
+        self._cache: dict[int, bytes | bytearray] = {}
         self._cache_order: list[int] = []
         self._cache_size = max(1, cache_chunks)
         self._index: dict[tuple[int, int], list[tuple[int, int]]] = {}
@@ -796,19 +797,27 @@ class IndexedWindowReader:
             self._index[key] = found
         return found
 
-    def _chunk_data(self, chunk_index: Any) -> bytes:
-        from mcap.data_stream import ReadDataStream
-        from mcap.records import Chunk
-        from mcap.stream_reader import get_chunk_data_stream
+    def _chunk_data(self, chunk_index: Any) -> bytes | bytearray:
+        """A chunk's uncompressed records (size-checked, CRC-checked: see
+        :func:`~trackctl.logs.recovery.inflate_chunk`).
 
+        Raises:
+            LogError: the chunk is damaged (a window read cannot skip part of a window).
+        """
         key = chunk_index.chunk_start_offset
         data = self._cache.get(key)
         if data is None:
-            # skip the chunk record's opcode (1 byte) and length (8 bytes)
-            self._f.seek(key + 1 + 8)
-            chunk = Chunk.read(ReadDataStream(self._f))
-            stream, length = get_chunk_data_stream(chunk)
-            data = stream.read(length)
+            self._f.seek(key)
+            head = self._f.read(9)
+            try:
+                if len(head) < 9 or head[0] != Opcode.CHUNK:
+                    raise ChunkError("no chunk record at the indexed offset")
+                (length,) = struct.unpack_from("<Q", head, 1)
+                if length != chunk_index.chunk_length - 9:
+                    raise ChunkError("chunk length differs from its index")
+                data = inflate_chunk(self._f.read(length))
+            except ChunkError as err:
+                raise LogError(f"{self.path}: damaged chunk at byte {key} ({err})") from None
             self.bytes_inflated += len(data)
             self._cache[key] = data
             self._cache_order.append(key)
@@ -847,7 +856,12 @@ class IndexedWindowReader:
             data = self._chunk_data(ci)
             for _, off in entries:
                 length = int.from_bytes(data[off + 1 : off + 9], "little")
-                body = data[off + 9 : off + 9 + length]
+                if data[off : off + 1] != bytes([Opcode.MESSAGE]) or off + 9 + length > len(data):
+                    raise LogError(
+                        f"{self.path}: chunk at byte {ci.chunk_start_offset}: its message index "
+                        f"points at no message (offset {off})"
+                    )
+                body = bytes(data[off + 9 : off + 9 + length])
                 message = Message.read(ReadDataStream(io.BytesIO(body)), length)
                 out.append(RawMessage.from_records(schema, channel, message))
         out.sort(key=lambda r: r.log_time_ns)

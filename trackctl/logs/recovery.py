@@ -20,7 +20,7 @@ import os
 import struct
 import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import IO, Any
 
 from mcap.data_stream import ReadDataStream
@@ -34,6 +34,9 @@ __all__ = [
     "ChunkHeader",
     "ChunkError",
     "decode_chunk",
+    "inflate_chunk",
+    "check_chunk_size",
+    "MAX_CHUNK_BYTES",
     "parse_chunk_header",
     "parse_message_index",
 ]
@@ -43,8 +46,15 @@ _CHUNK_FIXED = struct.Struct("<QQQI")  # start, end, uncompressed size, uncompre
 _MESSAGE = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
 _NAMES = {int(op): op.name.lower() for op in Opcode}
 _MAGIC_LEN = 8
-# A chunk's uncompressed size is trusted only up to this (a forged size must not allocate GBs).
-MAX_CHUNK_BYTES = 1 << 31
+MAX_CHUNK_BYTES = 256 << 20
+"""A chunk claiming more uncompressed bytes than this is skipped as damaged, before anything is
+allocated. Writers use chunks of 1-8 MiB (trackctl 1 MiB, the mcap CLI 4 MiB, rosbag2 768 KiB);
+one message bigger than the chunk size makes a chunk of its own size."""
+MAX_RATIO = {"": 1, "lz4": 256, "zstd": 32768}
+"""The most uncompressed bytes one compressed byte can give (lz4 tops out near 255:1, zstd's
+RLE blocks at 4 bytes per 128 KiB): a bigger claim is a lie, refused before decompression."""
+_RATIO_SLACK = 1 << 10
+_PIECE = 1 << 22  # decompress 4 MiB at a time
 
 
 class ChunkError(ValueError):
@@ -115,36 +125,83 @@ def parse_chunk_header(body: bytes) -> ChunkHeader:
     return ChunkHeader(start, end, size, crc, compression, pos, data_len)
 
 
-def _decompress(head: ChunkHeader, data: bytes) -> bytes:
-    if head.uncompressed_size > MAX_CHUNK_BYTES:
-        raise ChunkError(f"implausible uncompressed size {head.uncompressed_size}")
+def check_chunk_size(head: ChunkHeader) -> None:
+    """Refuse a chunk whose claimed uncompressed size is over :data:`MAX_CHUNK_BYTES` or more
+    than its compression can produce from the compressed bytes it has (a forged size must not
+    allocate anything).
+
+    Raises:
+        ChunkError: the claim is implausible.
+    """
+    size = head.uncompressed_size
+    if size > MAX_CHUNK_BYTES:
+        raise ChunkError(
+            f"implausible uncompressed size {size}: over the {MAX_CHUNK_BYTES >> 20} MiB limit"
+        )
+    ratio = MAX_RATIO.get(head.compression)
+    if ratio is not None and size > ratio * head.data_length + _RATIO_SLACK:
+        raise ChunkError(
+            f"implausible uncompressed size {size} for {head.data_length} bytes of "
+            f"{head.compression or 'uncompressed'} data"
+        )
+
+
+def _stream(head: ChunkHeader, data: bytes) -> Any:
+    """A file-like reader of the decompressed bytes (the frame's own content size is never
+    trusted for an allocation: the caller reads bounded pieces)."""
+    if head.compression == "zstd":
+        import zstandard
+
+        return zstandard.ZstdDecompressor().stream_reader(data, read_across_frames=True)
+    if head.compression == "lz4":
+        import lz4.frame
+
+        return lz4.frame.LZ4FrameFile(io.BytesIO(data), mode="rb")
+    if head.compression == "":
+        return io.BytesIO(data)
+    raise ChunkError(f"unknown compression {head.compression[:20]!r}")
+
+
+def _inflate(head: ChunkHeader, data: bytes, *, lenient: bool = False) -> bytearray:
+    """Decompress piece by piece (streaming: the output grows only as the data really
+    decompresses and never past the claimed size, whatever the compressed frame says).
+
+    Args:
+        lenient: return what decompresses before an error or the end of the data instead of
+            raising (a cut chunk).
+
+    Raises:
+        ChunkError: the data does not decompress to exactly the claimed size.
+    """
+    size = min(head.uncompressed_size, MAX_CHUNK_BYTES)
+    buf = bytearray()
+    extra = b""
     try:
-        if head.compression == "zstd":
-            import zstandard
-
-            out = zstandard.ZstdDecompressor().decompress(
-                data, max_output_size=head.uncompressed_size
-            )
-        elif head.compression == "lz4":
-            import lz4.frame
-
-            out = lz4.frame.decompress(data)
-        elif head.compression == "":
-            out = data
-        else:
-            raise ChunkError(f"unknown compression {head.compression[:20]!r}")
+        reader = _stream(head, data)
+        while len(buf) < size:
+            piece = reader.read(min(_PIECE, size - len(buf)))
+            if not piece:
+                break
+            buf += piece
+        if not lenient:
+            extra = reader.read(1)
     except ChunkError:
         raise
     except Exception as err:  # noqa: BLE001 - zstd/lz4 raise their own error types
-        raise ChunkError(f"{head.compression} data does not decompress: {err}") from None
-    if len(out) != head.uncompressed_size:
-        raise ChunkError(f"decompressed to {len(out)} bytes, header says {head.uncompressed_size}")
-    return out
+        if not lenient:
+            reason = " ".join(str(err).split())[:200] or type(err).__name__
+            raise ChunkError(f"{head.compression} data does not decompress: {reason}") from None
+    if not lenient and (len(buf) != head.uncompressed_size or extra):
+        got = f"more than {len(buf)}" if extra else str(len(buf))
+        raise ChunkError(f"decompressed to {got} bytes, header says {head.uncompressed_size}")
+    return buf
 
 
-def _records(data: bytes, *, lenient: bool = False) -> Iterator[tuple[int, bytes]]:
+def _records(data: bytes | bytearray, *, lenient: bool = False) -> Iterator[tuple[int, bytes]]:
     """(opcode, body) of the records in ``data``; a record running past the end is an error
-    (or, with ``lenient``, the end)."""
+    (or, with ``lenient``, the end), and so is opcode 0 (no MCAP record has it: a run of zeros,
+    which would otherwise be millions of empty records)."""
+    view = memoryview(data)
     pos, end = 0, len(data)
     while pos < end:
         if pos + _HEAD.size > end:
@@ -157,7 +214,11 @@ def _records(data: bytes, *, lenient: bool = False) -> Iterator[tuple[int, bytes
             if lenient:
                 return
             raise ChunkError(f"record length {length} runs past the chunk")
-        yield opcode, data[pos : pos + length]
+        if opcode == 0:
+            if lenient:
+                return
+            raise ChunkError("a record with opcode 0 inside the chunk")
+        yield opcode, bytes(view[pos : pos + length])
         pos += length
 
 
@@ -190,6 +251,25 @@ def _record(opcode: int, body: bytes) -> Any:
     return record
 
 
+def inflate_chunk(body: bytes) -> bytes | bytearray:
+    """The uncompressed records of a chunk record body, CRC-checked when the chunk has a CRC.
+
+    The claimed size is checked (:func:`check_chunk_size`) before anything is allocated.
+
+    Raises:
+        ChunkError: the chunk is damaged or its size implausible.
+    """
+    head = parse_chunk_header(body)
+    data = body[head.data_start : head.data_start + head.data_length]
+    if len(data) != head.data_length:
+        raise ChunkError(f"compressed length {head.data_length} runs past the chunk")
+    check_chunk_size(head)
+    raw = _inflate(head, data)
+    if head.uncompressed_crc and zlib.crc32(raw) != head.uncompressed_crc:
+        raise ChunkError("CRC mismatch")
+    return raw
+
+
 def decode_chunk(body: bytes, *, lenient: bool = False) -> list[Any]:
     """The Schema, Channel and Message records of a chunk record body, all or none.
 
@@ -202,10 +282,9 @@ def decode_chunk(body: bytes, *, lenient: bool = False) -> list[Any]:
     Raises:
         ChunkError: the chunk is damaged; no record of it should be used.
     """
-    head = parse_chunk_header(body)
-    data = body[head.data_start : head.data_start + head.data_length]
     if lenient:
-        raw = _partial_decompress(head, data)
+        head = parse_chunk_header(body)
+        raw = _partial_decompress(head, body[head.data_start : head.data_start + head.data_length])
         out = []
         try:
             for opcode, rec_body in _records(raw, lenient=True):
@@ -215,31 +294,18 @@ def decode_chunk(body: bytes, *, lenient: bool = False) -> list[Any]:
         except ChunkError:
             pass
         return out
-    if len(data) != head.data_length:
-        raise ChunkError(f"compressed length {head.data_length} runs past the chunk")
-    raw = _decompress(head, data)
-    if head.uncompressed_crc and zlib.crc32(raw) != head.uncompressed_crc:
-        raise ChunkError("CRC mismatch")
+    raw = inflate_chunk(body)
     return [r for opcode, rec_body in _records(raw) if (r := _record(opcode, rec_body)) is not None]
 
 
-def _partial_decompress(head: ChunkHeader, data: bytes) -> bytes:
-    try:
-        if head.compression == "zstd":
-            import zstandard
-
-            raw = zstandard.ZstdDecompressor().decompressobj().decompress(data)
-        elif head.compression == "lz4":
-            import lz4.frame
-
-            raw = lz4.frame.LZ4FrameDecompressor().decompress(data)
-        elif head.compression == "":
-            raw = data
-        else:
-            return b""
-    except Exception:  # noqa: BLE001 - a damaged frame simply yields nothing more
+def _partial_decompress(head: ChunkHeader, data: bytes) -> bytes | bytearray:
+    """What a cut chunk's bytes decompress to, as far as they go (nothing for an implausible
+    claim; the buffer is bounded by what the bytes that are there can give)."""
+    ratio = MAX_RATIO.get(head.compression)
+    if head.uncompressed_size > MAX_CHUNK_BYTES or ratio is None:
         return b""
-    return raw[: min(head.uncompressed_size, MAX_CHUNK_BYTES)]
+    bounded = min(head.uncompressed_size, ratio * len(data) + _RATIO_SLACK)
+    return _inflate(replace(head, uncompressed_size=bounded), data, lenient=True)
 
 
 def parse_message_index(body: bytes) -> MessageIndex:
