@@ -269,9 +269,7 @@ def _tsai_attr(path: Path, node: Element | None, element: str, name: str) -> flo
             f"{path}: <{element}> attribute {name}: not a number ({short_repr(value)})"
         ) from None
     if not np.isfinite(number):
-        raise InputError(
-            f"{path}: <{element}> attribute {name}: not finite ({short_repr(value)})"
-        )
+        raise InputError(f"{path}: <{element}> attribute {name}: not finite ({short_repr(value)})")
     return number
 
 
@@ -435,7 +433,9 @@ def calibrate_ground(
 
 
 def check_calibration_output(
-    out: str | os.PathLike[str], inputs: tuple[str | os.PathLike[str], ...] = (), option: str = "--out"
+    out: str | os.PathLike[str],
+    inputs: tuple[str | os.PathLike[str], ...] = (),
+    option: str = "--out",
 ) -> Path:
     """The path a calibration for ``out`` will be written to, checked before any work.
 

@@ -343,10 +343,9 @@ def check_text_nesting(data: bytes, where: str, max_depth: int = MAX_DEPTH) -> N
 def _check_flow_depth(text: bytes, where: str, max_depth: int) -> None:
     """Bracket depth (``[`` and ``{``), counted over the whole text at once."""
     arr = np.frombuffer(text, dtype=np.uint8)
-    step = (
-        np.isin(arr, np.frombuffer(b"[{", np.uint8)).astype(np.int32)
-        - np.isin(arr, np.frombuffer(b"]}", np.uint8)).astype(np.int32)
-    )
+    step = np.isin(arr, np.frombuffer(b"[{", np.uint8)).astype(np.int32) - np.isin(
+        arr, np.frombuffer(b"]}", np.uint8)
+    ).astype(np.int32)
     flow = np.cumsum(step)
     if flow.size and int(flow.max()) > max_depth:
         line = text[: int(np.argmax(flow > max_depth))].count(b"\n") + 1
@@ -371,9 +370,7 @@ def _check_indentation(text: bytes, where: str, max_depth: int) -> None:
             raise InputError(f"{where}: line {lineno}: nested deeper than {max_depth} levels")
 
 
-def bounded_number(
-    value: Any, where: str, lo: float, hi: float, integer: bool = False
-) -> float:
+def bounded_number(value: Any, where: str, lo: float, hi: float, integer: bool = False) -> float:
     """``value`` as a finite float within [lo, hi] (an integral one when ``integer``).
 
     Raises:
