@@ -77,8 +77,14 @@ def ground(
     import numpy as np
 
     from trackctl.geometry.calib import camera_problems, geometry_summary
-    from trackctl.ingest.calibration import calibrate_ground, read_point_pairs, write_calibration
+    from trackctl.ingest.calibration import (
+        calibrate_ground,
+        check_calibration_output,
+        read_point_pairs,
+        write_calibration,
+    )
 
+    check_calibration_output(out, (intrinsics, *(() if points is None else (points,))))
     if points is not None and (image_points or world_points):
         raise InputError("give --points or --image-points/--world-points, not both")
     if points is not None:
@@ -90,13 +96,10 @@ def ground(
         name = "--image-points/--world-points"
     else:
         raise InputError("give --points CSV, or --image-points with --world-points")
-    if out.resolve() == intrinsics.resolve():
-        raise InputError(f"--out {out}: would overwrite the input calibration")
     fit = calibrate_ground(intrinsics, camera, img, world, name)
     problems = camera_problems(fit.model)
     if problems[0]:
         raise InputError(f"{name}: the pose found is implausible: {problems[0][0]}")
-    write_calibration(fit.model, out)
     summary = geometry_summary(fit.model)
     summary.update(
         {
@@ -106,6 +109,7 @@ def ground(
             "out": str(out),
         }
     )
+    write_calibration(fit.model, out)  # last: nothing is written when anything before fails
     if json_out:
         print_json(summary)
         return
@@ -135,24 +139,28 @@ def import_cmd(
     import numpy as np
 
     from trackctl.geometry.calib import camera_problems, geometry_summary, with_pose
-    from trackctl.ingest.calibration import read_calibration, write_calibration
+    from trackctl.ingest.calibration import (
+        check_calibration_output,
+        checked_model,
+        read_calibration,
+        write_calibration,
+    )
 
     scale = _units(units)
-    if out.resolve() == source.resolve():
-        raise InputError(f"--out {out}: would overwrite the input calibration")
+    check_calibration_output(out, (source,))
     model = read_calibration(source, camera, scale)
     if (rvec is None) != (tvec is None):
         raise InputError("--rvec and --tvec go together")
     if rvec is not None and tvec is not None:
         r = np.array(_points(rvec, "--rvec", 3)).reshape(-1)
         t = np.array(_points(tvec, "--tvec", 3)).reshape(-1)
-        model = with_pose(model, r, t * (scale or 1.0))
+        model = checked_model(source, with_pose(model, r, t * (scale or 1.0)))
     errors, warns = camera_problems(model)
     if errors:
         raise InputError(f"{source}: {errors[0]}")
-    write_calibration(model, out)
     summary = geometry_summary(model)
     summary["out"] = str(out)
+    write_calibration(model, out)  # last: nothing is written when anything before fails
     if json_out:
         print_json(summary)
         return

@@ -122,7 +122,11 @@ def scale_translation(model: CameraModel, metres_per_unit: float) -> CameraModel
 
 
 def tsai_model(tsai: TsaiCamera, camera: str, metres_per_unit: float = 1e-3) -> CameraModel:
-    """The OpenCV pinhole model (plumb_bob k1 k2 0 0 k3) of a Tsai camera."""
+    """The OpenCV pinhole model (plumb_bob k1 k2 0 0 k3) of a Tsai camera.
+
+    Raises:
+        ValueError: no OpenCV distortion fits the camera's kappa1 (a degenerate camera).
+    """
     fx = tsai.focal * tsai.sx / tsai.dpx
     fy = tsai.focal / tsai.dpy
     # Tsai: undistorted = distorted * (1 + c rho_d^2) in normalised coordinates, c = kappa1 f^2;
@@ -132,12 +136,7 @@ def tsai_model(tsai: TsaiCamera, camera: str, metres_per_unit: float = 1e-3) -> 
     xn = (corners[:, 0] - tsai.cx) / fx
     yn = (corners[:, 1] - tsai.cy) / fy
     rho_max = 1.05 * float(np.hypot(xn, yn).max())
-    c = tsai.kappa1 * tsai.focal**2
-    rho_d = np.linspace(0.0, rho_max, 400)
-    rho_u = rho_d * (1 + c * rho_d**2)
-    factor = 1.0 / (1 + c * rho_d**2)
-    a = np.column_stack([rho_u**2, rho_u**4, rho_u**6])
-    k, *_ = np.linalg.lstsq(a, factor - 1.0, rcond=None)
+    k = _tsai_distortion(tsai.kappa1 * tsai.focal**2, rho_max)
     model = CameraModel(
         t_ns=0,
         camera=camera,
@@ -152,6 +151,34 @@ def tsai_model(tsai: TsaiCamera, camera: str, metres_per_unit: float = 1e-3) -> 
     )
     rvec = Rotation.from_matrix(tsai.rotation()).as_rotvec()
     return with_pose(model, rvec, np.asarray(tsai.t, float) * metres_per_unit)
+
+
+def _tsai_distortion(c: float, rho_max: float) -> np.ndarray:
+    """OpenCV's k1, k2, k3 fitted to Tsai's inverse distortion ``c`` (normalised) up to radius
+    ``rho_max``.
+
+    Raises:
+        ValueError: the fit is impossible (radii or factors overflow, or the least squares
+            does not converge): kappa1 or the focal length is far outside a real camera's.
+    """
+    problem = (
+        f"Tsai kappa1 * focal^2 = {c:.3g} over normalised radii up to {rho_max:.3g} admits no "
+        "OpenCV distortion fit (check kappa1, focal, dpx, cx, cy)"
+    )
+    with np.errstate(all="ignore"):
+        rho_d = np.linspace(0.0, rho_max, 400)
+        rho_u = rho_d * (1 + c * rho_d**2)
+        factor = 1.0 / (1 + c * rho_d**2)
+        a = np.column_stack([rho_u**2, rho_u**4, rho_u**6])
+    if not (np.isfinite(a).all() and np.isfinite(factor).all()):
+        raise ValueError(problem)
+    try:
+        k, *_ = np.linalg.lstsq(a, factor - 1.0, rcond=None)
+    except np.linalg.LinAlgError:
+        raise ValueError(problem) from None
+    if not np.isfinite(k).all():
+        raise ValueError(problem)
+    return np.asarray(k)
 
 
 def tsai_project(tsai: TsaiCamera, world: np.ndarray, metres_per_unit: float = 1e-3) -> np.ndarray:

@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import os
 import tempfile
-import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
+from xml.etree.ElementTree import Element
 
 import cv2
 import numpy as np
-import yaml
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from scipy.spatial.transform import Rotation
 
@@ -29,17 +28,36 @@ from trackctl.geometry.calib import (
     scale_translation,
     tsai_model,
 )
+from trackctl.ingest.limits import (
+    bounded_number,
+    check_text_nesting,
+    load_yaml,
+    parse_xml,
+    read_bounded,
+    short_repr,
+)
 from trackctl.logs.messages import CameraModel, Quat, Transform, Vec3
+from trackctl.logs.writer import check_output_path
 
 __all__ = [
     "read_calibration",
     "read_tsai_xml",
     "write_calibration",
+    "check_calibration_output",
+    "checked_model",
     "read_point_pairs",
     "calibrate_ground",
     "to_foxglove_calibration",
     "camera_matrix",
 ]
+
+MAX_CALIBRATION_BYTES = 1 << 20
+"""Largest calibration file read (1 MiB; real ones are a few kB): refused before reading."""
+MAX_IMAGE_SIDE_PX = 100_000
+"""Largest image width or height a calibration may give."""
+
+MAX_POINTS_BYTES = 16 << 20
+"""Largest floor point CSV read (16 MiB)."""
 
 _K_KEYS = ("camera_matrix", "cameraMatrix", "K", "intrinsics")
 _D_KEYS = ("distortion_coefficients", "dist_coeffs", "distCoeffs", "D", "distortion")
@@ -89,10 +107,9 @@ def _model(
     if width is None or height is None:
         raise InputError(f"{path}: image_width and image_height are required")
     for name, value in (("image_width", width), ("image_height", height)):
-        if isinstance(value, bool) or not isinstance(value, int | float) or not value >= 1:
-            raise InputError(f"{path}: field {name}: expected a positive integer, got {value!r}")
+        bounded_number(value, f"{path}: field {name}", 1, MAX_IMAGE_SIDE_PX)
     try:
-        return CameraModel(
+        model = CameraModel(
             t_ns=0,
             camera=camera,
             width_px=int(width),
@@ -107,6 +124,45 @@ def _model(
         )
     except ValueError as err:
         raise InputError(f"{path}: {err}") from err
+    return checked_model(path, model)
+
+
+_RANGES = (
+    ("fx_px", 1e-6, 1e7),
+    ("fy_px", 1e-6, 1e7),
+    ("cx_px", -1e6, 1e6),
+    ("cy_px", -1e6, 1e6),
+)
+MAX_DISTORTION = 1e6
+"""Largest distortion coefficient accepted (real ones are below 10^3 even for fisheyes)."""
+MAX_TRANSLATION = 1e7
+"""Largest camera translation accepted, in the file's unit (millimetres included)."""
+
+
+def checked_model(path: Path, model: CameraModel) -> CameraModel:
+    """``model`` after checking that every value is finite and in a range a camera can have
+    (what later geometry divides by or raises to powers).
+
+    Raises:
+        InputError: naming the file, the value and the range expected.
+    """
+    for name, lo, hi in _RANGES:
+        bounded_number(getattr(model, name), f"{path}: {name}", lo, hi)
+    for i, d in enumerate(model.distortion):
+        bounded_number(d, f"{path}: distortion[{i}]", -MAX_DISTORTION, MAX_DISTORTION)
+    pose = model.world_from_camera
+    if pose is not None:
+        q = pose.rotation
+        if not np.isfinite([q.x, q.y, q.z, q.w]).all():
+            raise InputError(f"{path}: the camera rotation is not finite (check rvec)")
+        for axis in ("x", "y", "z"):
+            bounded_number(
+                getattr(pose.translation, axis),
+                f"{path}: camera position {axis}",
+                -MAX_TRANSLATION,
+                MAX_TRANSLATION,
+            )
+    return model
 
 
 def _read_ros(path: Path, camera: str, doc: dict[str, Any]) -> CameraModel:
@@ -149,17 +205,20 @@ def _read_plain(path: Path, camera: str, doc: dict[str, Any]) -> CameraModel:
     )
 
 
-def _read_opencv(path: Path, camera: str) -> CameraModel:
+def _read_opencv(path: Path, data: bytes, camera: str) -> CameraModel:
+    # OpenCV's parsers recurse per nesting level and segfault on deep nesting: bound it first
+    check_text_nesting(data, str(path))
     # OpenCV reports a malformed file as cv2.error, or as SystemError from its Python binding
     try:
-        return _read_opencv_storage(path, camera)
+        return _read_opencv_storage(path, data.decode("utf-8", errors="replace"), camera)
     except (cv2.error, SystemError) as err:
         reason = " ".join(str(err).split(") ")[-1].split())[:160]
         raise InputError(f"{path}: OpenCV cannot parse this calibration file ({reason})") from None
 
 
-def _read_opencv_storage(path: Path, camera: str) -> CameraModel:
-    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+def _read_opencv_storage(path: Path, text: str, camera: str) -> CameraModel:
+    # from memory: OpenCV parses exactly the bytes checked above (the path may have changed)
+    fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
     try:
         if not fs.isOpened():
             raise InputError(f"{path}: OpenCV cannot parse this calibration file")
@@ -197,7 +256,7 @@ def _read_opencv_storage(path: Path, camera: str) -> CameraModel:
         fs.release()
 
 
-def _tsai_attr(path: Path, node: ET.Element | None, element: str, name: str) -> float:
+def _tsai_attr(path: Path, node: Element | None, element: str, name: str) -> float:
     if node is None:
         raise InputError(f"{path}: Tsai camera XML without a <{element}> element")
     value = node.get(name)
@@ -207,10 +266,10 @@ def _tsai_attr(path: Path, node: ET.Element | None, element: str, name: str) -> 
         number = float(value)
     except ValueError:
         raise InputError(
-            f"{path}: <{element}> attribute {name}: not a number ({value!r})"
+            f"{path}: <{element}> attribute {name}: not a number ({short_repr(value)})"
         ) from None
     if not np.isfinite(number):
-        raise InputError(f"{path}: <{element}> attribute {name}: not finite ({value!r})")
+        raise InputError(f"{path}: <{element}> attribute {name}: not finite ({short_repr(value)})")
     return number
 
 
@@ -221,10 +280,25 @@ def read_tsai_xml(path: str | Path) -> TsaiCamera:
         InputError: not such a file, or an attribute is missing or not a number.
     """
     path = Path(path)
-    try:
-        root = ET.parse(path).getroot()
-    except (OSError, ET.ParseError) as err:
-        raise InputError(f"{path}: not a readable XML file ({err})") from None
+    return _parse_tsai(path, read_bounded(path, str(path), MAX_CALIBRATION_BYTES))
+
+
+_TSAI_RANGES = (
+    ("width", 1, MAX_IMAGE_SIDE_PX),
+    ("height", 1, MAX_IMAGE_SIDE_PX),
+    ("dpx", 1e-9, 1e3),
+    ("dpy", 1e-9, 1e3),
+    ("focal", 1e-6, 1e6),
+    ("sx", 1e-3, 1e3),
+    ("cx", -1e6, 1e6),
+    ("cy", -1e6, 1e6),
+)
+"""Tsai values (mm, or pixels for width/height) a real camera has; outside them the model's
+conversion overflows or divides by zero."""
+
+
+def _parse_tsai(path: Path, data: bytes) -> TsaiCamera:
+    root = parse_xml(data, str(path))
     geo, intr, extr = (root.find(e) for e in ("Geometry", "Intrinsic", "Extrinsic"))
 
     def g(e: str, n: str) -> float:
@@ -247,9 +321,8 @@ def read_tsai_xml(path: str | Path) -> TsaiCamera:
         t=(g("Extrinsic", "tx"), g("Extrinsic", "ty"), g("Extrinsic", "tz")),
         r=(g("Extrinsic", "rx"), g("Extrinsic", "ry"), g("Extrinsic", "rz")),
     )
-    for name in ("width", "height", "dpx", "dpy", "focal", "sx"):
-        if not getattr(tsai, name) > 0:
-            raise InputError(f"{path}: Tsai {name} must be positive, got {getattr(tsai, name)}")
+    for name, lo, hi in _TSAI_RANGES:
+        bounded_number(getattr(tsai, name), f"{path}: Tsai {name}", lo, hi)
     return tsai
 
 
@@ -269,40 +342,38 @@ def read_calibration(
         InputError: the file is missing or holds no usable calibration.
     """
     path = Path(path)
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise InputError(f"{path}: no such calibration file (camera {camera})")
-    try:
-        text = path.read_text(errors="replace")
-    except OSError as err:
-        raise InputError(f"{path}: cannot read ({err.strerror})") from None
+    data = read_bounded(path, str(path), MAX_CALIBRATION_BYTES)
+    text = data.decode("utf-8", errors="replace")
     if not text.strip():
         raise InputError(f"{path}: empty calibration file (camera {camera})")
     if _is_tsai(text):
-        return tsai_model(read_tsai_xml(path), camera, metres_per_unit or 1e-3)
-    model = _read_calibration_text(path, text, camera)
+        try:
+            model = tsai_model(_parse_tsai(path, data), camera, metres_per_unit or 1e-3)
+        except ValueError as err:
+            raise InputError(f"{path}: {err}") from None
+        return checked_model(path, model)
+    model = _read_calibration_text(path, data, text, camera)
     return scale_translation(model, metres_per_unit or 1.0)
 
 
-def _read_calibration_text(path: Path, text: str, camera: str) -> CameraModel:
+def _read_calibration_text(path: Path, data: bytes, text: str, camera: str) -> CameraModel:
     if path.suffix.lower() == ".xml" and "<opencv_storage>" not in text:
         raise InputError(
             f"{path}: not an OpenCV XML calibration (no <opencv_storage> element) nor a Tsai "
             "camera XML (<Camera> with <Geometry>, <Intrinsic>, <Extrinsic>)"
         )
     if text.lstrip().startswith("%YAML") or "!!opencv-matrix" in text or path.suffix == ".xml":
-        return _read_opencv(path, camera)
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        reason = " ".join(str(err).split())[:160]
-        raise InputError(f"{path}: not valid YAML ({reason})") from None
+        return _read_opencv(path, data, camera)
+    doc = load_yaml(data, str(path))
     if not isinstance(doc, dict):
         raise InputError(f"{path}: expected a YAML mapping of calibration fields")
     if isinstance(doc.get("camera_matrix"), dict):
         return _read_ros(path, camera, doc)
     if any(isinstance(doc.get(k), list) for k in _K_KEYS):
         return _read_plain(path, camera, doc)
-    return _read_opencv(path, camera)
+    return _read_opencv(path, data, camera)
 
 
 def read_point_pairs(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -313,11 +384,12 @@ def read_point_pairs(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         InputError: missing file, a row that is not 4 or 5 numbers (named by line).
     """
     path = Path(path)
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise InputError(f"{path}: no such point file")
+    text = read_bounded(path, str(path), MAX_POINTS_BYTES).decode("utf-8", errors="replace")
     rows: list[list[float]] = []
     header = False
-    for lineno, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+    for lineno, line in enumerate(text.splitlines(), 1):
         cells = [c.strip() for c in line.replace(";", ",").split(",")]
         if not line.strip() or line.lstrip().startswith("#"):
             continue
@@ -360,10 +432,42 @@ def calibrate_ground(
         raise InputError(f"{points_name}: {err}") from None
 
 
+def check_calibration_output(
+    out: str | os.PathLike[str],
+    inputs: tuple[str | os.PathLike[str], ...] = (),
+    option: str = "--out",
+) -> Path:
+    """The path a calibration for ``out`` will be written to, checked before any work.
+
+    A local stand-in for the general output rule of issue 45 item 3 (swap it for that one when
+    it lands): the device/FIFO/folder check is :func:`trackctl.logs.writer.check_output_path`'s.
+
+    Raises:
+        OutputError: ``out`` is one of ``inputs`` (also by another name or a link), a device,
+            FIFO, socket or folder, or in a folder that does not exist.
+    """
+    try:
+        target = check_output_path(out)
+    except OutputError as err:
+        raise OutputError(f"{option} {err}") from None
+    for src in inputs:
+        same = os.path.realpath(target) == os.path.realpath(src)
+        if not same and target.exists() and os.path.exists(src):
+            same = os.path.samefile(target, src)
+        if same:
+            raise OutputError(f"{option} {out}: would overwrite the input {src} (nothing written)")
+    return target
+
+
 def write_calibration(model: CameraModel, path: str | Path) -> None:
     """Write ``model`` as the OpenCV YAML that :func:`read_calibration` reads (atomically: the
-    file appears whole or not at all)."""
-    path = Path(path)
+    file appears whole or not at all; an existing device, FIFO or folder is refused, never
+    replaced).
+
+    Raises:
+        OutputError: the path is not a regular file or new path, or cannot be written.
+    """
+    path = check_output_path(path)
     d = np.asarray(model.distortion or (0.0,) * 5, float).reshape(1, -1)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".yaml", dir=path.parent or ".")
     os.close(fd)

@@ -66,6 +66,8 @@ BRIDGELOC_KEYS = {
     "ir_height_m": float,
     "max_range_m": float,
 }
+MAX_SITE_BYTES = 4 << 20
+"""Largest site file read (4 MiB)."""
 _SMIRROR_KEYS = ("requesters", "floorplan")
 _TOP = ("robots", "smirror", "bridgeloc")
 
@@ -190,21 +192,11 @@ def read_site(path: str | Path) -> dict[str, dict[str, str]]:
     Raises:
         InputError: the file is missing, is not YAML, or does not fit the layout above.
     """
-    import yaml
+    from trackctl.ingest.limits import load_yaml, read_bounded
 
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"--site {path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise InputError(f"--site {path}: cannot read ({err})") from err
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        at = f" at line {mark.line + 1}" if mark is not None else ""
-        raise InputError(f"--site {path}: not valid YAML{at}") from err
+    # stat before open: a FIFO or device is refused, not waited on; size bounded before reading
+    data = load_yaml(read_bounded(path, f"--site {path}", MAX_SITE_BYTES), f"--site {path}")
     return site_records(data, path)
 
 
