@@ -30,7 +30,14 @@ from trackctl.errors import OutputError
 from trackctl.logs.codecs import Codec, codec_for_type
 from trackctl.logs.reader import RawMessage
 
-__all__ = ["LogWriter", "COMPRESSIONS", "PARTIAL_SUFFIX", "check_output_path", "partial_path"]
+__all__ = [
+    "LogWriter",
+    "ChannelError",
+    "COMPRESSIONS",
+    "PARTIAL_SUFFIX",
+    "check_output_path",
+    "partial_path",
+]
 
 COMPRESSIONS = {
     "zstd": CompressionType.ZSTD,
@@ -41,6 +48,11 @@ PROFILE = "trackctl"
 MAX_CHANNELS = 65535  # MCAP channel ids are uint16 (id 0 is valid)
 PARTIAL_SUFFIX = ".partial"
 MAX_LOG_TIME_NS = (1 << 64) - 1
+
+
+class ChannelError(OutputError):
+    """One message cannot go on its topic (another schema holds it, or the log has no channel id
+    left); nothing was written and the writer can go on with other messages."""
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -242,19 +254,20 @@ class LogWriter:
         """Channel id for ``topic``, registering schema and channel on first use.
 
         Raises:
-            OutputError: the topic was already registered with another schema or encoding.
+            ChannelError: the topic was already registered with another schema or encoding, or
+                the log holds :data:`MAX_CHANNELS` channels already.
         """
         known = self._channels.get(topic)
         if known is not None:
             cid, known_schema, known_enc = known
             if (known_schema, known_enc) != (schema_name, message_encoding):
-                raise OutputError(
+                raise ChannelError(
                     f"{topic}: already written with schema {known_schema} ({known_enc}); "
                     f"cannot also write {schema_name} ({message_encoding}) on it"
                 )
             return cid
         if len(self._channels) >= MAX_CHANNELS:
-            raise OutputError(
+            raise ChannelError(
                 f"{self.path}: topic {topic} would be channel {len(self._channels) + 1}; an MCAP "
                 f"log holds at most {MAX_CHANNELS} channels (16-bit channel ids)"
             )
