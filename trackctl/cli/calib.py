@@ -11,6 +11,7 @@ from rich.table import Table
 
 from trackctl.cli.common import TrackctlGroup, console, print_json, stderr
 from trackctl.errors import InputError
+from trackctl.logs.output import check_output
 
 calib_app = typer.Typer(
     cls=TrackctlGroup,
@@ -79,6 +80,7 @@ def ground(
     from trackctl.geometry.calib import camera_problems, geometry_summary
     from trackctl.ingest.calibration import calibrate_ground, read_point_pairs, write_calibration
 
+    check_output(out, [intrinsics, points])
     if points is not None and (image_points or world_points):
         raise InputError("give --points or --image-points/--world-points, not both")
     if points is not None:
@@ -90,8 +92,6 @@ def ground(
         name = "--image-points/--world-points"
     else:
         raise InputError("give --points CSV, or --image-points with --world-points")
-    if out.resolve() == intrinsics.resolve():
-        raise InputError(f"--out {out}: would overwrite the input calibration")
     fit = calibrate_ground(intrinsics, camera, img, world, name)
     problems = camera_problems(fit.model)
     if problems[0]:
@@ -137,9 +137,8 @@ def import_cmd(
     from trackctl.geometry.calib import camera_problems, geometry_summary, with_pose
     from trackctl.ingest.calibration import read_calibration, write_calibration
 
+    check_output(out, [source])
     scale = _units(units)
-    if out.resolve() == source.resolve():
-        raise InputError(f"--out {out}: would overwrite the input calibration")
     model = read_calibration(source, camera, scale)
     if (rvec is None) != (tvec is None):
         raise InputError("--rvec and --tvec go together")

@@ -20,6 +20,7 @@ from trackctl.cli.common import (
     stderr,
 )
 from trackctl.cli.process import figures_from_output, run_system
+from trackctl.logs.output import check_output
 
 
 def _read_eids(path: Path) -> tuple[str, ...]:
@@ -139,6 +140,7 @@ def ev_match(
         verbose=verbose,
         plot=draw,
         outputs_only=outputs_only,
+        inputs=[eids],
     )
 
 
@@ -182,6 +184,7 @@ def simulate_ev(
     from trackctl.sim.ev import EvScenario
     from trackctl.sim.ev import simulate_ev as simulate
 
+    check_output(out)
     cfg = EvScenario(
         people=people,
         area_m=area,

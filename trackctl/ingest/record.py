@@ -107,6 +107,7 @@ class RecordConfig:
             *self.detections.values(),
             *((self.ros2,) if self.ros2 is not None else ()),
             *((self.site,) if self.site is not None else ()),
+            *((self.frame_times,) if isinstance(self.frame_times, Path) else ()),
         )
 
 

@@ -18,8 +18,7 @@ import errno
 import fcntl
 import os
 import stat
-import tempfile
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
@@ -28,6 +27,7 @@ from mcap.writer import CompressionType, Writer
 
 from trackctl.errors import OutputError
 from trackctl.logs.codecs import Codec, codec_for_type
+from trackctl.logs.output import check_output, check_output_path, write_text_atomic
 from trackctl.logs.reader import RawMessage
 
 __all__ = [
@@ -36,6 +36,8 @@ __all__ = [
     "COMPRESSIONS",
     "PARTIAL_SUFFIX",
     "check_output_path",
+    "check_output",
+    "write_text_atomic",
     "partial_path",
 ]
 
@@ -55,77 +57,6 @@ class ChannelError(OutputError):
     left); nothing was written and the writer can go on with other messages."""
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return a.exists() and b.exists() and os.path.samefile(a, b)
-    except OSError:
-        return False
-
-
-def _kind(mode: int) -> str:
-    if stat.S_ISDIR(mode):
-        return "a directory"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "not a regular file"
-
-
-def check_output_path(path: str | os.PathLike[str]) -> Path:
-    """The file a log for ``path`` will really be written to (a symlink's regular target).
-
-    Raises:
-        OutputError: ``path`` is (or links to) a directory, device, FIFO or socket, or its folder
-            does not exist.
-    """
-    path = Path(path)
-    try:
-        st = os.stat(path)  # follows symlinks: a link to a device is a device
-    except FileNotFoundError:
-        st = None
-    except OSError as err:
-        raise OutputError(f"{path}: cannot use as output ({err.strerror})") from err
-    if st is not None and not stat.S_ISREG(st.st_mode):
-        raise OutputError(
-            f"{path}: is {_kind(st.st_mode)}; trackctl writes logs only to regular files or new "
-            "paths (nothing was written)"
-        )
-    target = Path(os.path.realpath(path)) if path.is_symlink() else path
-    parent = target.parent
-    if not parent.is_dir():
-        raise OutputError(f"{path}: folder {parent} does not exist")
-    return target
-
-
-def write_text_atomic(
-    path: str | os.PathLike[str], text: str, inputs: Sequence[str | os.PathLike[str]] = ()
-) -> None:
-    """Write ``text`` to ``path`` through a temporary file beside it and a rename: a reader
-    sees the old file or the whole new one, never a half; ``path`` must not be an input.
-
-    Raises:
-        OutputError: ``path`` is one of ``inputs``, not a regular file or new path, or cannot be
-            written (a full disk, no permission); nothing is changed then.
-    """
-    target = check_output_path(path)
-    for src in inputs:
-        if os.path.realpath(src) == os.path.realpath(target):
-            raise OutputError(
-                f"{path}: is the input {src}; choose another output (nothing written)"
-            )
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-        os.replace(tmp, target)
-    except OSError as err:
-        Path(tmp).unlink(missing_ok=True)
-        raise OutputError(f"{path}: cannot write ({err.strerror}); nothing was changed") from err
-
-
 def partial_path(path: str | os.PathLike[str], suffix: str = PARTIAL_SUFFIX) -> Path:
     """Where the log for ``path`` is written until it is finished."""
     path = Path(path)
@@ -142,7 +73,7 @@ def _open_locked(partial: Path, final: Path) -> int:
         try:
             st = os.fstat(fd)
             if not stat.S_ISREG(st.st_mode):
-                raise OutputError(f"{partial}: is {_kind(st.st_mode)}; remove it and try again")
+                raise OutputError(f"{partial}: is not a regular file; remove it and try again")
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
@@ -202,18 +133,11 @@ class LogWriter:
         partial_suffix: str = PARTIAL_SUFFIX,
     ) -> None:
         self.path = Path(path)
-        for inp in inputs:
-            inp_path = Path(inp)
-            if self.path.resolve() == inp_path.resolve() or _same_file(self.path, inp_path):
-                raise OutputError(
-                    f"{self.path}: output path is the input log; choose another --out "
-                    "(trackctl never overwrites its input)"
-                )
+        self._target = check_output(self.path, inputs)  # the output rule: logs/output.py
         if compression not in COMPRESSIONS:
             raise OutputError(
                 f"compression {compression!r} unknown; expected one of {sorted(COMPRESSIONS)}"
             )
-        self._target = check_output_path(self.path)
         self.partial_path = partial_path(self._target, partial_suffix)
         self.keep_partial = keep_partial
         fd = _open_locked(self.partial_path, self.path)
