@@ -153,6 +153,8 @@ def eval_(
     """
     from trackctl.bridgeloc import BridgeLocConfig, BridgeLocProcessor, Mode, PoseMethod
 
+    if out is not None:
+        check_output(out, [log, site])  # before the site is read
     mode_value = parse_choice(Mode, mode, "--mode")
     pose_value = parse_choice(PoseMethod, pose, "--pose")
     proc = BridgeLocProcessor(

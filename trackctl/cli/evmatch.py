@@ -105,6 +105,8 @@ def ev_match(
     from trackctl.errors import InputError
     from trackctl.evmatch import Algorithm, EvMatchConfig, EvMatchProcessor, MatchParams
 
+    if out is not None:
+        check_output(out, [log, eids])  # before the EID list is read
     if eids is not None and all_eids:
         raise InputError("--eids and --all: give one of them")
     algo = parse_choice(Algorithm, algorithm, "--algorithm")

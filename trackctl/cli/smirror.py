@@ -76,6 +76,8 @@ def smirror(
     from trackctl.smirror import Mode, SmirrorConfig, SmirrorProcessor
     from trackctl.smirror.link import LinkConfig
 
+    if out is not None:
+        check_output(out, [log, site])  # before the site is read
     mode_value = parse_choice(Mode, mode, "--mode")
     try:
         cfg = SmirrorConfig(

@@ -11,8 +11,10 @@ so a failure (a full disk, an interrupt) leaves the target and every input as th
 from __future__ import annotations
 
 import os
+import signal
 import stat
 import tempfile
+import threading
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -20,7 +22,16 @@ from typing import IO
 
 from trackctl.errors import OutputError
 
-__all__ = ["check_output", "check_output_path", "atomic_file", "write_text_atomic"]
+__all__ = [
+    "check_output",
+    "check_output_path",
+    "atomic_file",
+    "write_text_atomic",
+    "signals_deferred",
+    "track_unfinished",
+    "forget_unfinished",
+    "remove_unfinished",
+]
 
 PathLike = str | os.PathLike[str]
 
@@ -125,7 +136,9 @@ def atomic_file(path: PathLike, inputs: Iterable[PathLike | None] = ()) -> Itera
     """
     target = check_output(path, inputs)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+        with signals_deferred():
+            fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+            track_unfinished(Path(tmp))
     except OSError as err:
         raise OutputError(f"{path}: cannot write ({err.strerror}); nothing was changed") from err
     try:
@@ -137,7 +150,54 @@ def atomic_file(path: PathLike, inputs: Iterable[PathLike | None] = ()) -> Itera
     except OSError as err:
         raise OutputError(f"{path}: cannot write ({err.strerror}); nothing was changed") from err
     finally:
-        Path(tmp).unlink(missing_ok=True)
+        with signals_deferred():
+            Path(tmp).unlink(missing_ok=True)
+            forget_unfinished(Path(tmp))
+
+
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+_UNFINISHED: dict[Path, None] = {}  # ordered set of temporary outputs not yet renamed or removed
+
+
+@contextmanager
+def signals_deferred() -> Iterator[None]:
+    """Hold SIGINT, SIGTERM and SIGHUP back (they are delivered when the block ends), so that a
+    temporary output is created and registered, or renamed or removed and forgotten, as one
+    step: an interrupt then never leaves one behind unregistered. Main thread only."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def track_unfinished(path: Path) -> None:
+    """Register a temporary output (``OUT.partial``, a stage file): :func:`remove_unfinished`
+    removes it if the program is interrupted before it is finished."""
+    _UNFINISHED[Path(path)] = None
+
+
+def forget_unfinished(path: Path) -> None:
+    """The temporary output was renamed into place or removed."""
+    _UNFINISHED.pop(Path(path), None)
+
+
+def remove_unfinished() -> list[Path]:
+    """Remove every registered temporary output (after an interrupt: a rerun then finds the
+    output path free); the paths removed."""
+    removed = []
+    with signals_deferred():
+        for path in list(_UNFINISHED):
+            try:
+                path.unlink(missing_ok=True)
+                removed.append(path)
+            except OSError:
+                pass
+            _UNFINISHED.pop(path, None)
+    return removed
 
 
 def write_text_atomic(path: PathLike, text: str, inputs: Iterable[PathLike | None] = ()) -> None:

@@ -27,7 +27,14 @@ from mcap.writer import CompressionType, Writer
 
 from trackctl.errors import OutputError
 from trackctl.logs.codecs import Codec, codec_for_type
-from trackctl.logs.output import check_output, check_output_path, write_text_atomic
+from trackctl.logs.output import (
+    check_output,
+    check_output_path,
+    forget_unfinished,
+    signals_deferred,
+    track_unfinished,
+    write_text_atomic,
+)
 from trackctl.logs.reader import RawMessage
 
 __all__ = [
@@ -140,7 +147,10 @@ class LogWriter:
             )
         self.partial_path = partial_path(self._target, partial_suffix)
         self.keep_partial = keep_partial
-        fd = _open_locked(self.partial_path, self.path)
+        with signals_deferred():  # created and registered as one step (see logs/output.py)
+            fd = _open_locked(self.partial_path, self.path)
+            if not keep_partial:
+                track_unfinished(self.partial_path)
         self._stream: IO[bytes] = os.fdopen(fd, "wb")
         self._writer = Writer(
             self._stream,
@@ -336,7 +346,9 @@ class LogWriter:
             self._writer.finish()  # type: ignore[no-untyped-call]
             self._stream.flush()
             os.fsync(self._stream.fileno())
-            os.replace(self.partial_path, self._target)  # still locked while renamed
+            with signals_deferred():
+                os.replace(self.partial_path, self._target)  # still locked while renamed
+                forget_unfinished(self.partial_path)
         except OSError as err:
             self._fail(err, "finish")
         self._closed = True
@@ -354,18 +366,20 @@ class LogWriter:
             return
         self._closed = True
         keep = self.keep_partial and self.message_count > 0
-        try:
-            if keep:
-                self._stream.flush()
-            else:
-                self.partial_path.unlink(missing_ok=True)
-        except OSError:
-            pass
-        finally:
+        with signals_deferred():
             try:
-                self._stream.close()
+                if keep:
+                    self._stream.flush()
+                else:
+                    self.partial_path.unlink(missing_ok=True)
+                    forget_unfinished(self.partial_path)
             except OSError:
                 pass
+            finally:
+                try:
+                    self._stream.close()
+                except OSError:
+                    pass
 
     def __enter__(self) -> LogWriter:
         return self

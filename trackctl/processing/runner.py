@@ -14,7 +14,12 @@ from pathlib import Path
 from trackctl.errors import OutputError
 from trackctl.logs.copy import copy_log
 from trackctl.logs.messages import MetricReport, MetricValue
-from trackctl.logs.output import check_output
+from trackctl.logs.output import (
+    check_output,
+    forget_unfinished,
+    signals_deferred,
+    track_unfinished,
+)
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.metrics.catalog import WALL_S, catalog
@@ -134,11 +139,7 @@ def run_processors(
             if last:
                 target = out_path
             else:
-                fd, stage_name = tempfile.mkstemp(
-                    prefix=f".{out_path.name}.stage{i}.", suffix=".mcap", dir=out_path.parent
-                )
-                os.close(fd)
-                target = Path(stage_name)
+                target = _stage_file(out_path, i)
                 temps.append(target)
             reports.append(
                 _run_one(
@@ -154,6 +155,19 @@ def run_processors(
             )
             current = target
     finally:
-        for stage in temps:
-            stage.unlink(missing_ok=True)
+        with signals_deferred():
+            for stage in temps:
+                stage.unlink(missing_ok=True)
+                forget_unfinished(stage)
     return reports
+
+
+def _stage_file(out_path: Path, i: int) -> Path:
+    """A hidden intermediate log beside the output, registered so an interrupt removes it."""
+    with signals_deferred():
+        fd, stage_name = tempfile.mkstemp(
+            prefix=f".{out_path.name}.stage{i}.", suffix=".mcap", dir=out_path.parent
+        )
+        os.close(fd)
+        track_unfinished(Path(stage_name))
+    return Path(stage_name)
