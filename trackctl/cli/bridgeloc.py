@@ -24,6 +24,7 @@ from trackctl.cli.common import (
     stderr,
 )
 from trackctl.cli.process import figures_from_output, run_system
+from trackctl.logs.output import check_output
 
 bridgeloc_app = typer.Typer(
     help="BridgeLoc (§4.2): rotation-symmetric tags, view bridging, EKF robot localization.",
@@ -79,6 +80,7 @@ def tags(
         result["universal"] = count_universal(n)
         result["practical"] = count_practical(n)
     if out is not None:
+        check_output(out)
         check_family(family, n)
         sheet = list(iter_sheet_tags(n, practical, family))
         if len(sheet) > 512:
@@ -151,6 +153,8 @@ def eval_(
     """
     from trackctl.bridgeloc import BridgeLocConfig, BridgeLocProcessor, Mode, PoseMethod
 
+    if out is not None:
+        check_output(out, [log, site])  # before the site is read
     mode_value = parse_choice(Mode, mode, "--mode")
     pose_value = parse_choice(PoseMethod, pose, "--pose")
     proc = BridgeLocProcessor(
@@ -178,6 +182,7 @@ def eval_(
         verbose=verbose,
         plot=draw,
         outputs_only=outputs_only,
+        inputs=[site],
     )
 
 
@@ -224,6 +229,7 @@ def simulate_bridgeloc(
     from trackctl.sim.bridgeloc import BridgeLocScenario
     from trackctl.sim.bridgeloc import simulate_bridgeloc as simulate
 
+    check_output(out)
     cfg = BridgeLocScenario(
         field=field,
         tags=tags if field == "lobby" else 1,

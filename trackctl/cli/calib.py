@@ -11,6 +11,7 @@ from rich.table import Table
 
 from trackctl.cli.common import TrackctlGroup, console, print_json, stderr
 from trackctl.errors import InputError
+from trackctl.logs.output import check_output
 
 calib_app = typer.Typer(
     cls=TrackctlGroup,
@@ -77,14 +78,9 @@ def ground(
     import numpy as np
 
     from trackctl.geometry.calib import camera_problems, geometry_summary
-    from trackctl.ingest.calibration import (
-        calibrate_ground,
-        check_calibration_output,
-        read_point_pairs,
-        write_calibration,
-    )
+    from trackctl.ingest.calibration import calibrate_ground, read_point_pairs, write_calibration
 
-    check_calibration_output(out, (intrinsics, *(() if points is None else (points,))))
+    check_output(out, [intrinsics, points])
     if points is not None and (image_points or world_points):
         raise InputError("give --points or --image-points/--world-points, not both")
     if points is not None:
@@ -140,14 +136,13 @@ def import_cmd(
 
     from trackctl.geometry.calib import camera_problems, geometry_summary, with_pose
     from trackctl.ingest.calibration import (
-        check_calibration_output,
         checked_model,
         read_calibration,
         write_calibration,
     )
 
+    check_output(out, [source])
     scale = _units(units)
-    check_calibration_output(out, (source,))
     model = read_calibration(source, camera, scale)
     if (rvec is None) != (tvec is None):
         raise InputError("--rvec and --tvec go together")

@@ -31,6 +31,7 @@ from typer.core import TyperGroup
 
 from trackctl.errors import InputError, TrackctlError
 from trackctl.logs.messages import MetricReport
+from trackctl.logs.output import remove_unfinished
 from trackctl.logs.reader import LogReader
 from trackctl.metrics.report import (
     check_gate_keys,
@@ -112,6 +113,7 @@ class TrackctlGroup(TyperGroup):
             # every output is written to OUT.partial and renamed when complete: an interrupted
             # run leaves its inputs and any earlier OUT as they were (a live recording, which
             # keeps what it got, handles the signal itself and ends normally)
+            remove_unfinished()  # OUT.partial and stage files an interrupt may have left
             how = f"by {err.args[0]}" if isinstance(err, Stopped) else "(Ctrl-C)"
             stderr.print(f"interrupted {how}: the unfinished output was removed, inputs untouched")
             raise typer.Exit(128 + (err.args[1] if isinstance(err, Stopped) else 2)) from None

@@ -20,6 +20,7 @@ from trackctl.cli.common import (
     stderr,
 )
 from trackctl.cli.process import figures_from_output, run_system
+from trackctl.logs.output import check_output
 
 
 def _read_eids(path: Path) -> tuple[str, ...]:
@@ -104,6 +105,8 @@ def ev_match(
     from trackctl.errors import InputError
     from trackctl.evmatch import Algorithm, EvMatchConfig, EvMatchProcessor, MatchParams
 
+    if out is not None:
+        check_output(out, [log, eids])  # before the EID list is read
     if eids is not None and all_eids:
         raise InputError("--eids and --all: give one of them")
     algo = parse_choice(Algorithm, algorithm, "--algorithm")
@@ -139,6 +142,7 @@ def ev_match(
         verbose=verbose,
         plot=draw,
         outputs_only=outputs_only,
+        inputs=[eids],
     )
 
 
@@ -182,6 +186,7 @@ def simulate_ev(
     from trackctl.sim.ev import EvScenario
     from trackctl.sim.ev import simulate_ev as simulate
 
+    check_output(out)
     cfg = EvScenario(
         people=people,
         area_m=area,

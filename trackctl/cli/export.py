@@ -10,6 +10,7 @@ import typer
 from trackctl.cli.common import JsonOption, QuietOption, parse_choice, print_json, progress, stderr
 from trackctl.errors import InputError
 from trackctl.export import PERSON_HEIGHT_M, ExportConfig, ExportFormat, export
+from trackctl.logs.output import check_output
 
 
 def export_cmd(
@@ -66,6 +67,7 @@ def export_cmd(
         )
     except ValueError as err:
         raise InputError(f"--person-height-m {person_height_m}: expected metres > 0") from err
+    check_output(out, [log])
     with progress(f"export {topic}", quiet) as update:
         result = export(log, out, config, update)
     if json_out:

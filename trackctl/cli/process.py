@@ -23,8 +23,8 @@ from trackctl.cli.common import (
 )
 from trackctl.errors import InputError
 from trackctl.logs.messages import MetricReport
+from trackctl.logs.output import check_output, write_text_atomic
 from trackctl.logs.reader import LogReader
-from trackctl.logs.writer import write_text_atomic
 from trackctl.metrics.catalog import catalog
 from trackctl.metrics.report import jsonable_metrics, read_reports
 from trackctl.processing import Processor, get_processor, processors, run_processors
@@ -109,6 +109,8 @@ def process(
         raise InputError("process needs LOG and --with NAME (or --list to see processors)")
     chain = [get_processor(name).factory() for name in names]
     check_fail_if(fail_if, [p.name for p in chain])  # a typo fails before the run, not after
+    if out is not None:
+        check_output(out, [log])
     with progress("processing", quiet) as bar:
         reports = run_processors(log, out, chain, bar, outputs_only=outputs_only)
     if json_out:
@@ -135,6 +137,8 @@ def report(
 
     Example: trackctl report tracked.mcap --fail-if "idf1<0.9" --csv report.csv
     """
+    if csv is not None:
+        check_output(csv, [log])
     reports = read_reports(LogReader(log))
     if not reports:
         raise InputError(
@@ -189,14 +193,20 @@ def run_system(
     outputs_only: bool = False,
     allow_unmeasured: bool = False,
     verbose: bool = False,
+    inputs: Sequence[Path | None] = (),
 ) -> MetricReport:
     """What every system command does with its processor: run it over ``log`` into ``out``
     (progress bar on a TTY, atomic output; no ``out``: report only), draw its figures, print the
     report (its headline, or one JSON object of the metrics and ``unmeasured`` with ``--json``),
-    then apply ``--fail-if`` (exit 1; exit 2 on a metric that was not measured)."""
+    then apply ``--fail-if`` (exit 1; exit 2 on a metric that was not measured). ``inputs``:
+    the other files the command reads (the output may be none of them)."""
     check_fail_if(fail_if, [processor.name])
+    if out is not None:
+        check_output(out, [log, *inputs])
     with progress(name, quiet) as bar:
-        (report,) = run_processors(log, out, [processor], bar, outputs_only=outputs_only)
+        (report,) = run_processors(
+            log, out, [processor], bar, outputs_only=outputs_only, inputs=inputs
+        )
     if plot is not None:
         plot()
     if json_out:

@@ -17,6 +17,7 @@ from trackctl.cli.common import (
     stderr,
 )
 from trackctl.errors import InputError
+from trackctl.logs.output import check_output
 from trackctl.logs.writer import COMPRESSIONS
 
 if TYPE_CHECKING:
@@ -180,6 +181,8 @@ def record(
     # Imported here: OpenCV/pandas/SciPy cost ~0.5 s and other commands do not need them.
     from trackctl.ingest.record import IngestPlan, ingest
 
+    named = (imu, odom, video, calib, detections)
+    check_output(out, _option_inputs(named, [*(rssi or ()), ros2, site, _frame_times(frame_times)]))
     files = _files_config(
         imu=imu,
         rssi=rssi,
@@ -263,6 +266,14 @@ def _files_config(
     )
 
 
+def _option_inputs(
+    named: tuple[list[str] | None, ...], paths: list[Path | str | None]
+) -> list[Path]:
+    """Every file the options name (``NAME=FILE`` values and plain paths), for the output rule."""
+    files = [Path(v.partition("=")[2]) for values in named for v in values or () if "=" in v]
+    return files + [p for p in paths if isinstance(p, Path)]
+
+
 def _frame_times(value: str | None) -> Path | str | None:
     """``--frame-times``: a CSV file, ``"names"`` or nothing."""
     if value is None or value == "names":
@@ -325,13 +336,21 @@ def recover(
     """
     from trackctl.logs.copy import recover_log
 
+    if out is not None:
+        check_output(out, [partial])
     result = recover_log(partial, out, keep=keep)
     if json_out:
         print_json(
-            {"out": str(result.out), "messages": result.messages, "warnings": len(result.warnings)}
+            {
+                "out": str(result.out),
+                "messages": result.messages,
+                "warnings": len(result.warnings),
+                "removed_input": result.removed_input,
+            }
         )
     elif not quiet:
-        stderr.print(f"recovered {result.messages} messages from {partial} into {result.out}")
+        kept = "" if result.removed_input else f" ({partial} kept)"
+        stderr.print(f"recovered {result.messages} messages from {partial} into {result.out}{kept}")
 
 
 def filter_cmd(
@@ -355,6 +374,7 @@ def filter_cmd(
     """
     from trackctl.logs.copy import filter_log
 
+    check_output(out, [log])
     result = filter_log(log, out, include=tuple(include or ()), exclude=tuple(exclude or ()))
     if json_out:
         print_json(

@@ -24,8 +24,10 @@ def demo(
 
     Example: trackctl simulate demo --out demo.mcap --seed 0 --duration 20
     """
+    from trackctl.logs.output import check_output
     from trackctl.sim.demo import DemoConfig, simulate_demo
 
+    check_output(out)
     counts = simulate_demo(str(out), DemoConfig(duration_s=duration, seed=seed))
     if json_out:
         print_json({"out": str(out), "topics": counts})

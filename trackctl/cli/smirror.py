@@ -23,6 +23,7 @@ from trackctl.cli.common import (
     stderr,
 )
 from trackctl.cli.process import run_system
+from trackctl.logs.output import check_output
 
 
 def smirror(
@@ -75,6 +76,8 @@ def smirror(
     from trackctl.smirror import Mode, SmirrorConfig, SmirrorProcessor
     from trackctl.smirror.link import LinkConfig
 
+    if out is not None:
+        check_output(out, [log, site])  # before the site is read
     mode_value = parse_choice(Mode, mode, "--mode")
     try:
         cfg = SmirrorConfig(
@@ -114,6 +117,7 @@ def smirror(
         verbose=verbose,
         plot=draw if plot is not None else None,
         outputs_only=outputs_only,
+        inputs=[site],
     )
 
 
@@ -167,6 +171,7 @@ def simulate_smirror(
     from trackctl.sim.smirror import SmirrorScenario
     from trackctl.sim.smirror import simulate_smirror as simulate
 
+    check_output(out)
     try:
         w, h = (int(v) for v in size.lower().split("x"))
     except ValueError:

@@ -21,6 +21,7 @@ from trackctl.cli.common import (
     stderr,
 )
 from trackctl.cli.process import figures_from_output, run_system
+from trackctl.logs.output import check_output
 
 
 def vm_track(
@@ -217,6 +218,7 @@ def simulate_vm(
     from trackctl.sim.vm import VmScenario
     from trackctl.sim.vm import simulate_vm as simulate
 
+    check_output(out, [trajectories])
     try:
         parts = [float(x) for x in speed.split(",")]
     except ValueError:

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import IO
 
 from trackctl.errors import OutputError
-from trackctl.logs.writer import check_output_path
+from trackctl.logs.output import check_output
 
 __all__ = ["atomic_outputs", "check_not_input"]
 
@@ -22,16 +22,7 @@ def check_not_input(out: str | os.PathLike[str], log: str | os.PathLike[str]) ->
         OutputError: ``out`` is the log itself (or a link to it), a directory, a device, or in
             a folder that does not exist.
     """
-    target = check_output_path(out)
-    same = os.path.realpath(target) == os.path.realpath(log)
-    if not same and target.exists():
-        try:
-            same = os.path.samefile(target, log)
-        except OSError:
-            same = False
-    if same:
-        raise OutputError(f"{out}: is the input log {log}; choose another output (nothing written)")
-    return target
+    return check_output(out, [log])  # the one output rule: trackctl/logs/output.py
 
 
 @contextmanager

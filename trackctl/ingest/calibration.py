@@ -37,13 +37,12 @@ from trackctl.ingest.limits import (
     short_repr,
 )
 from trackctl.logs.messages import CameraModel, Quat, Transform, Vec3
-from trackctl.logs.writer import check_output_path
+from trackctl.logs.output import check_output_path
 
 __all__ = [
     "read_calibration",
     "read_tsai_xml",
     "write_calibration",
-    "check_calibration_output",
     "checked_model",
     "read_point_pairs",
     "calibrate_ground",
@@ -430,33 +429,6 @@ def calibrate_ground(
         return ground_pose(model, image_px, world_m)
     except ValueError as err:
         raise InputError(f"{points_name}: {err}") from None
-
-
-def check_calibration_output(
-    out: str | os.PathLike[str],
-    inputs: tuple[str | os.PathLike[str], ...] = (),
-    option: str = "--out",
-) -> Path:
-    """The path a calibration for ``out`` will be written to, checked before any work.
-
-    A local stand-in for the general output rule of issue 45 item 3 (swap it for that one when
-    it lands): the device/FIFO/folder check is :func:`trackctl.logs.writer.check_output_path`'s.
-
-    Raises:
-        OutputError: ``out`` is one of ``inputs`` (also by another name or a link), a device,
-            FIFO, socket or folder, or in a folder that does not exist.
-    """
-    try:
-        target = check_output_path(out)
-    except OutputError as err:
-        raise OutputError(f"{option} {err}") from None
-    for src in inputs:
-        same = os.path.realpath(target) == os.path.realpath(src)
-        if not same and target.exists() and os.path.exists(src):
-            same = os.path.samefile(target, src)
-        if same:
-            raise OutputError(f"{option} {out}: would overwrite the input {src} (nothing written)")
-    return target
 
 
 def write_calibration(model: CameraModel, path: str | Path) -> None:

@@ -3,13 +3,9 @@
 from __future__ import annotations
 
 import heapq
-import os
-import select
 import signal
-import socket
 import sys
 import threading
-import time
 import warnings
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -18,15 +14,22 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from trackctl.errors import InputError, TrackctlError
+from trackctl.errors import InputError
 from trackctl.geometry.calib import camera_problems
 from trackctl.ingest.calibration import read_calibration, to_foxglove_calibration
+from trackctl.ingest.live import (
+    LiveStats,
+    StopFlag,
+    StreamSource,
+    UdpSource,
+    record_live,
+    stop_on_signals,
+)
 from trackctl.ingest.mot import read_mot_detections
 from trackctl.ingest.ros2 import TopicPlan, read_ros2
 from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv, seconds_to_ns
 from trackctl.ingest.video import FrameSelection, frame_size, read_frames
 from trackctl.logs import topics
-from trackctl.logs.jsonl import AttachmentLine, JsonlRecord, MetadataLine, parse_line
 from trackctl.logs.writer import LogWriter
 from trackctl.progress import Progress
 
@@ -104,6 +107,7 @@ class RecordConfig:
             *self.detections.values(),
             *((self.ros2,) if self.ros2 is not None else ()),
             *((self.site,) if self.site is not None else ()),
+            *((self.frame_times,) if isinstance(self.frame_times, Path) else ()),
         )
 
 
@@ -256,164 +260,6 @@ def record_files(
     return counts
 
 
-@dataclass
-class LiveStats:
-    """What a live recording received."""
-
-    counts: Counter[str] = field(default_factory=Counter)
-    rejected: int = 0
-    interrupted: bool = False
-    metadata: int = 0
-    attachments: int = 0
-
-
-Line = tuple[bytes | str, str, int]  # (line, where it came from, line number)
-FLUSH_EVERY_S = 1.0  # a live log loses at most this much to kill -9
-_TICK_S = 0.25  # how often an idle source wakes the recorder to flush
-
-
-class UdpSource:
-    """JSON lines from UDP datagrams on a local port (one or more lines per datagram).
-
-    Iterating yields lines, and ``None`` about every quarter second while no datagram arrives, so
-    the recorder can flush its chunk even when the stream goes quiet.
-    """
-
-    def __init__(self, port: int, host: str = "127.0.0.1") -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        # A large receive buffer so bursts are not dropped while a message is being written.
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
-        try:
-            self.sock.bind((host, port))
-        except (OSError, OverflowError) as err:
-            self.sock.close()
-            reason = getattr(err, "strerror", None) or str(err)
-            raise InputError(f"--udp {port}: cannot bind {host}:{port} ({reason})") from err
-        self.sock.settimeout(_TICK_S)
-        self.address = self.sock.getsockname()
-        self.where = f"udp:{self.address[1]}"
-        self._n = 0
-
-    def _lines(self, datagram: bytes, sender: Any) -> Iterator[Line]:
-        origin = f" from {sender[0]}:{sender[1]}" if sender else ""
-        for line in datagram.splitlines():
-            if line.strip():
-                self._n += 1
-                # "udp:9870 line 4 from 127.0.0.1:50123": the sender's port is not a line number
-                yield line, f"{self.where} line {self._n}{origin}", 0
-
-    def __iter__(self) -> Iterator[Line | None]:
-        while True:
-            try:
-                datagram, sender = self.sock.recvfrom(65535)
-            except TimeoutError:
-                yield None
-                continue
-            yield from self._lines(datagram, sender)
-
-    def drain(self) -> Iterator[Line]:
-        """Datagrams already received by the kernel but not yet read."""
-        self.sock.setblocking(False)
-        while True:
-            try:
-                datagram, sender = self.sock.recvfrom(65535)
-            except (BlockingIOError, InterruptedError):
-                return
-            yield from self._lines(datagram, sender)
-
-    def close(self) -> None:
-        """Close the socket."""
-        self.sock.close()
-
-
-class StreamSource:
-    """JSON lines from a file descriptor (stdin), with ``None`` ticks while it is idle."""
-
-    def __init__(self, fd: int, where: str = "<stdin>") -> None:
-        self.fd = fd
-        self.where = where
-
-    def __iter__(self) -> Iterator[Line | None]:
-        pending = b""
-        lineno = 0
-        while True:
-            try:
-                ready, _, _ = select.select([self.fd], [], [], _TICK_S)
-            except (OSError, ValueError):  # not selectable (some Windows-like fds): block
-                ready = [self.fd]
-            if not ready:
-                yield None
-                continue
-            block = os.read(self.fd, 1 << 16)
-            if not block:
-                break
-            pending += block
-            *lines, pending = pending.split(b"\n")
-            for line in lines:
-                lineno += 1
-                yield line, self.where, lineno
-        if pending:
-            yield pending, self.where, lineno + 1
-
-
-def record_live(
-    writer: LogWriter,
-    lines: Iterable[Line | None],
-    on_reject: Callable[[str], None] | None = None,
-    drain: Callable[[], Iterable[Line]] | None = None,
-    flush_every_s: float = FLUSH_EVERY_S,
-) -> LiveStats:
-    """Write JSON lines as they arrive until the source ends or Ctrl-C (KeyboardInterrupt).
-
-    A bad line (not JSON, not UTF-8, NaN or infinity, a time outside uint64, a message that does
-    not fit its schema...) is rejected, reported through ``on_reject`` with its line number or
-    sender, counted, and recording goes on: a live sensor stream must not be lost to one
-    malformed message. The writer is flushed at least every ``flush_every_s`` (``None`` items
-    are idle ticks from the source), so a killed recorder loses at most that much. On Ctrl-C,
-    lines already received (``drain``) are still written, and the caller closes ``writer`` into
-    a valid log.
-    """
-    stats = LiveStats()
-    last_flush = time.monotonic()
-
-    def take(line: bytes | str, where: str, lineno: int) -> None:
-        if not line.strip():
-            return
-        try:
-            rec = parse_line(line, where, lineno)
-            if isinstance(rec, JsonlRecord):
-                writer.check_log_time(rec.log_time_ns)
-        except TrackctlError as err:
-            stats.rejected += 1
-            if on_reject is not None:
-                on_reject(str(err))
-            return
-        if isinstance(rec, MetadataLine):
-            writer.add_metadata(rec.name, rec.metadata)
-            stats.metadata += 1
-        elif isinstance(rec, AttachmentLine):
-            writer.add_attachment(rec.name, rec.data, rec.media_type, rec.log_time_ns)
-            stats.attachments += 1
-        else:
-            writer.write_encoded(rec.topic, rec.codec, rec.data, rec.log_time_ns)
-            stats.counts[rec.topic] += 1
-
-    try:
-        for item in lines:
-            if item is not None:
-                take(*item)
-            now = time.monotonic()
-            if now - last_flush >= flush_every_s:
-                writer.flush()
-                last_flush = now
-    except KeyboardInterrupt:
-        stats.interrupted = True
-        if drain is not None:
-            for line, where, lineno in drain():
-                take(line, where, lineno)
-    return stats
-
-
 TIME_UNITS = ("s", "ms", "us", "ns")
 
 
@@ -478,24 +324,25 @@ def _no_progress() -> Iterator[Progress]:
     yield lambda done, total, stage=None: None
 
 
+_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
 @contextmanager
 def _interrupt_on_signals() -> Iterator[None]:
-    """SIGTERM and SIGINT raise KeyboardInterrupt while recording (main thread only).
-
-    SIGTERM (a supervisor stopping us) ends a live recording like Ctrl-C: with a valid log.
-    SIGINT too, explicitly: a shell starts background jobs with SIGINT ignored, and then
-    ``kill -INT`` would not stop the recording.
+    """SIGINT, SIGTERM and SIGHUP raise KeyboardInterrupt during the file pass (main thread
+    only): the unfinished output is removed. SIGINT explicitly: a shell starts background jobs
+    with SIGINT ignored, and then ``kill -INT`` would not stop the recording. The live pass
+    replaces these by :func:`~trackctl.ingest.live.stop_on_signals` (it ends with a valid log).
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
-    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
+    previous = {s: signal.signal(s, signal.default_int_handler) for s in _SIGNALS}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
-        signal.signal(signal.SIGINT, previous_int)
+        for s, h in previous.items():
+            signal.signal(s, h)
 
 
 def ingest(
@@ -563,11 +410,13 @@ def _record_source(
     on_reject: Callable[[str], None] | None,
     on_live: Callable[[tuple[str, int] | None], None] | None,
 ) -> LiveStats:
-    """The live part of :func:`ingest`: ``source``, or stdin without one."""
-    if source is not None:
+    """The live part of :func:`ingest`: ``source``, or stdin without one, until its end or a
+    signal (SIGINT, SIGTERM, SIGHUP end it between two lines, with a valid log)."""
+    with stop_on_signals(StopFlag()) as stop:
+        if source is not None:
+            if on_live is not None:
+                on_live((source.address[0], source.address[1]))
+            return record_live(writer, source, on_reject, drain=source.drain, stop=stop)
         if on_live is not None:
-            on_live((source.address[0], source.address[1]))
-        return record_live(writer, source, on_reject, drain=source.drain)
-    if on_live is not None:
-        on_live(None)
-    return record_live(writer, StreamSource(sys.stdin.fileno()), on_reject)
+            on_live(None)
+        return record_live(writer, StreamSource(sys.stdin.fileno()), on_reject, stop=stop)

@@ -117,6 +117,9 @@ class RecoverResult:
     out: Path
     messages: int
     warnings: tuple[str, ...]
+    removed_input: bool = False
+    """The input was a recorder's ``OUT.partial`` holding messages, now all in ``out``, and was
+    removed (every other input is kept)."""
 
 
 def recover_log(
@@ -128,7 +131,10 @@ def recover_log(
     """Finish an unfinished log (``OUT.partial`` of a killed recording, a cut copy) into ``out``.
 
     Every message that can be read is copied, with the metadata and attachments, into a complete,
-    indexed log. The partial file is deleted afterwards unless ``keep``.
+    indexed log. The input is removed afterwards only when it is a recorder's ``*.partial`` file,
+    at least one message was recovered and ``keep`` is not set (the next recording of that output
+    refuses to start while it exists); any other input, and a partial file from which nothing
+    was recovered, is never deleted.
 
     Args:
         partial: the unfinished log.
@@ -158,8 +164,9 @@ def recover_log(
             ) from None
         with LogWriter(out, inputs=[partial], partial_suffix=".recovering") as writer:
             n = copy_log(reader, writer)
-        if not keep:
+        remove = not keep and n > 0 and partial.name.endswith(PARTIAL_SUFFIX)
+        if remove:
             partial.unlink(missing_ok=True)
     finally:
         os.close(fd)
-    return RecoverResult(Path(out), n, tuple(reader.warnings))
+    return RecoverResult(Path(out), n, tuple(reader.warnings), remove)

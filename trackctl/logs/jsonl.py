@@ -18,6 +18,7 @@ from __future__ import annotations
 import base64
 import binascii
 import json
+import re
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -39,18 +40,49 @@ __all__ = [
 
 
 class _NonFinite(ValueError):
-    pass
+    def __init__(self, msg: str, token: str = "") -> None:
+        super().__init__(msg)
+        self.token = token[:40]
 
 
 def _no_constant(name: str) -> Any:
-    raise _NonFinite(f"non-finite number {name}")
+    raise _NonFinite(f"non-finite number {name}", name)
 
 
 def _finite_float(text: str) -> float:
     value = float(text)
     if value in (float("inf"), float("-inf")):
-        raise _NonFinite(f"number {text[:40]} overflows a 64-bit float")
+        raise _NonFinite(f"number {text[:40]} overflows a 64-bit float", text)
     return value
+
+
+MAX_INT_DIGITS = 40
+"""Longest integer a JSON line may hold (uint64 has 20 digits): Python's own limit (4300 digits)
+would raise a ValueError deep in the parser, and a long one costs quadratic time to convert."""
+
+
+def _bounded_int(text: str) -> int:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_INT_DIGITS:
+        raise _NonFinite(
+            f"integer of {digits} digits is out of range (at most {MAX_INT_DIGITS})", text
+        )
+    return int(text)
+
+
+_KEY_BEFORE = re.compile(r'"([^"\\]{1,80})"\s*:\s*\[?\s*$')
+_TOPIC = re.compile(r'"topic"\s*:\s*"([^"\\]{1,200})"')
+
+
+def _where_in(line: str, err: _NonFinite) -> str:
+    """``topic T: field F: `` for the number ``err`` names, as far as the raw line tells."""
+    topic = _TOPIC.search(line[:4096])
+    token = err.token
+    pos = line.find(token) if token else -1
+    key = _KEY_BEFORE.search(line[max(0, pos - 200) : pos]) if pos > 0 else None
+    return (f"topic {topic.group(1)}: " if topic else "") + (
+        f"field {key.group(1)!r}: " if key else ""
+    )
 
 
 # Payloads holding these are re-encoded (one line per message, strict JSON out).
@@ -120,13 +152,18 @@ def _json_object(line: str | bytes, at: str) -> dict[str, Any]:
                 f"{at}: not UTF-8 text (byte 0x{line[err.start]:02x} at column {err.start + 1})"
             ) from None
     try:
-        obj: Any = json.loads(line, parse_constant=_no_constant, parse_float=_finite_float)
+        obj: Any = json.loads(
+            line, parse_constant=_no_constant, parse_float=_finite_float, parse_int=_bounded_int
+        )
     except json.JSONDecodeError as err:
         raise InputError(f"{at}: not valid JSON ({err.msg} at column {err.colno})") from err
     except _NonFinite as err:
-        raise InputError(f"{at}: {err} (JSON has no NaN or infinity)") from None
+        hint = "" if "integer" in str(err) else " (JSON has no NaN or infinity)"
+        raise InputError(f"{at}: {_where_in(line, err)}{err}{hint}") from None
     except RecursionError:
         raise InputError(f"{at}: JSON nested too deeply") from None
+    except ValueError as err:  # any other number the parser cannot convert
+        raise InputError(f"{at}: not valid JSON ({str(err)[:120]})") from None
     if not isinstance(obj, dict):
         raise InputError(f"{at}: expected a JSON object, got {type(obj).__name__}")
     return obj

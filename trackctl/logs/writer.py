@@ -18,8 +18,7 @@ import errno
 import fcntl
 import os
 import stat
-import tempfile
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
@@ -28,9 +27,26 @@ from mcap.writer import CompressionType, Writer
 
 from trackctl.errors import OutputError
 from trackctl.logs.codecs import Codec, codec_for_type
+from trackctl.logs.output import (
+    check_output,
+    check_output_path,
+    forget_unfinished,
+    signals_deferred,
+    track_unfinished,
+    write_text_atomic,
+)
 from trackctl.logs.reader import RawMessage
 
-__all__ = ["LogWriter", "COMPRESSIONS", "PARTIAL_SUFFIX", "check_output_path", "partial_path"]
+__all__ = [
+    "LogWriter",
+    "ChannelError",
+    "COMPRESSIONS",
+    "PARTIAL_SUFFIX",
+    "check_output_path",
+    "check_output",
+    "write_text_atomic",
+    "partial_path",
+]
 
 COMPRESSIONS = {
     "zstd": CompressionType.ZSTD,
@@ -43,75 +59,9 @@ PARTIAL_SUFFIX = ".partial"
 MAX_LOG_TIME_NS = (1 << 64) - 1
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return a.exists() and b.exists() and os.path.samefile(a, b)
-    except OSError:
-        return False
-
-
-def _kind(mode: int) -> str:
-    if stat.S_ISDIR(mode):
-        return "a directory"
-    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
-        return "a device"
-    if stat.S_ISFIFO(mode):
-        return "a FIFO"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "not a regular file"
-
-
-def check_output_path(path: str | os.PathLike[str]) -> Path:
-    """The file a log for ``path`` will really be written to (a symlink's regular target).
-
-    Raises:
-        OutputError: ``path`` is (or links to) a directory, device, FIFO or socket, or its folder
-            does not exist.
-    """
-    path = Path(path)
-    try:
-        st = os.stat(path)  # follows symlinks: a link to a device is a device
-    except FileNotFoundError:
-        st = None
-    except OSError as err:
-        raise OutputError(f"{path}: cannot use as output ({err.strerror})") from err
-    if st is not None and not stat.S_ISREG(st.st_mode):
-        raise OutputError(
-            f"{path}: is {_kind(st.st_mode)}; trackctl writes logs only to regular files or new "
-            "paths (nothing was written)"
-        )
-    target = Path(os.path.realpath(path)) if path.is_symlink() else path
-    parent = target.parent
-    if not parent.is_dir():
-        raise OutputError(f"{path}: folder {parent} does not exist")
-    return target
-
-
-def write_text_atomic(
-    path: str | os.PathLike[str], text: str, inputs: Sequence[str | os.PathLike[str]] = ()
-) -> None:
-    """Write ``text`` to ``path`` through a temporary file beside it and a rename: a reader
-    sees the old file or the whole new one, never a half; ``path`` must not be an input.
-
-    Raises:
-        OutputError: ``path`` is one of ``inputs``, not a regular file or new path, or cannot be
-            written (a full disk, no permission); nothing is changed then.
-    """
-    target = check_output_path(path)
-    for src in inputs:
-        if os.path.realpath(src) == os.path.realpath(target):
-            raise OutputError(
-                f"{path}: is the input {src}; choose another output (nothing written)"
-            )
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-        os.replace(tmp, target)
-    except OSError as err:
-        Path(tmp).unlink(missing_ok=True)
-        raise OutputError(f"{path}: cannot write ({err.strerror}); nothing was changed") from err
+class ChannelError(OutputError):
+    """One message cannot go on its topic (another schema holds it, or the log has no channel id
+    left); nothing was written and the writer can go on with other messages."""
 
 
 def partial_path(path: str | os.PathLike[str], suffix: str = PARTIAL_SUFFIX) -> Path:
@@ -130,7 +80,7 @@ def _open_locked(partial: Path, final: Path) -> int:
         try:
             st = os.fstat(fd)
             if not stat.S_ISREG(st.st_mode):
-                raise OutputError(f"{partial}: is {_kind(st.st_mode)}; remove it and try again")
+                raise OutputError(f"{partial}: is not a regular file; remove it and try again")
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
@@ -190,21 +140,17 @@ class LogWriter:
         partial_suffix: str = PARTIAL_SUFFIX,
     ) -> None:
         self.path = Path(path)
-        for inp in inputs:
-            inp_path = Path(inp)
-            if self.path.resolve() == inp_path.resolve() or _same_file(self.path, inp_path):
-                raise OutputError(
-                    f"{self.path}: output path is the input log; choose another --out "
-                    "(trackctl never overwrites its input)"
-                )
+        self._target = check_output(self.path, inputs)  # the output rule: logs/output.py
         if compression not in COMPRESSIONS:
             raise OutputError(
                 f"compression {compression!r} unknown; expected one of {sorted(COMPRESSIONS)}"
             )
-        self._target = check_output_path(self.path)
         self.partial_path = partial_path(self._target, partial_suffix)
         self.keep_partial = keep_partial
-        fd = _open_locked(self.partial_path, self.path)
+        with signals_deferred():  # created and registered as one step (see logs/output.py)
+            fd = _open_locked(self.partial_path, self.path)
+            if not keep_partial:
+                track_unfinished(self.partial_path)
         self._stream: IO[bytes] = os.fdopen(fd, "wb")
         self._writer = Writer(
             self._stream,
@@ -242,19 +188,20 @@ class LogWriter:
         """Channel id for ``topic``, registering schema and channel on first use.
 
         Raises:
-            OutputError: the topic was already registered with another schema or encoding.
+            ChannelError: the topic was already registered with another schema or encoding, or
+                the log holds :data:`MAX_CHANNELS` channels already.
         """
         known = self._channels.get(topic)
         if known is not None:
             cid, known_schema, known_enc = known
             if (known_schema, known_enc) != (schema_name, message_encoding):
-                raise OutputError(
+                raise ChannelError(
                     f"{topic}: already written with schema {known_schema} ({known_enc}); "
                     f"cannot also write {schema_name} ({message_encoding}) on it"
                 )
             return cid
         if len(self._channels) >= MAX_CHANNELS:
-            raise OutputError(
+            raise ChannelError(
                 f"{self.path}: topic {topic} would be channel {len(self._channels) + 1}; an MCAP "
                 f"log holds at most {MAX_CHANNELS} channels (16-bit channel ids)"
             )
@@ -399,7 +346,9 @@ class LogWriter:
             self._writer.finish()  # type: ignore[no-untyped-call]
             self._stream.flush()
             os.fsync(self._stream.fileno())
-            os.replace(self.partial_path, self._target)  # still locked while renamed
+            with signals_deferred():
+                os.replace(self.partial_path, self._target)  # still locked while renamed
+                forget_unfinished(self.partial_path)
         except OSError as err:
             self._fail(err, "finish")
         self._closed = True
@@ -417,18 +366,20 @@ class LogWriter:
             return
         self._closed = True
         keep = self.keep_partial and self.message_count > 0
-        try:
-            if keep:
-                self._stream.flush()
-            else:
-                self.partial_path.unlink(missing_ok=True)
-        except OSError:
-            pass
-        finally:
+        with signals_deferred():
             try:
-                self._stream.close()
+                if keep:
+                    self._stream.flush()
+                else:
+                    self.partial_path.unlink(missing_ok=True)
+                    forget_unfinished(self.partial_path)
             except OSError:
                 pass
+            finally:
+                try:
+                    self._stream.close()
+                except OSError:
+                    pass
 
     def __enter__(self) -> LogWriter:
         return self

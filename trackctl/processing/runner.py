@@ -14,8 +14,14 @@ from pathlib import Path
 from trackctl.errors import OutputError
 from trackctl.logs.copy import copy_log
 from trackctl.logs.messages import MetricReport, MetricValue
+from trackctl.logs.output import (
+    check_output,
+    forget_unfinished,
+    signals_deferred,
+    track_unfinished,
+)
 from trackctl.logs.reader import LogReader
-from trackctl.logs.writer import LogWriter, check_output_path
+from trackctl.logs.writer import LogWriter
 from trackctl.metrics.catalog import WALL_S, catalog
 from trackctl.metrics.report import METADATA_PREFIX, jsonable_metrics, report_topic
 from trackctl.processing.base import Processor, Progress
@@ -82,6 +88,7 @@ def run_processors(
     progress: Progress | None = None,
     *,
     outputs_only: bool = False,
+    inputs: Sequence[str | os.PathLike[str] | None] = (),
 ) -> list[MetricReport]:
     """Run ``chain`` in order; each processor sees the input plus what the earlier ones wrote.
 
@@ -92,13 +99,18 @@ def run_processors(
             channels then go to a temporary file that is deleted.
         outputs_only: the output holds only what the processors add (their channels, reports
             and metadata), not a copy of the input.
+        inputs: other files the run reads (a site file, an EID list): the output may be none
+            of them either.
 
     Raises:
-        OutputError: the output path is the input, or the chain is empty.
+        OutputError: the output rule (:func:`trackctl.logs.output.check_output`) refuses
+            ``out_path``, or the chain is empty. Checked before any work.
     """
     if not chain:
         raise OutputError("no processor given; pass --with NAME (see `trackctl process --list`)")
     input_path = Path(input_path)
+    if out_path is not None:
+        check_output(out_path, [input_path, *inputs])  # before any work
     with warnings.catch_warnings():
         # the processor's own reader warns about a damaged input; say it once, not twice
         warnings.simplefilter("ignore")
@@ -110,12 +122,6 @@ def run_processors(
                 input_path, Path(tmp) / "out.mcap", chain, progress, outputs_only=True
             )
     out_path = Path(out_path)
-    if out_path.resolve() == input_path.resolve():
-        raise OutputError(
-            f"{out_path}: output path is the input log; choose another --out "
-            "(trackctl never overwrites its input)"
-        )
-    check_output_path(out_path)  # refuse a device or directory before any work
     skip_topics: Container[str] = ()
     skip_metadata: Container[str] = ()
     if outputs_only:
@@ -133,11 +139,7 @@ def run_processors(
             if last:
                 target = out_path
             else:
-                fd, stage_name = tempfile.mkstemp(
-                    prefix=f".{out_path.name}.stage{i}.", suffix=".mcap", dir=out_path.parent
-                )
-                os.close(fd)
-                target = Path(stage_name)
+                target = _stage_file(out_path, i)
                 temps.append(target)
             reports.append(
                 _run_one(
@@ -153,6 +155,19 @@ def run_processors(
             )
             current = target
     finally:
-        for stage in temps:
-            stage.unlink(missing_ok=True)
+        with signals_deferred():
+            for stage in temps:
+                stage.unlink(missing_ok=True)
+                forget_unfinished(stage)
     return reports
+
+
+def _stage_file(out_path: Path, i: int) -> Path:
+    """A hidden intermediate log beside the output, registered so an interrupt removes it."""
+    with signals_deferred():
+        fd, stage_name = tempfile.mkstemp(
+            prefix=f".{out_path.name}.stage{i}.", suffix=".mcap", dir=out_path.parent
+        )
+        os.close(fd)
+        track_unfinished(Path(stage_name))
+    return Path(stage_name)
