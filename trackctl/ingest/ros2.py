@@ -317,28 +317,45 @@ def plan_ros2(
     missing = sorted(set(maps) - set(survey.types))
     if missing:
         raise InputError(
-            f"--map {missing[0]}: the bag has no such topic (topics: {', '.join(sorted(survey.types))})"
+            f"--map {missing[0]}: the bag has no such topic "
+            f"(topics: {', '.join(sorted(survey.types))})"
         )
     roles = {t: _role_of(t, ros_type, maps) for t, ros_type in sorted(survey.types.items())}
     auto_robot = [survey.facts[t] for t, (r, n, _) in roles.items() if r in ROBOT_ROLES and not n]
     robots = robot_names(auto_robot, robot)
-    plans = []
-    for topic, (role, name, why) in roles.items():
-        if role in ROBOT_ROLES:
-            name = name or robots[topic]
-            why = "--robot" if robot and why == "auto" else why
-        elif role not in ("ignore", "tf") and not name:
-            name = _name_from_topic(topic, role)
-        source = source_name(topic, role, name, _GENERIC) if role in ROBOT_ROLES else ""
-        plans.append(
-            TopicPlan(
-                topic, survey.types[topic], survey.counts[topic], role, name, why, source,
-                origin=survey.origins.get(topic),
-            )
-        )
-    plans = _mark_shared(plans)
+    plans = _mark_shared(
+        [_plan(t, role, name, why, survey, robots, robot) for t, (role, name, why) in roles.items()]
+    )
     _check_unique(bag, plans)
     return plans
+
+
+def _plan(
+    topic: str,
+    role: str,
+    name: str,
+    why: str,
+    survey: _BagTopics,
+    robots: Mapping[str, str],
+    robot: str | None,
+) -> TopicPlan:
+    """The plan of one topic: its NAME (the robot of a robot topic) and source."""
+    if role in ROBOT_ROLES:
+        name = name or robots[topic]
+        why = "--robot" if robot and why == "auto" else why
+    elif role not in ("ignore", "tf") and not name:
+        name = _name_from_topic(topic, role)
+    source = source_name(topic, role, name, _GENERIC) if role in ROBOT_ROLES else ""
+    return TopicPlan(
+        topic,
+        survey.types[topic],
+        survey.counts[topic],
+        role,
+        name,
+        why,
+        source,
+        origin=survey.origins.get(topic),
+    )
 
 
 def _mark_shared(plans: list[TopicPlan]) -> list[TopicPlan]:
@@ -368,10 +385,19 @@ def _check_unique(bag: Path, plans: Sequence[TopicPlan]) -> None:
 
 
 def ros_metadata(plans: Sequence[TopicPlan]) -> dict[str, dict[str, str]]:
-    """Metadata records of a conversion: the ENU origin of each GPS topic
-    (``ros/gps/NAME/SOURCE``)."""
+    """Metadata records of a conversion: what became of each converted ROS topic
+    (``ros/topic/<ROS topic>``: type, role, robot or camera, trackctl topics) and the ENU origin
+    of each GPS topic (``ros/gps/NAME/SOURCE``)."""
     out: dict[str, dict[str, str]] = {}
     for p in plans:
+        if p.targets:
+            out[f"ros/topic{p.ros_topic}"] = {
+                "ros_topic": p.ros_topic,
+                "type": p.ros_type,
+                "role": p.role,
+                "name": p.name,
+                "targets": ",".join(p.targets),
+            }
         if p.role == "gps" and p.origin is not None:
             out[f"ros/gps/{p.name}/{p.source}"] = {
                 "ros_topic": p.ros_topic,
@@ -500,7 +526,9 @@ def _imu(msg: Any, name: str, t_ns: int) -> Imu:
     )
     _finite(
         {
-            k.replace("accel_mps2", "linear_acceleration").replace("gyro_rps", "angular_velocity"): v
+            k.replace("accel_mps2", "linear_acceleration").replace(
+                "gyro_rps", "angular_velocity"
+            ): v
             for k, v in imu.finite_values().items()
         }
     )
@@ -734,7 +762,9 @@ class _Converter:
     tree: _StaticTree
     calibrated: set[str] = field(default_factory=set)
 
-    def convert(self, plan: TopicPlan, msgtype: str, msg: Any, log_ns: int) -> list[tuple[str, Any]]:
+    def convert(
+        self, plan: TopicPlan, msgtype: str, msg: Any, log_ns: int
+    ) -> list[tuple[str, Any]]:
         """The ``(trackctl topic, message)`` pairs one ROS message becomes (none for a
         camera's later CameraInfo).
 
