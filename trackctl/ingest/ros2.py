@@ -503,7 +503,7 @@ def _gps(msg: Any, plan: TopicPlan, t_ns: int) -> list[tuple[str, Any]]:
         latitude=float(msg.latitude),
         longitude=float(msg.longitude),
         altitude=float(msg.altitude),
-        position_covariance_type=int(msg.position_covariance_type),
+        position_covariance_type=int(msg.position_covariance_type),  # type: ignore[arg-type]
     )
     fix.position_covariance.extend(float(v) for v in msg.position_covariance)
     fix.timestamp.FromNanoseconds(t_ns)

@@ -27,7 +27,7 @@ integration), ``geometry_msgs/PoseStamped`` and ``PoseWithCovarianceStamped`` (e
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -130,10 +130,10 @@ def _fallback(topic: str, robots: Sequence[str]) -> str:
     """A topic without a robot frame among several robots: the one its namespace names, else
     the first."""
     space = _namespace(topic)
-    return space if space in robots else robots[0]
+    return space if space is not None and space in robots else robots[0]
 
 
-def source_name(topic: str, role: str, robot: str, generic: Mapping[str, object]) -> str:
+def source_name(topic: str, role: str, robot: str, generic: Collection[str]) -> str:
     """The name of a topic inside its robot: the topic's meaningful segments without the
     robot's name (``/stereo_odometer/odometry`` -> ``stereo_odometer``, ``/r1/odom`` of r1 ->
     ``odom``)."""
@@ -155,7 +155,7 @@ def fix_is_valid(msg: Any) -> bool:
 
 def enu_from_fix(msg: Any, origin: GeoOrigin) -> tuple[float, float, float]:
     """East, north, up (metres) of a fix from ``origin`` (WGS84, pymap3d)."""
-    import pymap3d
+    import pymap3d  # type: ignore[import-untyped]
 
     e, n, u = pymap3d.geodetic2enu(
         float(msg.latitude),

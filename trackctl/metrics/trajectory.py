@@ -74,7 +74,7 @@ class TrajectoryErrors:
 def evo_missing() -> str | None:
     """Why APE/RPE cannot be computed here (evo not installed), or None."""
     try:
-        import evo.core.metrics  # noqa: F401
+        import evo.core.metrics  # type: ignore[import-untyped] # noqa: F401
     except ImportError:
         return "evo is not installed (pip install 'trackctl[eval]')"
     return None
@@ -148,7 +148,7 @@ def trajectory_errors(
     if pairs is None:
         return None
     from evo.core import metrics
-    from evo.core.trajectory import PoseTrajectory3D
+    from evo.core.trajectory import PoseTrajectory3D  # type: ignore[import-untyped]
 
     t, exyz, eyaw, rxyz, ryaw = pairs
     e = PoseTrajectory3D(positions_xyz=exyz, orientations_quat_wxyz=_quats_wxyz(eyaw), timestamps=t)
@@ -175,7 +175,7 @@ def trajectory_errors(
 def _rpe(ref: object, est: object, delta_m: float) -> float | None:
     """RMS relative translation error per ``delta_m`` metres of the reference's path."""
     from evo.core import metrics
-    from evo.core.units import Unit
+    from evo.core.units import Unit  # type: ignore[import-untyped]
 
     try:
         rpe = metrics.RPE(
