@@ -67,7 +67,7 @@ def test_recorded_bag_localizes_like_the_native_log(
 
 def test_plan_by_type_and_overrides(bag: Path) -> None:
     plan = {p.ros_topic: p for p in plan_ros2(bag)}
-    assert plan["/r1/odom"].targets == ("/robot/r1/odom",)
+    assert plan["/r1/odom"].targets == ("/robot/r1/odom", "/robot/r1/reference/odom")
     assert plan["/node0/image/compressed"].targets == ("/node0/image",)
     assert plan["/node0/camera_info"].targets == ("/node0/calibration", "/node0/camera_model")
     assert plan["/tf_static"].targets == ("/tf_static",)
@@ -76,7 +76,8 @@ def test_plan_by_type_and_overrides(bag: Path) -> None:
         p.ros_topic: p
         for p in plan_ros2(bag, parse_maps(["/r1/odom=odometry:base", "/r1/imu=ignore"]))
     }
-    assert mapped["/r1/odom"].targets == ("/robot/base/odom",) and mapped["/r1/odom"].why == "--map"
+    assert mapped["/r1/odom"].targets == ("/robot/base/odom", "/robot/base/reference/odom")
+    assert mapped["/r1/odom"].why == "--map"
     assert mapped["/r1/imu"].targets == ()
     with pytest.raises(InputError, match="--map /nope: the bag has no such topic"):
         plan_ros2(bag, parse_maps(["/nope=odometry:x"]))
@@ -163,7 +164,7 @@ def test_cli_errors(tmp_path: Path, bag: Path) -> None:
     bad = runner.invoke(app, ["record", str(tmp_path / "o.mcap"), "--ros2", str(junk)])
     assert bad.exit_code == 2 and "not a readable ROS bag" in bad.output
     nomap = runner.invoke(app, ["record", str(tmp_path / "o.mcap"), "--map", "/a=ignore"])
-    assert nomap.exit_code == 2 and "--map needs --ros2 BAG" in nomap.output
+    assert nomap.exit_code == 2 and "--map needs --ros BAG" in nomap.output
     assert not (tmp_path / "o.mcap").exists()
 
 

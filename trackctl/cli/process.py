@@ -66,6 +66,38 @@ def print_reports(
         screen.print(f"wrote {escape(str(out))}")
 
 
+def _dead_reckoning(
+    source: list[str] | None, reference: str | None, align: bool, origin: bool, twist: bool
+) -> Processor | None:
+    """The dead-reckoning processor its options configure (None: no option given)."""
+    if not (source or reference or align or origin or twist):
+        return None
+    if align and origin:
+        raise InputError("--align and --align-origin exclude each other: give one")
+    from trackctl.processing.dead_reckoning import DeadReckoningConfig, DeadReckoningProcessor
+
+    config = DeadReckoningConfig(
+        sources=tuple(split_csv(source) or ()),
+        reference=reference,
+        align="se3" if align else "origin",
+        use_pose=not twist,
+    )
+    return DeadReckoningProcessor(config)
+
+
+def _chain(names: list[str], reckoning: Processor | None) -> list[Processor]:
+    """The processors ``names`` name, with dead reckoning as its options configure it."""
+    if reckoning is not None and "dead-reckoning" not in names:
+        raise InputError(
+            "--source/--reference/--align/--align-origin/--twist are dead-reckoning options: "
+            "add --with dead-reckoning"
+        )
+    return [
+        reckoning if name == "dead-reckoning" and reckoning else get_processor(name).factory()
+        for name in names
+    ]
+
+
 def process(
     log: Annotated[Path | None, typer.Argument(help="Input MCAP log.")] = None,
     with_: Annotated[
@@ -89,6 +121,42 @@ def process(
     allow_unmeasured: AllowUnmeasuredOption = False,
     verbose: VerboseOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
+    source: Annotated[
+        list[str] | None,
+        typer.Option(
+            metavar="TOPIC",
+            help="dead-reckoning: the odometry source(s) to integrate (trackctl or ROS topic, "
+            "or SOURCE); default: all.",
+        ),
+    ] = None,
+    reference: Annotated[
+        str | None,
+        typer.Option(
+            metavar="TOPIC",
+            help="dead-reckoning: the reference for APE/RPE (a /robot/NAME/reference/* topic, "
+            "its last segment, its ROS topic, or ground_truth); default: the ground truth, "
+            "else the robot's other references.",
+        ),
+    ] = None,
+    align: Annotated[
+        bool,
+        typer.Option(
+            "--align", help="dead-reckoning: align to the reference by SE(3) Umeyama (evo -a)."
+        ),
+    ] = False,
+    align_origin: Annotated[
+        bool,
+        typer.Option(
+            "--align-origin",
+            help="dead-reckoning: align the first poses (evo --align_origin; the default).",
+        ),
+    ] = False,
+    twist: Annotated[
+        bool,
+        typer.Option(
+            "--twist", help="dead-reckoning: integrate the twist even where a pose is given."
+        ),
+    ] = False,
 ) -> None:
     """Run registered processors over a log; the output holds the input plus their results.
 
@@ -107,7 +175,7 @@ def process(
     names = split_csv(with_)
     if log is None or not names:
         raise InputError("process needs LOG and --with NAME (or --list to see processors)")
-    chain = [get_processor(name).factory() for name in names]
+    chain = _chain(names, _dead_reckoning(source, reference, align, align_origin, twist))
     check_fail_if(fail_if, [p.name for p in chain])  # a typo fails before the run, not after
     if out is not None:
         check_output(out, [log])

@@ -83,19 +83,30 @@ def record(
     ros2: Annotated[
         Path | None,
         typer.Option(
-            "--ros2",
+            "--ros",
             metavar="BAG",
-            help="ROS 2 bag (rosbag2 directory, .mcap or .db3): odometry, IMU, images, "
-            "camera_info and tf mapped by message type (table printed).",
+            help="ROS bag: ROS 1 .bag, or ROS 2 rosbag2 directory, .mcap or .db3 (odometry, IMU, "
+            "poses, GPS, images, camera_info and tf mapped by message type; table printed).",
         ),
+    ] = None,
+    ros2_alias: Annotated[
+        Path | None, typer.Option("--ros2", metavar="BAG", hidden=True, help="Alias of --ros.")
     ] = None,
     ros2_map: Annotated[
         list[str] | None,
         typer.Option(
             "--map",
             metavar="ROS_TOPIC=ROLE:NAME",
-            help="Override the ROS 2 mapping of one topic: ROLE is odometry, imu, image, "
-            "camera_info, tf or ignore, e.g. --map /odom=odometry:r1.",
+            help="Override the ROS mapping of one topic: ROLE is odometry, imu, pose, gps, "
+            "image, camera_info, tf or ignore, e.g. --map /odom=odometry:r1.",
+        ),
+    ] = None,
+    robot: Annotated[
+        str | None,
+        typer.Option(
+            metavar="NAME",
+            help="The robot every robot topic of the --ros bag belongs to (default: from its "
+            "frames and namespaces).",
         ),
     ] = None,
     site: Annotated[
@@ -191,8 +202,9 @@ def record(
         calib=calib,
         detections=detections,
         min_score=min_score,
-        ros2=ros2,
+        ros2=_one_bag(ros2, ros2_alias),
         ros2_map=ros2_map,
+        robot=robot,
         site=site,
         fps=fps,
         every=every,
@@ -227,6 +239,7 @@ def _files_config(
     min_score: float | None,
     ros2: Path | None,
     ros2_map: list[str] | None,
+    robot: str | None,
     site: Path | None,
     fps: float | None,
     every: int,
@@ -244,7 +257,7 @@ def _files_config(
     from trackctl.ingest.record import RecordConfig, parse_named
     from trackctl.ingest.video import FrameSelection
 
-    plan = _ros2_plan(ros2, ros2_map, quiet)
+    plan = _ros2_plan(ros2, ros2_map, robot, quiet)
     return RecordConfig(
         site=site,
         site_records=load_site_file(site),
@@ -392,25 +405,34 @@ def filter_cmd(
         )
 
 
-def _ros2_plan(bag: Path | None, maps: list[str] | None, quiet: bool) -> tuple[Any, ...]:
-    """The ROS 2 topic plan (printed unless quiet); empty without a bag."""
-    if maps and bag is None:
-        raise InputError("--map needs --ros2 BAG")
+def _one_bag(ros: Path | None, alias: Path | None) -> Path | None:
+    """``--ros`` or its old name ``--ros2`` (not both)."""
+    if ros is not None and alias is not None:
+        raise InputError("--ros and --ros2 are one option (--ros2 is its old name): give one")
+    return ros if ros is not None else alias
+
+
+def _ros2_plan(
+    bag: Path | None, maps: list[str] | None, robot: str | None, quiet: bool
+) -> tuple[Any, ...]:
+    """The ROS topic plan (printed unless quiet); empty without a bag."""
+    if (maps or robot) and bag is None:
+        raise InputError(f"{'--map' if maps else '--robot'} needs --ros BAG")
     if bag is None:
         return ()
     from trackctl.ingest.ros2 import parse_maps, plan_ros2
 
-    plan = tuple(plan_ros2(bag, parse_maps(maps or [])))
+    plan = tuple(plan_ros2(bag, parse_maps(maps or []), robot))
     if not quiet:
         _print_plan(bag, plan)
     return plan
 
 
 def _print_plan(bag: Path, plan: tuple[Any, ...]) -> None:
-    """The ROS 2 topic mapping as a table on stderr."""
+    """The ROS topic mapping as a table on stderr."""
     from rich.table import Table
 
-    table = Table(title=f"{escape(str(bag))}: ROS 2 topics", title_justify="left")
+    table = Table(title=f"{escape(str(bag))}: ROS topics", title_justify="left")
     for col in ("ROS topic", "type", "count", "role", "trackctl topic(s)", "by"):
         table.add_column(col)
     for p in plan:

@@ -26,7 +26,7 @@ from trackctl.ingest.live import (
     stop_on_signals,
 )
 from trackctl.ingest.mot import read_mot_detections
-from trackctl.ingest.ros2 import TopicPlan, read_ros2
+from trackctl.ingest.ros2 import TopicPlan, read_ros2, ros_metadata
 from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv, seconds_to_ns
 from trackctl.ingest.video import FrameSelection, frame_size, read_frames
 from trackctl.logs import topics
@@ -78,7 +78,7 @@ class RecordConfig:
     site_records: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
     """Its metadata records (written before any message)."""
     ros2: Path | None = None
-    """A ROS 2 bag (directory or .mcap/.db3) to convert with ``ros2_plan``."""
+    """A ROS bag (ROS 1 .bag, rosbag2 directory or .mcap/.db3) to convert with ``ros2_plan``."""
     ros2_plan: tuple[TopicPlan, ...] = ()
     """What becomes of each of the bag's topics (:func:`~trackctl.ingest.ros2.plan_ros2`)."""
 
@@ -158,6 +158,8 @@ def write_site(writer: LogWriter, cfg: RecordConfig) -> None:
     """The site file's metadata records, and the file itself as an attachment."""
     for name, record in cfg.site_records.items():
         writer.add_metadata(name, dict(record))
+    for name, record in ros_metadata(cfg.ros2_plan).items():  # e.g. a GPS topic's ENU origin
+        writer.add_metadata(name, record)
     if cfg.site is not None:
         data = cfg.site.read_bytes()
         writer.add_attachment(f"site/{cfg.site.name}", data, "application/x-yaml", 0)
@@ -287,7 +289,7 @@ class IngestPlan:
             raise InputError("--stdin and --udp are exclusive; record one live source at a time")
         if self.files.empty and not self.live:
             raise InputError(
-                "nothing to record: give --imu/--rssi/--odom/--video/--detections/--ros2, "
+                "nothing to record: give --imu/--rssi/--odom/--video/--detections/--ros, "
                 "--stdin or --udp"
             )
 

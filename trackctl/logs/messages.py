@@ -188,6 +188,8 @@ class WheelOdometry(JsonMessage):
         v_mps: Forward speed, m/s.
         omega_rps: Yaw rate, rad/s, counter-clockwise positive.
         pose: The robot's own dead-reckoned pose in its odometry frame.
+        vy_mps: Lateral speed, m/s, +y to the left (holonomic robots, or a skidding one; ROS
+            twist.linear.y); null when not reported.
     """
 
     SCHEMA: ClassVar[str] = "trackctl.WheelOdometry"
@@ -199,6 +201,7 @@ class WheelOdometry(JsonMessage):
     v_mps: float | None = None
     omega_rps: float | None = None
     pose: Pose2D | None = None
+    vy_mps: float | None = None
 
     def __post_init__(self) -> None:
         has_ticks = self.left_ticks is not None and self.right_ticks is not None
@@ -210,7 +213,14 @@ class WheelOdometry(JsonMessage):
 
     def finite_values(self) -> dict[str, float]:
         """Every float field by dotted name (for NaN/inf checks)."""
-        out = {k: v for k, v in (("v_mps", self.v_mps), ("omega_rps", self.omega_rps))}
+        out = {
+            k: v
+            for k, v in (
+                ("v_mps", self.v_mps),
+                ("omega_rps", self.omega_rps),
+                ("vy_mps", self.vy_mps),
+            )
+        }
         if self.pose is not None:
             out.update({f"pose.{k}": v for k, v in self.pose._asdict().items()})
         return {k: v for k, v in out.items() if v is not None}

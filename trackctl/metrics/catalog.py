@@ -440,8 +440,35 @@ register_catalog(
     MetricCatalog(
         "dead-reckoning",
         _m(["error_m_mean", "error_m_max", "error_m_final"], TRUTH)
-        + _m(["robots", "poses", "path_m"]),
-        headline=("robots", "poses", "path_m", "error_m_mean", "error_m_final"),
+        + _m(["robots", "sources", "poses", "path_m", "method/*"])
+        + _m(
+            [
+                "reference",
+                "ape_m_rmse",
+                "rpe_m_rmse",
+                "reference/*",
+                "ape_m_rmse/*",
+                "ape_m_mean/*",
+                "ape_m_max/*",
+                "rpe_m_rmse/*",
+            ],
+            empty="no reference to score against (ground truth or /robot/NAME/reference/*)",
+        )
+        + _m(
+            ["own_pose_gap_m_final/*", "twist_pose_disagreement/*"],
+            empty="the odometry carries no pose (or no twist) to compare",
+        ),
+        headline=(
+            "robots",
+            "sources",
+            "poses",
+            "path_m",
+            "error_m_mean",
+            "error_m_final",
+            "reference",
+            "ape_m_rmse",
+            "rpe_m_rmse",
+        ),
     )
 )
 
