@@ -11,6 +11,7 @@ __all__ = [
     "calibration",
     "camera_model",
     "detections",
+    "overlay",
     "metrics",
     "EV_E",
     "EV_GROUND_TRUTH",
@@ -61,6 +62,12 @@ def camera_model(camera: str) -> str:
 def detections(camera: str) -> str:
     """Detections of a camera: ``/NAME/detections`` (trackctl.Detections)."""
     return f"/{camera}/detections"
+
+
+def overlay(source_topic: str) -> str:
+    """Image overlay of a per-camera topic: ``SOURCE/annotations`` (foxglove.ImageAnnotations),
+    e.g. ``/NAME/detections/annotations``; stamped as the camera's images are."""
+    return f"{source_topic}/annotations"
 
 
 def metrics(processor: str) -> str:

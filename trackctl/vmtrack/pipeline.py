@@ -26,6 +26,7 @@ from filterpy.kalman import rts_smoother
 from trackctl.errors import MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.logs import topics
+from trackctl.logs.foxglove import detection_annotations
 from trackctl.logs.messages import (
     CameraModel,
     Detections,
@@ -50,6 +51,7 @@ from trackctl.vmtrack.identity import BindingStats, IdentityBinder
 from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.online import OnlineTracker
+from trackctl.vmtrack.overlay import TrackOverlay
 from trackctl.vmtrack.radio import RadioEvidence
 from trackctl.vmtrack.retrack import PhoneTrack, Retracked, VisitReading, retrack
 from trackctl.vmtrack.scene import scene_update
@@ -202,6 +204,7 @@ def _track_log(
     inputs: _Inputs,
     online: OnlineTracker,
     progress: Progress | None,
+    overlay: TrackOverlay,
 ) -> dict[int, GroundTruth]:
     """Stage 2 (detection, association, identity): stream the log frame by frame through the
     online tracker; returns the ground truth seen (for the metrics only)."""
@@ -233,8 +236,10 @@ def _track_log(
         frame_t = msg.log_time_ns
         if detector is None:
             points.extend(_ground_points(reader, msg.topic, msg.message, inputs.cams))
+            overlay.add(msg.log_time_ns, msg.message.t_ns, msg.message)
             continue
-        _detect_in_frame(msg, detector, online, writer, search_full, points, covs)
+        found = _detect_in_frame(msg, detector, online, writer, search_full, points, covs)
+        overlay.add(msg.log_time_ns, _image_stamp(msg), found)
     if frame_t is not None:
         online.process_frame(frame_t, points, covs)
     online.close()
@@ -249,10 +254,10 @@ def _detect_in_frame(
     search_full: bool,
     points: list[tuple[str, np.ndarray]],
     covs: list[np.ndarray] | None,
-) -> None:
+) -> Detections:
     """One camera image of stage 2: people detected (in the tracks' predicted regions unless
-    ``search_full``), their detections written, their ground points (and covariances)
-    appended to the frame's."""
+    ``search_full``), their detections written (with their image overlay), their ground points
+    (and covariances) appended to the frame's; returns the detections."""
     camera = msg.topic.strip("/").split("/")[0]
     people = online.predictions(msg.log_time_ns, moved_only=True)
     preds = None if search_full else online.predictions(msg.log_time_ns)
@@ -260,9 +265,23 @@ def _detect_in_frame(
         msg.log_time_ns, camera, bytes(msg.message.data), preds, people
     )
     writer.write(detections_topic(camera), found, msg.log_time_ns)
+    writer.write(
+        topics.overlay(detections_topic(camera)),
+        detection_annotations(found, _image_stamp(msg)),
+        msg.log_time_ns,
+    )
     points.extend((camera, g) for g in ground)
     if covs is not None:
         covs.extend(ground_covs)
+    return found
+
+
+def _image_stamp(msg: LogMessage) -> int:
+    """The image's own timestamp (what Foxglove matches overlays on), else its log time."""
+    image = msg.message
+    if image.HasField("timestamp"):
+        return int(image.timestamp.ToNanoseconds())
+    return msg.log_time_ns
 
 
 def _association_cost(mode: Mode, cfg: VmTrackConfig) -> AssociationCost:
@@ -291,14 +310,18 @@ def run(
     clock.lap("motion")
     identity = IdentityBinder(phones, cfg)
     online = OnlineTracker(cfg, identity, inputs.mode, _association_cost(inputs.mode, cfg))
-    truth = _track_log(reader, writer, inputs, online, progress)
+    cams = inputs.detector.cams if inputs.detector is not None else inputs.cams
+    overlay = TrackOverlay(cams, cfg.frames.detector.person_height_m)
+    truth = _track_log(reader, writer, inputs, online, progress, overlay)
     if inputs.mode is Mode.VM:
         identity.finish()
     clock.lap("tracking")
     progress = progress or _silent
     progress(0, None, "smoothing")
     positions = _positions(online.frames, cfg.smooth, cfg.tracker)
-    report = _write_and_score(writer, online, positions, truth, phones, cfg, inputs.mode, progress)
+    report = _write_and_score(
+        writer, online, positions, truth, phones, cfg, inputs.mode, progress, overlay
+    )
     clock.lap("smoothing")
     metrics = dict(report)
     metrics.update(_timing_metrics(clock, online, inputs.detector))
@@ -627,13 +650,23 @@ def _write_and_score(
     cfg: VmTrackConfig,
     mode: Mode,
     progress: Progress,
+    overlay: TrackOverlay,
 ) -> dict[str, float | int | str | None]:
-    """Stages 4-5: write tracks and the 3-D scene per frame; score them against the ground
-    truth when the log has it (metrics only: nothing above reads the truth)."""
+    """Stages 4-5: write tracks, the 3-D scene and the cameras' track overlays per frame; score
+    them against the ground truth when the log has it (metrics only: nothing above reads the
+    truth)."""
     offline = _offline_stages(online, positions, phones, cfg, mode, progress)
     score = _TruthScore(truth, online, cfg.eval_threshold_m, mode, set(phones))
     tally = _write_frames(
-        writer, online.frames, positions, offline, phones, cfg.retrack.gate_m, progress, score
+        writer,
+        online.frames,
+        positions,
+        offline,
+        phones,
+        cfg.retrack.gate_m,
+        progress,
+        score,
+        overlay,
     )
     return _report(online, phones, mode, offline, score, tally)
 
@@ -727,6 +760,7 @@ def _write_frames(
     gate_m: float,
     progress: Progress,
     score: _TruthScore,
+    overlay: TrackOverlay,
 ) -> _Tally:
     """Each frame's published tracks and 3-D scene written, counted and scored; returns the
     count."""
@@ -738,6 +772,7 @@ def _write_frames(
         tally.add(tracks)
         writer.write(TRACKS_TOPIC, Tracks(fr.t_ns, tuple(tracks)))
         writer.write(SCENE_TOPIC, scene_update(fr.t_ns, tracks, set(phones)), fr.t_ns)
+        overlay.write(writer, fr.t_ns, tracks)
         score.add_frame(fr.t_ns, tracks)
     return tally
 
