@@ -27,6 +27,9 @@ __all__ = [
     "frame_transform",
     "odom_frame",
     "base_frame",
+    "odom_base_transform",
+    "map_odom_transform",
+    "map_base_transform",
     "image_annotations",
     "detection_annotations",
     "label_color",
@@ -74,6 +77,38 @@ def frame_transform(
     msg.rotation.z = math.sin(yaw_rad / 2.0)
     msg.rotation.w = math.cos(yaw_rad / 2.0)
     return msg
+
+
+def odom_base_transform(
+    t_ns: int, robot: str, x_m: float, y_m: float, yaw_rad: float
+) -> FrameTransform:
+    """``<NAME>/odom -> <NAME>/base_link``: the robot's dead-reckoned pose in its odometry
+    frame."""
+    return frame_transform(t_ns, odom_frame(robot), base_frame(robot), x_m, y_m, yaw_rad)
+
+
+def map_odom_transform(
+    t_ns: int,
+    robot: str,
+    map_pose: tuple[float, float, float],
+    odom_pose: tuple[float, float, float],
+) -> FrameTransform:
+    """``map -> <NAME>/odom``: the odometry frame's pose in the map that puts the robot at
+    ``map_pose`` (x, y, yaw; the localizer's estimate) when its odometry says ``odom_pose``
+    (what ROS localizers publish: map_T_odom = map_T_base * inverse(odom_T_base))."""
+    (xm, ym, yaw_m), (xo, yo, yaw_o) = map_pose, odom_pose
+    yaw = yaw_m - yaw_o
+    c, s = math.cos(yaw), math.sin(yaw)
+    x, y = xm - (c * xo - s * yo), ym - (s * xo + c * yo)
+    yaw = math.atan2(math.sin(yaw), math.cos(yaw))
+    return frame_transform(t_ns, MAP_FRAME, odom_frame(robot), x, y, yaw)
+
+
+def map_base_transform(
+    t_ns: int, robot: str, x_m: float, y_m: float, yaw_rad: float
+) -> FrameTransform:
+    """``map -> <NAME>/base_link``: a pose estimated without odometry (vision-only fixes)."""
+    return frame_transform(t_ns, MAP_FRAME, base_frame(robot), x_m, y_m, yaw_rad)
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 from trackctl.geometry.odometry import DiffDrive, increment, integrate_step
 from trackctl.logs import topics
-from trackctl.logs.foxglove import pose_in_frame
+from trackctl.logs.foxglove import odom_base_transform, pose_in_frame
 from trackctl.logs.messages import GroundTruth, MetricReport, WheelOdometry
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
@@ -282,6 +282,9 @@ class DeadReckoningProcessor:
             pose_in_frame(t_ns, x, y, yaw, frame_id=f"{name}/odom"),
             t_ns,
         )
+        # the same pose as a frame tree NAME/odom -> NAME/base_link (formats/README.md)
+        tf_topic = topics.transforms(f"/robot/{name}/dead_reckoning")
+        writer.write(tf_topic, odom_base_transform(t_ns, name, x, y, yaw), t_ns)
         rk.poses += 1
 
     def _motion(
