@@ -47,10 +47,15 @@ from trackctl.bridgeloc.smooth import RtsSmoother, position_sigma
 from trackctl.bridgeloc.tags import check_family
 from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
-from trackctl.geometry.odometry import DiffDrive, increment
+from trackctl.geometry.odometry import DiffDrive, increment, integrate_step
 from trackctl.ingest.site import warn_site_defaults
 from trackctl.logs import topics
-from trackctl.logs.foxglove import pose_in_frame
+from trackctl.logs.foxglove import (
+    map_base_transform,
+    map_odom_transform,
+    odom_base_transform,
+    pose_in_frame,
+)
 from trackctl.logs.messages import CameraModel, GroundTruth, WheelOdometry
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
@@ -628,6 +633,13 @@ class RobotPass:
         """(fix, state) positions at the first of the current run of rejected lone I-Cam fixes."""
         self.prev_odom: WheelOdometry | None = None
         self.odom_topic = topics.odom(setup.robot)
+        self.tf_topic = topics.transforms("/bridgeloc")
+        self.odom_pose: Pose = (0.0, 0.0, 0.0)
+        """The wheels alone, from the first odometry sample (the ``NAME/odom`` frame)."""
+        self._odom_at: dict[int, Pose] = {}
+        """Full mode with odometry: the wheels' pose at each robot frame waiting for its
+        (smoothed) estimate."""
+        self._odom_tree = cfg.mode is Mode.FULL and self.odom_topic in setup.present
         self.frame_topic: str | None = topics.image(setup.rcam_name) if setup.needs_robot else None
         if cfg.mode is Mode.ICAM:
             # I-Cam positions are the infrastructure frames; evaluate at ground-truth instants
@@ -650,6 +662,7 @@ class RobotPass:
             self._fuse_icam_until(t_ns)
         if topic == self.odom_topic:
             self._on_odometry(message)  # type: ignore[arg-type]
+            self._write_odom_frame(t_ns)
             return
         if self.cfg.mode is Mode.ICAM:
             fix = self.icam.at(t_ns)
@@ -709,7 +722,25 @@ class RobotPass:
             step = increment(self.prev_odom, od, self.drive)
             if step is not None:
                 self.ekf.predict(*step)
+                self.odom_pose = integrate_step(*self.odom_pose, *step)
         self.prev_odom = od
+
+    def _write_odom_frame(self, t_ns: int) -> None:
+        """Full mode: ``NAME/odom -> NAME/base_link`` at each odometry sample (the wheels)."""
+        if self._odom_tree:
+            tf = odom_base_transform(t_ns, self.setup.robot, *self.odom_pose)
+            self.writer.write(self.tf_topic, tf, t_ns)
+
+    def _write_map_frame(self, t_ns: int, pose: Pose) -> None:
+        """The estimate as a frame: ``map -> NAME/odom`` (full mode with odometry: the
+        correction of the wheels' pose at that frame), else ``map -> NAME/base_link``."""
+        robot = self.setup.robot
+        if self._odom_tree:
+            odom = self._odom_at.pop(t_ns, self.odom_pose)
+            tf = map_odom_transform(t_ns, robot, pose, odom)
+        else:
+            tf = map_base_transform(t_ns, robot, *pose)
+        self.writer.write(self.tf_topic, tf, t_ns)
 
     def _observe_tags(
         self, t_ns: int, data: bytes, det_times: list[float]
@@ -782,6 +813,8 @@ class RobotPass:
             return
         if self.cfg.mode is Mode.FULL:
             self.stats.frames_with_pose += 1
+            if self._odom_tree:
+                self._odom_at[t_ns] = self.odom_pose
         if self.ekf.smoother is not None:
             # the smoothed covariance also counts the map's and the cameras' systematic
             # errors as independent between fixes, and reads ~10x too sure of itself: the
@@ -797,6 +830,7 @@ class RobotPass:
         if pose is not None:
             self.stats.frames_with_pose += 1
             self.writer.write(POSE_TOPIC, pose_in_frame(t_ns, pose[0], pose[1], pose[2]), t_ns)
+            self._write_map_frame(t_ns, pose)
 
     def _emit_full(self, t_ns: int, x: np.ndarray, p: np.ndarray) -> None:
         """Full mode's pose at a robot frame (smoothed unless ``--no-smooth``)."""
@@ -807,6 +841,7 @@ class RobotPass:
             self.est.append((t_ns, pose))
             self.sigmas[t_ns] = sigma
             self.writer.write(POSE_TOPIC, pose_in_frame(t_ns, *pose), t_ns)
+            self._write_map_frame(t_ns, pose)
 
     def _ekf_update(
         self,
@@ -923,3 +958,4 @@ class RobotPass:
                 if fix is not None:
                     pose = pose_in_frame(int(t), float(fix[0]), float(fix[1]), 0.0)
                     self.writer.write(POSE_TOPIC, pose, int(t))
+                    self._write_map_frame(int(t), (float(fix[0]), float(fix[1]), 0.0))

@@ -18,6 +18,7 @@ from typing import IO
 import numpy as np
 
 from trackctl.errors import InputError
+from trackctl.geometry.boxes import BOX_WIDTH_SHARE, person_boxes
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.logs import topics
 from trackctl.logs.messages import CameraModel, GroundTruth, Tracks, Vec3
@@ -28,9 +29,6 @@ __all__ = ["SCHEMAS", "BOX_WIDTH_SHARE", "PersonBoxes", "load_camera", "write_mo
 
 SCHEMAS = (Tracks.SCHEMA, GroundTruth.SCHEMA)
 """The schemas a MOT export takes."""
-
-BOX_WIDTH_SHARE = 0.41
-"""A standing person's box width as a share of its height (MOTChallenge's pedestrians)."""
 
 NO_BOX = (-1.0, -1.0, -1.0, -1.0)
 
@@ -44,22 +42,12 @@ class PersonBoxes:
 
     def boxes(self, points: np.ndarray) -> list[tuple[float, float, float, float]]:
         """``(left, top, width, height)`` in 1-based pixels per ground point (N, 3)."""
-        if len(points) == 0:
-            return []
-        feet = np.column_stack([points[:, 0], points[:, 1], np.zeros(len(points))])
-        heads = feet + np.array([0.0, 0.0, self.height_m])
-        foot_px, foot_front = self.camera.project(feet)
-        head_px, head_front = self.camera.project(heads)
         out: list[tuple[float, float, float, float]] = []
-        for k in range(len(points)):
-            h_px = float(foot_px[k, 1] - head_px[k, 1])
-            if not (foot_front[k] and head_front[k]) or h_px <= 0:
-                out.append(NO_BOX)
-                continue
-            w_px = BOX_WIDTH_SHARE * h_px
+        for box in person_boxes(self.camera, points, self.height_m):
             # MOTChallenge counts pixels from 1; trackctl's pixel origin is the top-left corner
-            left = float(foot_px[k, 0]) - w_px / 2 + 1.0
-            out.append((left, float(head_px[k, 1]) + 1.0, w_px, h_px))
+            out.append(
+                NO_BOX if box is None else (box.x_px + 1.0, box.y_px + 1.0, box.w_px, box.h_px)
+            )
         return out
 
 

@@ -297,8 +297,8 @@ def parse_xml(data: bytes, where: str, max_depth: int = MAX_DEPTH) -> Element:
     Raises:
         InputError: not well-formed XML, an entity or DTD, or too deep (naming the element).
     """
-    from defusedxml import DefusedXmlException
-    from defusedxml.ElementTree import iterparse
+    from defusedxml import DefusedXmlException  # type: ignore[import-untyped]
+    from defusedxml.ElementTree import iterparse  # type: ignore[import-untyped]
 
     depth = 0
     events = iterparse(io.BytesIO(data), events=("start", "end"), forbid_dtd=True)
@@ -314,7 +314,7 @@ def parse_xml(data: bytes, where: str, max_depth: int = MAX_DEPTH) -> Element:
         raise InputError(f"{where}: not well-formed XML ({err})") from None
     except DefusedXmlException as err:
         raise InputError(f"{where}: XML with {type(err).__name__} is refused ({err})") from None
-    root: Element = events.root  # type: ignore[attr-defined]
+    root: Element = events.root
     return root
 
 

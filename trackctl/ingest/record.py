@@ -30,6 +30,8 @@ from trackctl.ingest.ros2 import TopicPlan, read_ros2, ros_metadata
 from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv, seconds_to_ns
 from trackctl.ingest.video import FrameSelection, frame_size, read_frames
 from trackctl.logs import topics
+from trackctl.logs.foxglove import detection_annotations
+from trackctl.logs.messages import Detections
 from trackctl.logs.writer import LogWriter
 from trackctl.progress import Progress
 
@@ -140,6 +142,14 @@ def _stamped(source: Iterable[Any], topic: str, order: int) -> Iterator[Stamped]
         yield (msg.t_ns, order, topic, msg)
 
 
+def _with_annotations(source: Iterable[Detections], topic: str, order: int) -> Iterator[Stamped]:
+    """Each detections message, then its boxes as a Foxglove image overlay at the same time."""
+    overlay = topics.overlay(topic)
+    for dets in source:
+        yield (dets.t_ns, order, topic, dets)
+        yield (dets.t_ns, order, overlay, detection_annotations(dets))
+
+
 def _frames(path: Path, name: str, cfg: RecordConfig, order: int) -> Iterator[Stamped]:
     for t_ns, img in read_frames(
         path,
@@ -246,7 +256,7 @@ def record_files(
         dets = read_mot_detections(path, name, cfg.fps or 0.0, start_ns, cfg.min_score)
         if skipped is not None:
             skipped[str(path)] = dets.skipped
-        streams.append(_stamped(dets.messages, topics.detections(name), order))
+        streams.append(_with_annotations(dets.messages, topics.detections(name), order))
         order += 1
     if cfg.ros2 is not None:
         streams.append(read_ros2(cfg.ros2, cfg.ros2_plan, order))

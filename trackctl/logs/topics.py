@@ -11,6 +11,8 @@ __all__ = [
     "calibration",
     "camera_model",
     "detections",
+    "overlay",
+    "transforms",
     "metrics",
     "EV_E",
     "EV_GROUND_TRUTH",
@@ -61,6 +63,18 @@ def camera_model(camera: str) -> str:
 def detections(camera: str) -> str:
     """Detections of a camera: ``/NAME/detections`` (trackctl.Detections)."""
     return f"/{camera}/detections"
+
+
+def overlay(source_topic: str) -> str:
+    """Image overlay of a per-camera topic: ``SOURCE/annotations`` (foxglove.ImageAnnotations),
+    e.g. ``/NAME/detections/annotations``; stamped as the camera's images are."""
+    return f"{source_topic}/annotations"
+
+
+def transforms(prefix: str) -> str:
+    """A processor's robot frame tree: ``PREFIX/tf`` (foxglove.FrameTransform, one transform a
+    message), e.g. ``/robot/NAME/dead_reckoning/tf``, ``/smirror/NAME/tf``, ``/bridgeloc/tf``."""
+    return f"{prefix}/tf"
 
 
 def metrics(processor: str) -> str:

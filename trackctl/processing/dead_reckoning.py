@@ -25,7 +25,7 @@ from typing import Any
 from trackctl.errors import InputError
 from trackctl.geometry.odometry import DiffDrive, compose, planar_increment, pose_increment
 from trackctl.logs import topics
-from trackctl.logs.foxglove import pose_in_frame
+from trackctl.logs.foxglove import odom_base_transform, pose_in_frame
 from trackctl.logs.messages import GroundTruth, MetricReport, MetricValue, WheelOdometry
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
@@ -569,6 +569,11 @@ class _Run:
         s.track.add(t_ns, *s.pose)
         x, y, yaw = s.pose
         writer.write(s.out_topic, pose_in_frame(t_ns, x, y, yaw, frame_id=f"{s.robot}/odom"), t_ns)
+        # the same pose as a frame tree LABEL/odom -> LABEL/base_link (formats/README.md); one
+        # tree per source, so two sources of one robot never publish the same frame twice
+        writer.write(
+            topics.transforms(s.out_topic), odom_base_transform(t_ns, s.label, x, y, yaw), t_ns
+        )
         self.poses += 1
 
     def _score_pending(self, s: _Source, prev: tuple[float, ...] | None, t1: int) -> None:

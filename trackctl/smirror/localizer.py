@@ -23,9 +23,14 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from trackctl.geometry.odometry import increment
+from trackctl.geometry.odometry import increment, integrate_step
 from trackctl.logs import topics
-from trackctl.logs.foxglove import pose_in_frame
+from trackctl.logs.foxglove import (
+    map_base_transform,
+    map_odom_transform,
+    odom_base_transform,
+    pose_in_frame,
+)
 from trackctl.logs.messages import GroundTruth, MirrorTransmission, WheelOdometry
 from trackctl.logs.reader import LogMessage
 from trackctl.logs.writer import LogWriter
@@ -68,12 +73,19 @@ class RobotRun:
     gt_wait: list[tuple[int, float, float]] = field(default_factory=list)
     last_gt_xy: tuple[float, float] | None = None
     path_m: float = 0.0
+    odom_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """The wheels alone, from the first odometry sample (the ``NAME/odom`` frame's origin)."""
     _covering: tuple[tuple[float, float], str | None] | None = None
     """The node covering the last pose asked about (the nodes' frames of one instant ask alike)."""
 
     @property
     def name(self) -> str:
         return self.site.name
+
+    @property
+    def tf_out(self) -> str:
+        """The robot's frame tree: ``/smirror/NAME/tf`` (foxglove.FrameTransform)."""
+        return topics.transforms(f"/smirror/{self.name}")
 
     def requests(self, node: str, cover: Coverage) -> bool:
         """Whether this robot asks ``node`` for its image: lost, it asks every node until one
@@ -237,7 +249,8 @@ class Localizer:
         else:
             was = robot.filt.localized
             dt = (t_ns - robot.filt.t_ns) / 1e9
-            self._dead_reckon(robot, robot.filt, t_ns, odo)
+            ds, dyaw = self._dead_reckon(robot, robot.filt, t_ns, odo)
+            robot.odom_pose = integrate_step(*robot.odom_pose, ds, dyaw)
             res.odometry_s += dt
             res.localized_s += dt if was else 0.0
         robot.dr_ms.append((time.perf_counter() - started) * 1e3)
@@ -245,16 +258,29 @@ class Localizer:
         filt = robot.filt
         if filt.localized and res.first_fix_s is None and self.t_first is not None:
             res.first_fix_s = (t_ns - self.t_first) / 1e9
+        if self.writer is not None:
+            self._write_frames(robot, t_ns)
         if self.writer is not None and filt.localized:
             x, y, yaw = filt.pose
             self.writer.write(robot.pose_out, pose_in_frame(t_ns, x, y, yaw), t_ns)
         while robot.gt_wait and robot.gt_wait[0][0] <= t_ns:
             self._score(robot, *robot.gt_wait.pop(0))
 
+    def _write_frames(self, robot: RobotRun, t_ns: int) -> None:
+        """The robot's frame tree at an odometry sample: ``NAME/odom -> NAME/base_link`` (the
+        wheels alone) and, once localized, ``map -> NAME/odom`` (the estimate's correction)."""
+        assert self.writer is not None and robot.filt is not None
+        odom = robot.odom_pose
+        self.writer.write(robot.tf_out, odom_base_transform(t_ns, robot.name, *odom), t_ns)
+        if robot.filt.localized:
+            tf = map_odom_transform(t_ns, robot.name, robot.filt.pose, odom)
+            self.writer.write(robot.tf_out, tf, t_ns)
+
     def _dead_reckon(
         self, robot: RobotRun, filt: PoseFilter, t_ns: int, odo: WheelOdometry
-    ) -> None:
-        """Apply the fixes that have arrived, then the wheel motion since the last sample."""
+    ) -> tuple[float, float]:
+        """Apply the fixes that have arrived, then the wheel motion since the last sample;
+        returns that motion (distance m, heading change rad)."""
         while robot.pending and robot.pending[0][0] <= t_ns:
             _, ready, sp, sy = robot.pending.pop(0)
             filt.last_nis = None
@@ -266,6 +292,7 @@ class Localizer:
         # encoder ticks, or v/omega held over the interval, or the robot's own poses
         ds, dyaw = increment(last, odo, robot.site.drive) or (0.0, 0.0)
         filt.step(t_ns, ds, dyaw)
+        return ds, dyaw
 
     # -- node frames ----------------------------------------------------------------------------
     def _on_frame(self, name: str, t_ns: int, data: bytes) -> None:
@@ -302,6 +329,9 @@ class Localizer:
             if self.writer is not None:
                 pose = pose_in_frame(t_ns, fix.x_m, fix.y_m, fix.yaw_rad)
                 self.writer.write(robot.pose_out, pose, t_ns)
+                # vision only: no odometry frame between the map and the robot
+                tf = map_base_transform(t_ns, robot.name, fix.x_m, fix.y_m, fix.yaw_rad)
+                self.writer.write(robot.tf_out, tf, t_ns)
 
     def _mirror(self, name: str, t_ns: int, frame: np.ndarray) -> None:
         """A node senses; when robots request images it encodes and sends its foreground."""

@@ -8,9 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from trackctl.logs import topics
-from trackctl.logs.messages import (
-    GroundTruth,
-)
+from trackctl.logs.foxglove import detection_annotations
+from trackctl.logs.messages import Detections, GroundTruth
 from trackctl.logs.reader import LogMessage, LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import Progress
@@ -19,6 +18,7 @@ from trackctl.vmtrack.cost import AssociationCost, VisualCost, VisualMotionCost
 from trackctl.vmtrack.frames import FrameDetector, detections_topic
 from trackctl.vmtrack.inputs import Inputs, ground_points
 from trackctl.vmtrack.online import OnlineTracker
+from trackctl.vmtrack.overlay import TrackOverlay
 
 
 def associate_online(
@@ -27,9 +27,11 @@ def associate_online(
     inputs: Inputs,
     online: OnlineTracker,
     progress: Progress | None,
+    overlay: TrackOverlay,
 ) -> dict[int, GroundTruth]:
     """Stage 2 (detection, association, identity): stream the log frame by frame through the
-    online tracker; returns the ground truth seen (for the metrics only)."""
+    online tracker, each camera's view kept in ``overlay`` for the track boxes; returns the
+    ground truth seen (for the metrics only)."""
     detector = inputs.detector
     truth: dict[int, GroundTruth] = {}
     frame_t: int | None = None
@@ -58,8 +60,10 @@ def associate_online(
         frame_t = msg.log_time_ns
         if detector is None:
             points.extend(ground_points(reader, msg.topic, msg.message, inputs.cams))
+            overlay.add(msg.log_time_ns, msg.message.t_ns, msg.message)
             continue
-        _detect_in_frame(msg, detector, online, writer, search_full, points, covs)
+        found = _detect_in_frame(msg, detector, online, writer, search_full, points, covs)
+        overlay.add(msg.log_time_ns, _image_stamp(msg), found)
     if frame_t is not None:
         online.process_frame(frame_t, points, covs)
     online.close()
@@ -74,10 +78,10 @@ def _detect_in_frame(
     search_full: bool,
     points: list[tuple[str, np.ndarray]],
     covs: list[np.ndarray] | None,
-) -> None:
+) -> Detections:
     """One camera image of stage 2: people detected (in the tracks' predicted regions unless
-    ``search_full``), their detections written, their ground points (and covariances)
-    appended to the frame's."""
+    ``search_full``), their detections written (with their image overlay), their ground points
+    (and covariances) appended to the frame's; returns the detections."""
     camera = msg.topic.strip("/").split("/")[0]
     people = online.predictions(msg.log_time_ns, moved_only=True)
     preds = None if search_full else online.predictions(msg.log_time_ns)
@@ -85,9 +89,23 @@ def _detect_in_frame(
         msg.log_time_ns, camera, bytes(msg.message.data), preds, people
     )
     writer.write(detections_topic(camera), found, msg.log_time_ns)
+    writer.write(
+        topics.overlay(detections_topic(camera)),
+        detection_annotations(found, _image_stamp(msg)),
+        msg.log_time_ns,
+    )
     points.extend((camera, g) for g in ground)
     if covs is not None:
         covs.extend(ground_covs)
+    return found
+
+
+def _image_stamp(msg: LogMessage) -> int:
+    """The image's own timestamp (what Foxglove matches overlays on), else its log time."""
+    image = msg.message
+    if image.HasField("timestamp"):
+        return int(image.timestamp.ToNanoseconds())
+    return msg.log_time_ns
 
 
 def association_cost(mode: Mode, cfg: VmTrackConfig) -> AssociationCost:

@@ -33,6 +33,7 @@ from trackctl.vmtrack.inputs import phone_motions, plan_inputs
 from trackctl.vmtrack.interfaces import VmResult
 from trackctl.vmtrack.offline import offline_stages
 from trackctl.vmtrack.online import OnlineTracker
+from trackctl.vmtrack.overlay import TrackOverlay
 from trackctl.vmtrack.report import (
     StageClock,
     detector_metrics,
@@ -75,7 +76,9 @@ def run_stages(
     clock.lap("motion")
     identity = IdentityBinder(phones, cfg)
     online = OnlineTracker(cfg, identity, inputs.mode, association_cost(inputs.mode, cfg))
-    truth = associate_online(reader, writer, inputs, online, progress)
+    cams = inputs.detector.cams if inputs.detector is not None else inputs.cams
+    overlay = TrackOverlay(cams, cfg.frames.detector.person_height_m)
+    truth = associate_online(reader, writer, inputs, online, progress, overlay)
     if inputs.mode is Mode.VM:
         identity.finish()
     clock.lap("tracking")
@@ -83,8 +86,9 @@ def run_stages(
     positions = smoothed_positions(online.frames, cfg.smooth, cfg.tracker)
     offline = offline_stages(online, positions, phones, cfg, inputs.mode, progress)
     score = TruthScore(truth, online, cfg.eval_threshold_m, inputs.mode, set(phones))
+    gate_m = cfg.retrack.gate_m
     tally = write_frames(
-        writer, online.frames, positions, offline, phones, cfg.retrack.gate_m, progress, score
+        writer, online.frames, positions, offline, phones, gate_m, progress, score, overlay
     )
     metrics = report_metrics(online, phones, inputs.mode, offline, score, tally)
     clock.lap("smoothing")

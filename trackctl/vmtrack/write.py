@@ -1,4 +1,5 @@
-"""Stage 6 of VM-Tracking, writing: each frame's published tracks and 3-D scene."""
+"""Stage 6 of VM-Tracking, writing: each frame's published tracks, 3-D scene and the cameras'
+track overlays."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.naming import frame_tracks
 from trackctl.vmtrack.offline import Offline
+from trackctl.vmtrack.overlay import TrackOverlay
 from trackctl.vmtrack.scene import scene_update
 from trackctl.vmtrack.score import TruthScore
 
@@ -53,9 +55,10 @@ def write_frames(
     gate_m: float,
     progress: Progress,
     score: TruthScore,
+    overlay: TrackOverlay,
 ) -> Tally:
-    """Each frame's published tracks and 3-D scene written, counted and scored; returns the
-    count."""
+    """Each frame's published tracks, 3-D scene and track boxes per camera written, counted
+    and scored; returns the count."""
     tally = Tally()
     for k_fr, fr in enumerate(frames):
         progress(k_fr, len(frames), "writing tracks")
@@ -66,5 +69,6 @@ def write_frames(
         tally.written.append(msg)
         writer.write(TRACKS_TOPIC, msg)
         writer.write(SCENE_TOPIC, scene_update(fr.t_ns, tracks, set(phones)), fr.t_ns)
+        overlay.write(writer, fr.t_ns, tracks)
         score.add_frame(fr.t_ns, tracks)
     return tally
