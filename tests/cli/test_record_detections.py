@@ -48,7 +48,7 @@ def test_record_public_detections_of_two_cameras_then_vm_track(
     assert set(summary["topics"]) == {
         f"/{c}/{kind}"
         for c in ("cam0", "cam1")
-        for kind in ("detections", "camera_model", "calibration")
+        for kind in ("detections", "detections/annotations", "camera_model", "calibration")
     }
     warned = [line for line in rec.stderr.splitlines() if "warning" in line]
     assert len(warned) == 1 and f"skipped {len(JUNK_LINES)} unusable line(s)" in warned[0]

@@ -76,7 +76,8 @@ def test_plan_by_type_and_overrides(bag: Path) -> None:
         p.ros_topic: p
         for p in plan_ros2(bag, parse_maps(["/r1/odom=odometry:base", "/r1/imu=ignore"]))
     }
-    assert mapped["/r1/odom"].targets == ("/robot/base/odom", "/robot/base/reference/odom")
+    # the source keeps the topic's meaningful segments without its robot's name: r1 (not base)
+    assert mapped["/r1/odom"].targets == ("/robot/base/odom", "/robot/base/reference/r1")
     assert mapped["/r1/odom"].why == "--map"
     assert mapped["/r1/imu"].targets == ()
     with pytest.raises(InputError, match="--map /nope: the bag has no such topic"):
