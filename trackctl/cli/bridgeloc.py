@@ -220,7 +220,7 @@ def simulate_bridgeloc(
         ),
     ] = 0,
     json_out: JsonOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """A robot among infrastructure cameras and wall tags, with rendered images (BridgeLoc).
 

@@ -177,7 +177,7 @@ def simulate_ev(
     ] = 0,
     seed: Annotated[int, typer.Option(help="Random seed (same seed, same log).")] = 0,
     json_out: JsonOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """People under cell-level E-location and per-cell cameras (EV-Matching scenarios).
 

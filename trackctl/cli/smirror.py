@@ -161,7 +161,7 @@ def simulate_smirror(
         float, typer.Option(help="Share of people in LED-coloured (green/magenta) shirts.")
     ] = 0.0,
     json_out: JsonOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """Three rooms, three node cameras, a robot with LEDs and encoders patrolling (S-Mirror).
 

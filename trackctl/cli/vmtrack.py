@@ -114,7 +114,7 @@ def vm_track(
             source=source_value,
             frames=FrameConfig(predicted=search == "predicted"),
             phones_aligned=phones_aligned,
-            retrack=retrack_cfg,
+            refinement=retrack_cfg,
         )
     )
     draw = figures_from_output(out, plot, "vmtrack")
@@ -207,8 +207,8 @@ def simulate_vm(
         float | None,
         typer.Option(help="Realistic: phone clock offsets uniform in +- this many seconds (2)."),
     ] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    json_out: JsonOption = False,
+    quiet: QuietOption = False,
 ) -> None:
     """People walking under calibrated cameras, some with phones (VM-Tracking scenarios).
 
