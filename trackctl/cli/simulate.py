@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import JsonOption, QuietOption, print_json, stderr
+from trackctl.cli.common import JsonOption, QuietOption, SeedOption, print_json, stderr
 
 simulate_app = typer.Typer(help="Generate scenario logs with ground truth.", no_args_is_help=True)
 
@@ -16,7 +16,7 @@ simulate_app = typer.Typer(help="Generate scenario logs with ground truth.", no_
 def demo(
     out: Annotated[Path, typer.Option(help="MCAP log to write.")],
     duration: Annotated[float, typer.Option(help="Seconds of scenario.")] = 20.0,
-    seed: Annotated[int, typer.Option(help="Random seed (same seed, same bytes).")] = 0,
+    seed: SeedOption = 0,
     json_out: JsonOption = False,
     quiet: QuietOption = False,
 ) -> None:
