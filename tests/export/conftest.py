@@ -19,7 +19,7 @@ def vm_office_tracked() -> tuple[dict[str, Any], Path]:
     from trackctl.vmtrack import VmTrackConfig, VmTrackProcessor
     from trackctl.vmtrack.retrack import RetrackConfig
 
-    proc = VmTrackProcessor(VmTrackConfig(retrack=RetrackConfig(enabled=False)))
+    proc = VmTrackProcessor(VmTrackConfig(refinement=RetrackConfig(enabled=False)))
     return processed(SAMPLES / "vm-office.mcap", proc, name="vm-office-tracked.mcap")
 
 

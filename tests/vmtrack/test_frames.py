@@ -48,7 +48,7 @@ def test_vm_track_detects_in_frames_and_identifies_users(frames_log: Path, tmp_p
     # detection and the online and offline identities (test_readme_main_job_on_the_sample_log
     # runs frames through the re-tracking too)
     out = tmp_path / "out.mcap"
-    cfg = VmTrackConfig(retrack=RetrackConfig(enabled=False))
+    cfg = VmTrackConfig(refinement=RetrackConfig(enabled=False))
     (rep,) = run_processors(frames_log, out, [VmTrackProcessor(cfg)])
     m = rep.metrics
     assert m["source"] == "frames"
@@ -111,7 +111,9 @@ def test_plot_draws_the_papers_figures(tmp_path: Path) -> None:
 
 def test_full_search_mode_searches_every_frame_whole(frames_log: Path, tmp_path: Path) -> None:
     # the detector's searches (re-tracking, which searches no frame, is left out)
-    cfg = VmTrackConfig(frames=FrameConfig(predicted=False), retrack=RetrackConfig(enabled=False))
+    cfg = VmTrackConfig(
+        frames=FrameConfig(predicted=False), refinement=RetrackConfig(enabled=False)
+    )
     (rep,) = run_processors(frames_log, tmp_path / "o.mcap", [VmTrackProcessor(cfg)])
     assert rep.metrics["region_searches"] == 0
     assert rep.metrics["full_searches"] == 240
@@ -131,7 +133,7 @@ def test_undecodable_frame_is_skipped_and_counted(frames_log: Path, tmp_path: Pa
                 broken += 1
             w.write_raw(raw)
     # the detector's skip and count (re-tracking, which decodes no frame, is left out)
-    cfg = VmTrackConfig(retrack=RetrackConfig(enabled=False))
+    cfg = VmTrackConfig(refinement=RetrackConfig(enabled=False))
     (rep,) = run_processors(damaged, tmp_path / "o.mcap", [VmTrackProcessor(cfg)])
     assert rep.metrics["bad_frames"] == 3
     assert rep.metrics["idf1"] >= 0.9

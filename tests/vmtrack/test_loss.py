@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from trackctl.vmtrack.align import Alignment, lag_grid
+from trackctl.vmtrack.binder import IdentityBinder
 from trackctl.vmtrack.config import VmTrackConfig
-from trackctl.vmtrack.identity import IdentityBinder
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.tracker import GroundTrack, TrackerConfig
 
@@ -24,7 +24,7 @@ def _phone(speed: float) -> PhoneMotion:
 
 def _run(track_speed: float) -> IdentityBinder:
     cfg = VmTrackConfig()
-    binder = IdentityBinder({"m1": _phone(1.0)}, cfg)
+    binder = IdentityBinder({"m1": _phone(1.0)}, cfg.binding, cfg.align)
     trk = GroundTrack.start("v1", np.zeros(2), 0, TrackerConfig())
     # bound with a known alignment: the phone's heading is the walk's, its clock the cameras'
     zero = int(np.argmin(np.abs(lag_grid(cfg.align))))

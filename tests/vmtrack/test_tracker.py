@@ -11,9 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import examples
+from trackctl.vmtrack.binder import IdentityBinder
 from trackctl.vmtrack.config import Mode, VmTrackConfig
 from trackctl.vmtrack.cost import CostTrack, VisualCost, VisualMotionCost
-from trackctl.vmtrack.identity import IdentityBinder
 from trackctl.vmtrack.online import OnlineTracker
 from trackctl.vmtrack.tracker import (
     GroundTrack,
@@ -110,7 +110,7 @@ class _ForbidAll:
 
 def _walk(cost: VisualCost | _ForbidAll, frames: int = 6) -> OnlineTracker:
     cfg = VmTrackConfig(mode=Mode.V_AF)
-    online = OnlineTracker(cfg, IdentityBinder({}, cfg), Mode.V_AF, cost)
+    online = OnlineTracker(cfg, IdentityBinder({}, cfg.binding, cfg.align), Mode.V_AF, cost)
     for k in range(frames):
         # a slow walker, 0.6 m a second: the births of a forbidding cost are no clutter spot
         online.process_frame(k * 1_000_000_000, [("cam0", np.array([0.6 * k, 0.0]))])

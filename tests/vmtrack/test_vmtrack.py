@@ -320,3 +320,27 @@ def test_run_stages_gives_the_written_tracks_and_the_report(
     assert len(table) == sum(len(fr.tracks) for fr in written)
     assert set(table["track_id"]) == {t.track_id for fr in written for t in fr.tracks}
     assert result.report.metrics["tracks_published"] is not None
+
+
+def test_the_identity_refinement_is_an_injected_part(office_log: Path, tmp_path: Path) -> None:
+    """``run_stages(refinement=...)``: the part is called once with the offline identity and
+    what it returns names the tracks; ``no_refinement`` is the configuration's ``--no-retrack``."""
+    from trackctl.vmtrack.offline import RefinementInputs, no_refinement
+    from trackctl.vmtrack.pipeline import run_stages
+    from trackctl.vmtrack.retrack import RetrackConfig, Retracked
+
+    seen: list[RefinementInputs] = []
+
+    def spy(inputs: RefinementInputs, progress: object) -> Retracked:
+        seen.append(inputs)
+        return no_refinement(inputs, progress)  # type: ignore[arg-type]
+
+    def tracks(cfg: VmTrackConfig, **parts: object) -> list[object]:
+        with LogWriter(tmp_path / f"r{len(list(tmp_path.iterdir()))}.mcap") as writer:
+            return list(run_stages(LogReader(office_log), writer, cfg, **parts).tracks)  # type: ignore[arg-type]
+
+    skipped = tracks(VmTrackConfig(refinement=RetrackConfig(enabled=False)))
+    assert tracks(VmTrackConfig(), refinement=spy) == skipped
+    (inputs,) = seen
+    assert len(inputs.frame_t) == len(inputs.points) and inputs.ids.known
+    assert set(inputs.phones) >= set(inputs.ids.known)

@@ -12,7 +12,9 @@ from trackctl.cli.common import (
     AllowUnmeasuredOption,
     JsonOption,
     OutputsOnlyOption,
+    PlotOption,
     QuietOption,
+    SeedOption,
     SiteOption,
     VerboseOption,
     fail_if_option,
@@ -139,9 +141,7 @@ def eval_(
     ] = True,
     site: SiteOption = None,
     json_out: JsonOption = False,
-    plot: Annotated[
-        Path | None, typer.Option(help="Write figures (PNG) to this directory.")
-    ] = None,
+    plot: PlotOption = None,
     fail_if: Annotated[str | None, fail_if_option("error_m_mean>0.32")] = None,
     allow_unmeasured: AllowUnmeasuredOption = False,
     verbose: VerboseOption = False,
@@ -200,7 +200,7 @@ def simulate_bridgeloc(
     infra_fps: Annotated[float, typer.Option(help="Infrastructure camera frames per second.")] = (
         5.0
     ),
-    seed: Annotated[int, typer.Option(help="Random seed (same seed, same bytes).")] = 0,
+    seed: SeedOption = 0,
     preset: Annotated[
         str,
         typer.Option(
@@ -220,7 +220,7 @@ def simulate_bridgeloc(
         ),
     ] = 0,
     json_out: JsonOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """A robot among infrastructure cameras and wall tags, with rendered images (BridgeLoc).
 

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from trackctl.cli.common import TrackctlGroup, console, print_json, stderr
+from trackctl.cli.common import JsonOption, TrackctlGroup, console, print_json, stderr
 from trackctl.errors import InputError
 from trackctl.logs.output import check_output
 
@@ -69,7 +69,7 @@ def ground(
     world_points: Annotated[
         str | None, typer.Option(help='Floor points "x,y x,y ..." in metres (z = 0), same order.')
     ] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
 ) -> None:
     """Pose of a camera on the floor from >= 4 floor point pairs (cv2.solvePnP).
 
@@ -126,7 +126,7 @@ def import_cmd(
     tvec: Annotated[
         str | None, typer.Option(help='Pose to add, OpenCV tvec "x,y,z" (metres unless --units).')
     ] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
 ) -> None:
     """Convert a calibration to trackctl's OpenCV YAML (metres, z up), with checks.
 
@@ -169,7 +169,7 @@ def check(
         Path | None, typer.Option(help="Video or image folder the calibration is for.")
     ] = None,
     units: Annotated[str | None, typer.Option(help=_UNITS_HELP)] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
 ) -> None:
     """Where the camera is and looks, and what is implausible (exit 2 on an error).
 

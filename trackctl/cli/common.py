@@ -55,6 +55,8 @@ __all__ = [
     "JsonOption",
     "QuietOption",
     "OutputsOnlyOption",
+    "PlotOption",
+    "SeedOption",
     "SiteOption",
     "out_option",
     "fail_if_option",
@@ -391,6 +393,13 @@ OutputsOnlyOption = Annotated[
     bool, typer.Option("--outputs-only", help="Write only what the run adds, not the input.")
 ]
 SiteOption = Annotated[Path | None, typer.Option(help=SITE_HELP)]
+PlotOption = Annotated[
+    Path | None,
+    typer.Option(help="Draw the system's figures (PNG) into this folder (needs the plot extra)."),
+]
+SeedOption = Annotated[
+    int, typer.Option(metavar="N", help="Random seed (same seed, same log, byte for byte).")
+]
 
 
 def out_option(adds: str) -> Any:

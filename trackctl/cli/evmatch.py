@@ -11,7 +11,9 @@ from trackctl.cli.common import (
     AllowUnmeasuredOption,
     JsonOption,
     OutputsOnlyOption,
+    PlotOption,
     QuietOption,
+    SeedOption,
     VerboseOption,
     fail_if_option,
     out_option,
@@ -90,9 +92,7 @@ def ev_match(
         int, typer.Option(help="Most evidence scenarios per EID before giving up.")
     ] = 12,
     json_out: JsonOption = False,
-    plot: Annotated[
-        Path | None, typer.Option(help="Folder for figures (needs the plot extra).")
-    ] = None,
+    plot: PlotOption = None,
     fail_if: Annotated[str | None, fail_if_option("accuracy<0.9")] = None,
     allow_unmeasured: AllowUnmeasuredOption = False,
     verbose: VerboseOption = False,
@@ -175,9 +175,9 @@ def simulate_ev(
     shared_eids: Annotated[
         int, typer.Option(help="Pairs of people that carry one EID (cloned MAC, shared phone).")
     ] = 0,
-    seed: Annotated[int, typer.Option(help="Random seed (same seed, same log).")] = 0,
+    seed: SeedOption = 0,
     json_out: JsonOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """People under cell-level E-location and per-cell cameras (EV-Matching scenarios).
 

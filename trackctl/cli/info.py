@@ -8,14 +8,14 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from trackctl.cli.common import console, print_json
+from trackctl.cli.common import JsonOption, console, print_json
 from trackctl.logs.info import log_info
 from trackctl.logs.reader import LogReader
 
 
 def info(
     log: Annotated[Path, typer.Argument(help="MCAP log to describe.")],
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
 ) -> None:
     """Topics, schemas, message counts, rates, time span and metadata of a log.
 

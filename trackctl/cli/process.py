@@ -12,6 +12,8 @@ from rich.table import Table
 
 from trackctl.cli.common import (
     AllowUnmeasuredOption,
+    JsonOption,
+    QuietOption,
     VerboseOption,
     apply_fail_if,
     check_fail_if,
@@ -113,14 +115,14 @@ def process(
         typer.Option("--outputs-only", help="Write only the derived channels, not the input."),
     ] = False,
     list_: Annotated[bool, typer.Option("--list", help="List registered processors.")] = False,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
     fail_if: Annotated[
         str | None,
         typer.Option(help='Exit 1 when a metric crosses a threshold, e.g. "nonfinite_values>0".'),
     ] = None,
     allow_unmeasured: AllowUnmeasuredOption = False,
     verbose: VerboseOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress output.")] = False,
+    quiet: QuietOption = False,
     source: Annotated[
         list[str] | None,
         typer.Option(
@@ -192,7 +194,7 @@ def process(
 
 def report(
     log: Annotated[Path, typer.Argument(help="MCAP log written by a processor.")],
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    json_out: JsonOption = False,
     csv: Annotated[Path | None, typer.Option(help="Also write the reports as CSV.")] = None,
     fail_if: Annotated[
         str | None,

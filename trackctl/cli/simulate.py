@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from trackctl.cli.common import print_json, stderr
+from trackctl.cli.common import JsonOption, QuietOption, SeedOption, print_json, stderr
 
 simulate_app = typer.Typer(help="Generate scenario logs with ground truth.", no_args_is_help=True)
 
@@ -16,9 +16,9 @@ simulate_app = typer.Typer(help="Generate scenario logs with ground truth.", no_
 def demo(
     out: Annotated[Path, typer.Option(help="MCAP log to write.")],
     duration: Annotated[float, typer.Option(help="Seconds of scenario.")] = 20.0,
-    seed: Annotated[int, typer.Option(help="Random seed (same seed, same bytes).")] = 0,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    seed: SeedOption = 0,
+    json_out: JsonOption = False,
+    quiet: QuietOption = False,
 ) -> None:
     """A small office scene using every trackctl format (the shipped sample log).
 

@@ -11,7 +11,9 @@ from trackctl.cli.common import (
     AllowUnmeasuredOption,
     JsonOption,
     OutputsOnlyOption,
+    PlotOption,
     QuietOption,
+    SeedOption,
     SiteOption,
     VerboseOption,
     fail_if_option,
@@ -59,9 +61,7 @@ def smirror(
         ),
     ] = None,
     site: SiteOption = None,
-    plot: Annotated[
-        Path | None, typer.Option(help="Write the paper's figures (PNG) to this directory.")
-    ] = None,
+    plot: PlotOption = None,
     json_out: JsonOption = False,
     fail_if: Annotated[str | None, fail_if_option("error_m_mean>0.33")] = None,
     allow_unmeasured: AllowUnmeasuredOption = False,
@@ -134,7 +134,7 @@ def simulate_smirror(
             help="Robots that patrol and log odometry (1-3; each with its own LED colours)."
         ),
     ] = 1,
-    seed: Annotated[int, typer.Option(help="Random seed (same seed, same bytes).")] = 0,
+    seed: SeedOption = 0,
     fps: Annotated[float, typer.Option(help="Node frame rate, Hz.")] = 5.0,
     size: Annotated[str, typer.Option(help="Node image size WxH.")] = "640x480",
     jpeg_quality: Annotated[int, typer.Option(help="JPEG quality of node frames.")] = 80,
@@ -161,7 +161,7 @@ def simulate_smirror(
         float, typer.Option(help="Share of people in LED-coloured (green/magenta) shirts.")
     ] = 0.0,
     json_out: JsonOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """Three rooms, three node cameras, a robot with LEDs and encoders patrolling (S-Mirror).
 

@@ -12,7 +12,9 @@ from trackctl.cli.common import (
     AllowUnmeasuredOption,
     JsonOption,
     OutputsOnlyOption,
+    PlotOption,
     QuietOption,
+    SeedOption,
     VerboseOption,
     fail_if_option,
     out_option,
@@ -43,10 +45,7 @@ def vm_track(
             "recover) or full (every frame searched whole)."
         ),
     ] = "predicted",
-    plot: Annotated[
-        Path | None,
-        typer.Option(help="Draw error over time and the CDF of tracking time into this folder."),
-    ] = None,
+    plot: PlotOption = None,
     phones_aligned: Annotated[
         bool,
         typer.Option(
@@ -114,7 +113,7 @@ def vm_track(
             source=source_value,
             frames=FrameConfig(predicted=search == "predicted"),
             phones_aligned=phones_aligned,
-            retrack=retrack_cfg,
+            refinement=retrack_cfg,
         )
     )
     draw = figures_from_output(out, plot, "vmtrack")
@@ -144,7 +143,7 @@ def simulate_vm(
     speed: Annotated[
         str, typer.Option(help="Walking speed m/s: MIN,MAX or one value.")
     ] = "0.5,1.5",
-    seed: Annotated[int, typer.Option(help="Random seed (same seed, same log).")] = 0,
+    seed: SeedOption = 0,
     det_noise: Annotated[float, typer.Option(help="Mean ground error of detections, m.")] = 0.35,
     trajectories: Annotated[
         Path | None,
@@ -207,8 +206,8 @@ def simulate_vm(
         float | None,
         typer.Option(help="Realistic: phone clock offsets uniform in +- this many seconds (2)."),
     ] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    json_out: JsonOption = False,
+    quiet: QuietOption = False,
 ) -> None:
     """People walking under calibrated cameras, some with phones (VM-Tracking scenarios).
 

@@ -6,13 +6,22 @@ from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import ProcessorInfo, Progress
 from trackctl.vmtrack.align import AlignConfig, Alignment
-from trackctl.vmtrack.config import Identity, Mode, Source, VmTrackConfig
+from trackctl.vmtrack.config import (
+    AssociationConfig,
+    BindingConfig,
+    Identity,
+    Mode,
+    ReportConfig,
+    Source,
+    VmTrackConfig,
+)
 from trackctl.vmtrack.cost import AssociationCost, VisualCost, VisualMotionCost, fused_probability
 from trackctl.vmtrack.detect import BackgroundModel, DetectorConfig, detect_people, predict_region
 from trackctl.vmtrack.frames import FrameConfig, FrameDetector
 from trackctl.vmtrack.identify import IdentifyConfig
 from trackctl.vmtrack.motion import MotionConfig, PhoneMotion
-from trackctl.vmtrack.pipeline import TRACKS_TOPIC, run
+from trackctl.vmtrack.pipeline import TRACKS_TOPIC, VmResult, run, run_stages
+from trackctl.vmtrack.retrack import RetrackConfig
 from trackctl.vmtrack.tracker import TrackerConfig
 
 __all__ = [
@@ -20,8 +29,10 @@ __all__ = [
     "TRACKS_TOPIC",
     "AlignConfig",
     "Alignment",
+    "AssociationConfig",
     "AssociationCost",
     "BackgroundModel",
+    "BindingConfig",
     "DetectorConfig",
     "FrameConfig",
     "FrameDetector",
@@ -33,13 +44,17 @@ __all__ = [
     "predict_region",
     "MotionConfig",
     "PhoneMotion",
+    "ReportConfig",
+    "RetrackConfig",
     "TrackerConfig",
     "VisualCost",
     "VisualMotionCost",
+    "VmResult",
     "VmTrackConfig",
     "VmTrackProcessor",
     "fused_probability",
     "run",
+    "run_stages",
 ]
 
 

@@ -112,5 +112,5 @@ def association_cost(mode: Mode, cfg: VmTrackConfig) -> AssociationCost:
     """Returns the association's cost for ``mode``: position only for ``v-af``, position and
     the phones' velocities for ``vm``."""
     if mode is Mode.V_AF:
-        return VisualCost(cfg.tracker.gate_p)
-    return VisualMotionCost(cfg.tracker.gate_p, cfg.tracker.pdr_sigma_mps)
+        return VisualCost(cfg.association.tracker.gate_p)
+    return VisualMotionCost(cfg.association.tracker.gate_p, cfg.association.tracker.pdr_sigma_mps)

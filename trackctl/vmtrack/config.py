@@ -13,7 +13,15 @@ from trackctl.vmtrack.retrack import RetrackConfig
 from trackctl.vmtrack.stitch import StitchConfig
 from trackctl.vmtrack.tracker import TrackerConfig
 
-__all__ = ["Identity", "Mode", "Source", "VmTrackConfig"]
+__all__ = [
+    "AssociationConfig",
+    "BindingConfig",
+    "Identity",
+    "Mode",
+    "ReportConfig",
+    "Source",
+    "VmTrackConfig",
+]
 
 
 class Mode(StrEnum):
@@ -40,13 +48,11 @@ class Source(StrEnum):
 
 
 @dataclass(frozen=True, slots=True)
-class VmTrackConfig:
-    """Configuration of a VM-Tracking run."""
+class AssociationConfig:
+    """Online association (:mod:`~trackctl.vmtrack.online`): detections to ground tracks."""
 
-    mode: Mode = Mode.VM
-    smooth: bool = True
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
-    motion: MotionConfig = field(default_factory=MotionConfig)
+    """Each ground track's Kalman model (also the smoother's)."""
     merge_m: float = 1.0
     """Detections of one instant from different cameras closer than this are one person."""
     spawn_m: float = 1.0
@@ -59,13 +65,17 @@ class VmTrackConfig:
     plant the detector keeps firing on; a door sees people walk away from it)."""
     duplicate_m: float = 0.45
     """Two tracks closer than this are one person (the younger, unbound one is dropped)."""
+
+
+@dataclass(frozen=True, slots=True)
+class BindingConfig:
+    """Online binding of phones to tracks (:mod:`~trackctl.vmtrack.binder`, Theorems 1-2)."""
+
     bind_frames: int = 9
     """Frames of consistent motion before a phone is bound to a visual track (Theorem 1)."""
     bind_frames_free: int = 24
     """...for a phone whose alignment (carry yaw, step scale, clock offset) is not known yet:
     every candidate gets its own best fit, so only turns, stops and pace tell them apart."""
-    align: AlignConfig = field(default_factory=AlignConfig)
-    """Search ranges of each phone's unknowns (:mod:`~trackctl.vmtrack.align`)."""
     reject_mps: float = 0.45
     """A candidate whose mean velocity disagreement exceeds this is filtered away."""
     loss_gross: float = 2.0
@@ -78,7 +88,8 @@ class VmTrackConfig:
     ratio: float = 3.0
     """Bind early when the best candidate's disagreement is this many times below the next."""
     offline_reject_mps: float = 0.6
-    """Offline pass: a never-bound phone takes its clear best track if it disagrees less."""
+    """End of log (online identity): a never-bound phone takes its clear best track if it
+    disagrees less."""
     checkpoint_dbm: float = -40.0
     """RSSI of a phone held within ~1 m of a check-point AP (the paper: "less than 1 meter")."""
     checkpoint_radius_m: float = 1.5
@@ -89,21 +100,47 @@ class VmTrackConfig:
     shadowing_db: float = 3.0
     rssi_evidence_m: float = 4.0
     """Tracks within this distance of an AP compare their distance with a phone's RSSI there."""
+
+
+@dataclass(frozen=True, slots=True)
+class ReportConfig:
+    """The metric report (:mod:`~trackctl.vmtrack.score`)."""
+
     eval_threshold_m: float = 1.0
-    """Metrics: a track within this distance of a person matches them."""
+    """A track within this distance of a person matches them (MOTA, IDF1, errors)."""
+
+
+@dataclass(frozen=True, slots=True)
+class VmTrackConfig:
+    """Configuration of a VM-Tracking run, one field per stage (the stages' order in
+    :func:`~trackctl.vmtrack.pipeline.run_stages`)."""
+
+    mode: Mode = Mode.VM
     source: Source = Source.AUTO
     """Detections from camera frames or from detections topics (auto: frames when present)."""
     frames: FrameConfig = field(default_factory=FrameConfig)
+    """Person detection in camera frames."""
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    """Pedestrian dead reckoning of each phone."""
     phones_aligned: bool = False
     """The paper's assumption, only for sites whose phone app guarantees it: each phone's
     rotation-vector heading is its carrier's walking direction in the site frame, and its clock
     is the cameras'. Off (the default), both are estimated per phone (:mod:`~trackctl.vmtrack.
     align`)."""
+    align: AlignConfig = field(default_factory=AlignConfig)
+    """Search ranges of each phone's unknowns (:mod:`~trackctl.vmtrack.align`), shared by the
+    binding, the offline identity and the refinement."""
+    association: AssociationConfig = field(default_factory=AssociationConfig)
+    binding: BindingConfig = field(default_factory=BindingConfig)
+    smooth: bool = True
+    """RTS-smooth every track (offline)."""
+    stitch: StitchConfig = field(default_factory=StitchConfig)
+    """Offline clean-up of visual-only tracks (coasting tails, fragments, short tracks)."""
     identity: Identity = Identity.OFFLINE
     identify: IdentifyConfig = field(default_factory=IdentifyConfig)
     """Offline identity parameters."""
-    stitch: StitchConfig = field(default_factory=StitchConfig)
-    """Offline clean-up of visual-only tracks (coasting tails, fragments, short tracks)."""
-    retrack: RetrackConfig = field(default_factory=RetrackConfig)
-    """Offline: each carrier followed through the raw detections by their phone
-    (:mod:`~trackctl.vmtrack.retrack`); it names the tracks where it finds the carrier."""
+    refinement: RetrackConfig = field(default_factory=RetrackConfig)
+    """Offline identity refinement: each carrier followed through the raw detections by their
+    phone (:mod:`~trackctl.vmtrack.retrack`); it names the tracks where it finds the carrier.
+    ``RetrackConfig(enabled=False)`` skips it."""
+    report: ReportConfig = field(default_factory=ReportConfig)

@@ -1,6 +1,6 @@
 """Offline identity: which phone each published track carries, decided over the whole log.
 
-The online stage (:mod:`~trackctl.vmtrack.identity`) binds phones as the paper's real-time system
+The online stage (:mod:`~trackctl.vmtrack.binder`) binds phones as the paper's real-time system
 did, frame by frame. Offline we have every track's whole life and every phone's whole motion, so
 identity becomes a global problem, solved here in five steps:
 

@@ -3,7 +3,7 @@
 The rule, in order: a re-tracked carrier's MID is published where its re-tracking put it (on
 the nearest track within the gate, or on its own); else a track carries the offline identity's
 MID (:mod:`~trackctl.vmtrack.identify`) for the frames it assigns; else the online binding's
-(:mod:`~trackctl.vmtrack.identity`); else its chain's visual id (:mod:`~trackctl.vmtrack.stitch`).
+(:mod:`~trackctl.vmtrack.binder`); else its chain's visual id (:mod:`~trackctl.vmtrack.stitch`).
 """
 
 from __future__ import annotations

@@ -1,13 +1,21 @@
 """Stage 4 of VM-Tracking, offline: the publication plan (stitching, clean-up), the offline identity
-and the identity refinement (re-tracking), over the whole log.
+and the identity refinement, over the whole log.
+
+The refinement is an injected part (a :class:`Refinement`): :class:`PhoneRetracking` (the
+default, :mod:`~trackctl.vmtrack.retrack`) follows each identified carrier through the raw
+detections by their phone's walk; :func:`no_refinement` skips it (``--no-retrack``); a library
+user passes their own to :func:`~trackctl.vmtrack.pipeline.run_stages`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
+from trackctl.logs.messages import RssiScan
 from trackctl.processing.base import Progress
 from trackctl.vmtrack.align import Alignment
 from trackctl.vmtrack.config import Identity, Mode, VmTrackConfig
@@ -29,6 +37,63 @@ class Offline:
     retracked: Retracked
 
 
+@dataclass(frozen=True)
+class RefinementInputs:
+    """What a refinement sees: the frame times, every frame's raw ground detections (before
+    association), the RSSI scans, the phones' motion and the offline identity."""
+
+    frame_t: np.ndarray
+    """Frame times, ns (int64)."""
+    points: Sequence[np.ndarray]
+    """Per frame, the (n, 2) ground positions of its detections, metres."""
+    rssi: Sequence[RssiScan]
+    phones: dict[str, PhoneMotion]
+    ids: Identities
+
+
+class Refinement(Protocol):
+    """An identity refinement: the carriers it re-finds (by MID), each with the frames it is
+    seen on and its alignment. What it returns names the published tracks where it finds the
+    carrier (:mod:`~trackctl.vmtrack.naming`)."""
+
+    def __call__(self, inputs: RefinementInputs, progress: Progress) -> Retracked: ...
+
+
+def no_refinement(inputs: RefinementInputs, progress: Progress) -> Retracked:
+    """The refinement skipped: the offline identity names the tracks."""
+    return Retracked()
+
+
+class PhoneRetracking:
+    """The default refinement: each identified phone's carrier re-tracked over the raw
+    detections (and RSSI) by the phone's walk (:func:`~trackctl.vmtrack.retrack.retrack`)."""
+
+    def __init__(self, cfg: VmTrackConfig) -> None:
+        self.cfg = cfg
+
+    def __call__(self, inputs: RefinementInputs, progress: Progress) -> Retracked:
+        cfg = self.cfg
+        model = (cfg.binding.rssi_at_1m_dbm, cfg.binding.path_loss_exponent)
+        radio = RadioEvidence(inputs.frame_t, inputs.rssi, model, cfg.refinement.radio)
+        return retrack(
+            inputs.frame_t,
+            list(inputs.points),
+            inputs.phones,
+            inputs.ids.known,
+            cfg.align,
+            cfg.refinement,
+            cfg.phones_aligned,
+            radio,
+            progress,
+            _trusted(inputs.ids, cfg.refinement.trust_clear_share),
+        )
+
+
+def default_refinement(cfg: VmTrackConfig) -> Refinement:
+    """The refinement the configuration asks for: :class:`PhoneRetracking` unless disabled."""
+    return PhoneRetracking(cfg) if cfg.refinement.enabled else no_refinement
+
+
 def offline_stages(
     online: OnlineTracker,
     positions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]],
@@ -36,9 +101,11 @@ def offline_stages(
     cfg: VmTrackConfig,
     mode: Mode,
     progress: Progress,
+    refinement: Refinement | None = None,
 ) -> Offline:
     """The offline stages: the publication plan, then (VM with the offline identity) the
-    identities, then (when enabled) the re-tracking."""
+    identities, then the identity refinement (``refinement``, by default the configuration's:
+    :func:`default_refinement`)."""
     frames = online.frames
     offline = mode is Mode.VM and cfg.identity is Identity.OFFLINE
     deaths = np.array(online.static_death_log, float).reshape(-1, 2)
@@ -49,38 +116,15 @@ def offline_stages(
         if offline
         else None
     )
-    if ids is None or not cfg.retrack.enabled:
+    if ids is None:
         return Offline(plan, ids, Retracked())
-    return Offline(plan, ids, _retrack(online, ids, phones, cfg, progress))
-
-
-def _retrack(
-    online: OnlineTracker,
-    ids: Identities,
-    phones: dict[str, PhoneMotion],
-    cfg: VmTrackConfig,
-    progress: Progress,
-) -> Retracked:
-    """The identified phones' carriers re-tracked over the raw detections (and RSSI); their
-    alignments replace the identity's in ``ids`` (for the report)."""
-    frame_t = np.array([fr.t_ns for fr in online.frames], np.int64)
-    points = [online.raw_points.get(int(t), np.empty((0, 2))) for t in frame_t]
-    model = (cfg.rssi_at_1m_dbm, cfg.path_loss_exponent)
-    radio = RadioEvidence(frame_t, online.rssi_log, model, cfg.retrack.radio)
-    retracked = retrack(
-        frame_t,
-        points,
-        phones,
-        ids.known,
-        cfg.align,
-        cfg.retrack,
-        cfg.phones_aligned,
-        radio,
-        progress,
-        _trusted(ids, cfg.retrack.trust_clear_share),
-    )
+    refine = refinement if refinement is not None else default_refinement(cfg)
+    frame_t = np.array([fr.t_ns for fr in frames], np.int64)
+    points = tuple(online.raw_points.get(int(t), np.empty((0, 2))) for t in frame_t)
+    inputs = RefinementInputs(frame_t, points, tuple(online.rssi_log), phones, ids)
+    retracked = refine(inputs, progress)
     _take_retrack_alignments(ids.alignments, retracked)
-    return retracked
+    return Offline(plan, ids, retracked)
 
 
 def _trusted(ids: Identities, share: float | None) -> set[str]:

@@ -18,9 +18,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from trackctl.logs.messages import RssiScan, TrackState
+from trackctl.vmtrack.binder import IdentityBinder
 from trackctl.vmtrack.config import Mode, VmTrackConfig
 from trackctl.vmtrack.cost import AssociationCost
-from trackctl.vmtrack.identity import IdentityBinder
 from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.tracker import (
     GroundTrack,
@@ -95,7 +95,8 @@ class OnlineTracker:
         self, cfg: VmTrackConfig, identity: IdentityBinder, mode: Mode, cost: AssociationCost
     ) -> None:
         self.cfg = cfg
-        self.tcfg = cfg.tracker
+        self.acfg = cfg.association
+        self.tcfg = cfg.association.tracker
         self.identity = identity
         self.mode = mode
         self.cost = cost
@@ -169,7 +170,7 @@ class OnlineTracker:
         lost_idx = [i for i in range(len(tracks)) if i not in given]
         rest = [points[k] for k in left]
         dets, new_covs = merge_with_covariance(
-            rest, None if covs is None else covs[left], self.cfg.merge_m
+            rest, None if covs is None else covs[left], self.acfg.merge_m
         )
         self._step_filters(t_ns, v_m, pred)
         self._correct_with(t_ns, meas)
@@ -278,7 +279,7 @@ class OnlineTracker:
                 continue
             keep.append(trk)
         self.tracks[:] = keep
-        memory = int(self.cfg.clutter_memory_s * 1e9)
+        memory = int(self.acfg.clutter_memory_s * 1e9)
         while self._static_deaths and self._static_deaths[0][0] < t_ns - memory:
             self._static_deaths.popleft()
         if self._pending_new:
@@ -296,7 +297,7 @@ class OnlineTracker:
         the clutter map."""
         if mid:
             self.identity.release(mid)
-        if trk.moved_m < self.cfg.clutter_radius_m and trk.born_xy is not None:
+        if trk.moved_m < self.acfg.clutter_radius_m and trk.born_xy is not None:
             bx, by = float(trk.born_xy[0]), float(trk.born_xy[1])
             self._static_deaths.append((t_ns, bx, by))
             self.static_death_log.append((float(trk.born_xy[0]), float(trk.born_xy[1])))
@@ -309,7 +310,7 @@ class OnlineTracker:
         deaths = np.array([d[1:] for d in self._static_deaths]).reshape(-1, 2)
         for det, cov in self._pending_new:
             # a detection near a track (or near one started just now) is a duplicate view
-            if tree is not None and tree.query_ball_point(det, self.cfg.spawn_m):
+            if tree is not None and tree.query_ball_point(det, self.acfg.spawn_m):
                 continue
             # a spot where tracks keep being born and dying without moving is clutter (a
             # poster, a plant): no new track there; people walking past keep their own tracks
@@ -317,7 +318,7 @@ class OnlineTracker:
                 self.clutter_suppressed += 1
                 continue
             if any(
-                np.linalg.norm(trk.xy - det) <= self.cfg.spawn_m for trk in self.tracks[n_kept:]
+                np.linalg.norm(trk.xy - det) <= self.acfg.spawn_m for trk in self.tracks[n_kept:]
             ):
                 continue
             self.tracks.append(
@@ -326,8 +327,8 @@ class OnlineTracker:
 
     def _in_clutter(self, det: np.ndarray, deaths: np.ndarray) -> bool:
         """Returns whether enough never-moving tracks died near ``det`` (rows of ``deaths``)."""
-        near = np.sum(np.sum((deaths - det) ** 2, axis=1) < self.cfg.clutter_radius_m**2)
-        return bool(near >= self.cfg.clutter_min)
+        near = np.sum(np.sum((deaths - det) ** 2, axis=1) < self.acfg.clutter_radius_m**2)
+        return bool(near >= self.acfg.clutter_min)
 
     def _prune_duplicates(self) -> None:
         """Two tracks on one person: keep the bound one, else the older one."""
@@ -338,7 +339,7 @@ class OnlineTracker:
             return
         xy = np.array([trk.kf.x[:2, 0] for trk in tracks])
         # only pairs closer than duplicate_m (k-d tree), in the order a full scan would meet them
-        pairs = cKDTree(xy).query_pairs(self.cfg.duplicate_m, output_type="ndarray")
+        pairs = cKDTree(xy).query_pairs(self.acfg.duplicate_m, output_type="ndarray")
         for a, b in sorted(map(tuple, pairs.tolist())):
             ta, tb = tracks[a], tracks[b]
             if ta.key in doomed or tb.key in doomed:

@@ -11,7 +11,8 @@ and each hands the next a typed record (keyed by the tracks' serial keys, never 
    frame by frame -> ``FrameOut`` per frame;
 3. smoothing (:mod:`~trackctl.vmtrack.smooth`, RTS) -> state per (track key, history index);
 4. offline (:mod:`~trackctl.vmtrack.offline`): publication plan, offline identity, identity
-   refinement (re-tracking: a swappable step, ``OfflineStages``) -> ``Offline``;
+   refinement (an injected :class:`~trackctl.vmtrack.offline.Refinement`; by default the
+   re-tracking) -> ``Offline``;
 5. naming (:mod:`~trackctl.vmtrack.naming`, whose docstring states the rule) and writing
    (:mod:`~trackctl.vmtrack.write`), each frame scored by :mod:`~trackctl.vmtrack.score` (the
    only reader of the ground truth);
@@ -27,11 +28,12 @@ from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import Progress
 from trackctl.vmtrack.association import associate_online, association_cost
-from trackctl.vmtrack.config import Mode, Source, VmTrackConfig
-from trackctl.vmtrack.identity import IdentityBinder
+from trackctl.vmtrack.binder import IdentityBinder
+from trackctl.vmtrack.config import Identity, Mode, Source, VmTrackConfig
+from trackctl.vmtrack.cost import AssociationCost
 from trackctl.vmtrack.inputs import phone_motions, plan_inputs
 from trackctl.vmtrack.interfaces import VmResult
-from trackctl.vmtrack.offline import offline_stages
+from trackctl.vmtrack.offline import Refinement, offline_stages
 from trackctl.vmtrack.online import OnlineTracker
 from trackctl.vmtrack.overlay import TrackOverlay
 from trackctl.vmtrack.report import (
@@ -65,17 +67,31 @@ def run_stages(
     writer: LogWriter,
     config: VmTrackConfig | None = None,
     progress: Progress | None = None,
+    *,
+    cost: AssociationCost | None = None,
+    refinement: Refinement | None = None,
 ) -> VmResult:
     """Track people in ``reader``; write ``/vmtrack/tracks`` (and the scene) to ``writer``;
-    return the published tracks and the report."""
+    return the published tracks and the report.
+
+    The injected parts default to what ``config`` asks for: ``cost``, the association's
+    (:func:`~trackctl.vmtrack.association.association_cost`: visual + motion for ``vm``,
+    visual only for ``v-af``); ``refinement``, the offline identity refinement
+    (:func:`~trackctl.vmtrack.offline.default_refinement`; ``no_refinement`` skips it)."""
     cfg = config or VmTrackConfig()
     progress = progress or _silent
     clock = StageClock()
     inputs = plan_inputs(reader, cfg)
     phones = phone_motions(reader, inputs, cfg)
     clock.lap("motion")
-    identity = IdentityBinder(phones, cfg)
-    online = OnlineTracker(cfg, identity, inputs.mode, association_cost(inputs.mode, cfg))
+    identity = IdentityBinder(
+        phones,
+        cfg.binding,
+        cfg.align,
+        phones_aligned=cfg.phones_aligned,
+        keep_evidence=cfg.identity is Identity.ONLINE,
+    )
+    online = OnlineTracker(cfg, identity, inputs.mode, cost or association_cost(inputs.mode, cfg))
     cams = inputs.detector.cams if inputs.detector is not None else inputs.cams
     overlay = TrackOverlay(cams, cfg.frames.detector.person_height_m)
     truth = associate_online(reader, writer, inputs, online, progress, overlay)
@@ -83,10 +99,10 @@ def run_stages(
         identity.finish()
     clock.lap("tracking")
     progress(0, None, "smoothing")
-    positions = smoothed_positions(online.frames, cfg.smooth, cfg.tracker)
-    offline = offline_stages(online, positions, phones, cfg, inputs.mode, progress)
-    score = TruthScore(truth, online, cfg.eval_threshold_m, inputs.mode, set(phones))
-    gate_m = cfg.retrack.gate_m
+    positions = smoothed_positions(online.frames, cfg.smooth, cfg.association.tracker)
+    offline = offline_stages(online, positions, phones, cfg, inputs.mode, progress, refinement)
+    score = TruthScore(truth, online, cfg.report.eval_threshold_m, inputs.mode, set(phones))
+    gate_m = cfg.refinement.gate_m
     tally = write_frames(
         writer, online.frames, positions, offline, phones, gate_m, progress, score, overlay
     )
@@ -105,13 +121,13 @@ def run_stages(
         params={
             "mode": inputs.mode.value,
             "smooth": cfg.smooth,
-            "retrack": cfg.retrack.enabled,
-            "rssi": cfg.retrack.radio.enabled,
-            "merge_m": cfg.merge_m,
-            "bind_frames": cfg.bind_frames,
-            "reject_mps": cfg.reject_mps,
-            "det_sigma_m": cfg.tracker.det_sigma_m,
-            "pdr_sigma_mps": cfg.tracker.pdr_sigma_mps,
+            "retrack": cfg.refinement.enabled,
+            "rssi": cfg.refinement.radio.enabled,
+            "merge_m": cfg.association.merge_m,
+            "bind_frames": cfg.binding.bind_frames,
+            "reject_mps": cfg.binding.reject_mps,
+            "det_sigma_m": cfg.association.tracker.det_sigma_m,
+            "pdr_sigma_mps": cfg.association.tracker.pdr_sigma_mps,
         },
     )
     return VmResult(tuple(tally.written), report)

@@ -8,10 +8,10 @@ import time
 
 import numpy as np
 
+from trackctl.vmtrack.binder import BindingStats
 from trackctl.vmtrack.config import Mode, VmTrackConfig
 from trackctl.vmtrack.frames import FrameDetector
 from trackctl.vmtrack.identify import Identities
-from trackctl.vmtrack.identity import BindingStats
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.offline import Offline
 from trackctl.vmtrack.online import OnlineTracker
@@ -46,7 +46,7 @@ def unmeasured(
             if key in metrics:
                 metrics[key] = None
                 why[key] = "v-af binds no phone (visual only)"
-    if mode is Mode.V_AF or not cfg.retrack.enabled:
+    if mode is Mode.V_AF or not cfg.refinement.enabled:
         reason = (
             "re-tracking is off (--no-retrack)" if mode is Mode.VM else "v-af re-tracks nothing"
         )

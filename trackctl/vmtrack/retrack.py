@@ -72,9 +72,8 @@ class RetrackConfig:
     search_cell_m: float = 0.3
     """Grid cell of the yaw search."""
     det_sigma_m: float = 0.35
-    """A detection's ground error, calibration bias included: measured on real footage (PETS
-    2009 view 001 against hand labels, ``benchmarks/pets_footage.py``: mean 0.37 m, median
-    0.27 m)."""
+    """A detection's ground error, calibration bias included, m (measured on real footage:
+    docs/vmtrack.md, Parameters)."""
     walk_sigma_mps: float = 0.2
     """Random walk of the carrier about the phone's aligned walk, m per sqrt(s): a 10 % step
     length or 5 deg heading error at 1.3 m/s, and a camera's bias taking over from another's."""
@@ -82,53 +81,36 @@ class RetrackConfig:
     """Cost of a frame with no detection near the path (missed, hidden, out of view): what a
     detection 2.5 sigma away costs, so a farther one is no better than none."""
     away_cost: float | None = 2.0
-    """Cost of a frame with the carrier out of view (a phone is on for the whole log, its
-    carrier is not in view all of it). Between what the carrier's own detections cost (about
-    1.2: their noise, misses) and ``miss_cost``: a path in view must be on detections that fit
-    the phone to beat it. The path comes into view once: out of view, in view, out of view
-    (each part possibly empty). So every stretch of the log where some stranger walks like
-    the phone competes with the carrier's own stretch, and in a crowd the one that fits best
-    is the carrier's; a path free to come and go would collect every stranger who walked like
-    the phone for a while. None: the path is one walk over the whole log, in view throughout."""
+    """Cost of a frame with the carrier out of view; the path comes into view once (out of
+    view, in view, out of view, each part possibly empty). None: the path is one walk over the
+    whole log, in view throughout (docs/vmtrack.md, Parameters)."""
     door_cost: float = 2.0
     wall_cost: float = 25.0
     """Cost of coming into view or leaving it: ``door_cost`` at a door, ``wall_cost``
     anywhere else (a door inside the view, a long miss)."""
     edge_m: float = 1.0
     door_ratio: float | None = None
-    """None (the default): the whole edge of the area the cameras cover (within ``edge_m`` of
-    it) is a door. A number: a door is only where that edge sees people come and go, its
-    detections beginning or ending (nobody within ``door_link_m`` in the ``door_frames``
-    frames before, or after) this many times as often as inside the area, smoothed over
-    ``door_smooth_m`` along the edge. On the real scenes of the benchmarks the edge reads
-    17-34, the simulated lobby's walls, which nobody crosses but where the cameras' fields
-    end, 7. At 12, closed-lobby logs gain (120 s, 10 and 40 people: 0.896 -> 0.944 and
-    0.499 -> 0.736) and the real shop fronts lose (`crowds_zara01` and `03`, seed 1:
-    0.874 -> 0.777 and 0.881 -> 0.821), so it is not the default."""
+    """None (the default): the whole edge of the covered area (within ``edge_m`` of it) is a
+    door. A number: a door is only where detections begin or end (nobody within ``door_link_m``
+    in the ``door_frames`` frames before, or after) this many times as often as inside the
+    area, smoothed over ``door_smooth_m`` along the edge (docs/vmtrack.md, Parameters)."""
     door_link_m: float = 1.2
     door_frames: int = 3
     door_smooth_m: float = 1.5
     turnover_min: float | None = 20.0
     steadiness_min: float = 0.8
     steadiness_window_s: float = 30.0
-    """The visit model is read from the log (:class:`VisitReading`): a scene people cross (a
-    shop front, an entrance) has each carrier's path come into view once (``away_cost``); a
-    closed room, where the same people stay in view, keeps the path in view throughout. A room
-    is closed when both its edge turnover (:meth:`~trackctl.vmtrack.grid.SiteGrid.
-    edge_turnover`) is below ``turnover_min`` and its occupancy's steadiness (:func:`~trackctl.
-    vmtrack.grid.occupancy_steadiness` over ``steadiness_window_s``) at least
-    ``steadiness_min``: nobody is seen coming and going, neither at the edge nor in number.
-    None: one visit whatever the log. See docs/vmtrack.md (stage 8) for the figures."""
+    """The visit model read from the log (:class:`VisitReading`): a room is closed, its paths
+    in view throughout, when its edge turnover is below ``turnover_min`` and its occupancy's
+    steadiness over ``steadiness_window_s`` at least ``steadiness_min``; anything else is one
+    visit (``away_cost``). None: one visit whatever the log (docs/vmtrack.md, Parameters)."""
     min_evidence: float | None = 5.0
     evidence_lag_s: float = 2.0
     evidence_sigma_mps: float = 0.3
     """A stretch is published only when its detections share ``min_evidence`` of motion
     changes with the phone (:func:`_evidence`: changes of velocity over ``evidence_lag_s``, in
-    units of ``evidence_sigma_mps``; a shared 35 deg turn at walking pace gives about 6), its
-    RSSI's log-likelihood ratio for the path against the carrier out of view counted in (a
-    straight walk past an AP that hears the phone loud then: `biwi_hotel`, where the 5
-    farthest walkers cross the view in 8-23 s on straight lines, and none was published on
-    motion alone). None publishes every stretch."""
+    units of ``evidence_sigma_mps``), its RSSI's log-likelihood ratio counted in. None
+    publishes every stretch (docs/vmtrack.md, Parameters)."""
     gate_m: float = 1.0
     """A frame counts as seen when a detection is this near the path."""
     fill_s: float = 2.0
@@ -136,9 +118,8 @@ class RetrackConfig:
     unseen_s: float = 20.0
     unseen_m: float = 1.0
     """Gaps up to ``unseen_s`` between two stretches are published on the phone's walk when
-    it lands within ``unseen_m`` (+ 15 % of the walk) of the next stretch: with its alignment
-    fitted, a phone's dead reckoning drifts by a few % of the distance (a 20 s gap at
-    1.3 m/s: ~1 m), and the misfit found at the far end is spread over the gap."""
+    it lands within ``unseen_m`` (+ 15 % of the walk) of the next stretch, the misfit spread
+    over the gap (docs/vmtrack.md, Parameters)."""
     min_stretch_s: float = 5.0
     """A stretch (seen frames and the gaps filled between them) shorter than this is not
     published: a path that passes a stranger picks up a few detections on the way."""
@@ -153,57 +134,38 @@ class RetrackConfig:
     """The one-yaw search tries every yaw at clock offsets this far apart."""
     search_max_hz: float | None = 3.5
     """The search sees every k-th frame, k the smallest that brings the log's frame rate to at
-    most this (a 7 Hz video: every second frame); the path and the alignment are then found
-    again on every frame. The search is the re-tracking's cost, and what it finds (a clock
-    offset on a 0.5 s grid, a yaw 15 deg apart, a step scale 0.1 apart) does not need more
-    frames than the benchmarks' 3 Hz. None: every frame."""
+    most this, Hz (a 7 Hz video: every second frame); the path and the alignment are then found
+    again on every frame. None: every frame (docs/vmtrack.md, Parameters)."""
     search_first_scales: tuple[float, ...] = (0.8, 1.0, 1.2)
     """Step scales at which the one-yaw search chooses the yaw of each stretch between carry
-    changes (at every clock offset): a step 20 % off the nominal drifts 6 m over 20 s in view,
-    which the search's random walk cannot absorb (`students001` seed 3: a 0.58 m step)."""
+    changes, at every clock offset (docs/vmtrack.md, Parameters)."""
     search_candidates: int = 3
     """The one-yaw search refines this many of its best yaws (each more than a step from the
     others): the offset and scale under each, the cheapest kept."""
     search_starts_s: tuple[float, ...] = (-1.5, 0.0, 1.5)
-    """Where the yaw search starts again when the clock offset it led to is at the edge of the
-    range (the search failed there): the one whose path costs least is kept. On the real shop
-    fronts of the benchmark (6 logs) this found 299 instead of 234 of the 484 carrier frames of
-    `crowds_zara01` seed 3, published 91 fewer wrong on `crowds_zara03` seed 3, and left the
-    rest within 20 frames; starting again for every phone gained no more at 2.7x the run time."""
+    """Clock offsets, s, where the yaw search starts again when the offset it led to is at the
+    edge of the range (the search failed there); the start whose path costs least is kept
+    (docs/vmtrack.md, Parameters)."""
     search_walk_sigma_mps: float = 0.2
     """The random walk of the search (it absorbs the yaw and scale grids' steps)."""
     yaw_step_cost: float = 40.0
-    """Cost of the walk's yaw moving by one step between two frames (drift, magnetic
-    disturbance: 1 deg per sqrt(s), 10-20 deg over metres, which the random walk absorbs). At
-    15, a wrong yaw turned by steps onto any stranger's heading."""
+    """Cost of the walk's yaw moving by one ``yaw_step_deg`` step between two frames (drift,
+    magnetic disturbance; docs/vmtrack.md, Parameters)."""
     yaw_jump_cost: float = 150.0
     """Cost of any other yaw change between two frames: a carry change the phone did not
-    notice. Not the -log of its chance (~10): a wrong yaw that may change cheaply hops from
-    walker to walker in a crowd; at 50 missed frames' cost, only a change the next minute
-    confirms is taken."""
+    notice (docs/vmtrack.md, Parameters)."""
     ambiguity_candidates: int = 8
     ambiguity_margin: float | None = 10.0
-    """A phone's path is weighed against the other alignments its search found (up to
-    ``ambiguity_candidates``, each refined): where one whose path costs at most this more (or
-    less) puts the carrier more than ``gate_m`` away, the frame is ambiguous and is not
-    published (:meth:`_Follower.settle`; ``ambiguous_s/<MID>`` in the report), unless one
-    place, the middle of them all, is within ``gate_m`` of each (a group walking together:
-    published there, ``grouped_s/<MID>``). In a dense
-    group the walker beside or behind the carrier fits a phone with another clock offset and
-    yaw nearly as well (`students001` seed 2, weighed at 0.2 m/sqrt(s): eight alignments within
-    8 of each other, three of them on the carrier); publishing the cheapest would be a guess.
-    On the 10-person lobby the nearest alternative that moves a path costs 50 more. None: no
-    alternatives weighed."""
+    """A phone's path is weighed against up to ``ambiguity_candidates`` other refined
+    alignments: where one whose path costs at most this more (or less) puts the carrier more
+    than ``gate_m`` away, the frame is not published (:meth:`_Follower.settle`), unless the
+    middle of them all is within ``gate_m`` of each (a group: published there). None: no
+    alternatives weighed (docs/vmtrack.md, Parameters)."""
     settle_walk_sigma_mps: float | None = 0.1
-    """The random walk under which a phone's refined alignments are weighed against each
-    other (:meth:`_Follower.settle`); the cheapest becomes the phone's path. The paths are
-    found under ``walk_sigma_mps``, loose enough for an alignment the search has only roughly
-    (its yaw and scale grids' steps); once refined, the walk's residual is the dead reckoning's
-    own: about 5 % of the step length and 3 deg of heading at 1.3 m/s, 0.1 m/sqrt(s). A path
-    riding strangers in a crowd moves sideways from one to the next, which a loose walk
-    forgives. On the saved `students001` runs, weighing at 0.2 leaves seed 2's phone 05 on
-    strangers (the true alignments 6-10 dearer); at 0.1 they are 24-30 cheaper. None: weighed
-    under ``walk_sigma_mps``, and the search's path is kept."""
+    """The random walk, m per sqrt(s), under which a phone's refined alignments are weighed
+    against each other (:meth:`_Follower.settle`); the cheapest becomes the phone's path. None:
+    weighed under ``walk_sigma_mps``, and the search's path is kept (docs/vmtrack.md,
+    Parameters)."""
     exclusive: bool = True
     """One person carries one phone: two phones whose paths share detections for
     ``min_stretch_s`` or more are settled jointly, the one that loses least without them
@@ -211,14 +173,9 @@ class RetrackConfig:
     phones (both would then be moved apart)."""
     trust_clear_share: float | None = 0.8
     """A phone whose offline identity is clear (:attr:`~trackctl.vmtrack.identify.Identities.
-    clear`: its chain fits, by ``IdentifyConfig.ratio`` better than any other) in at least this
-    share of the frames it puts the phone on a chain is followed from that identity's
-    alignment, refitted, and its alignment is not searched: the search takes ~95 % of the
-    re-tracking's time (~50 s per phone and 5 min of log) and exists for crowds, where a
-    chain's alignment is learnt from the wrong walker as often as not. Measured (stop 51):
-    the simulated lobby's phones read 0.84-0.96, the real crowds' 0.01-0.75 (`students001`
-    0.01-0.24, `crowds_zara01` 0.30-0.75, `crowds_zara03` 0.48-0.58, `biwi_hotel` 0.32-0.66),
-    so crowds are searched as before. None: every phone searched (``--refine full``)."""
+    clear`) in at least this share of the frames it is on a chain is followed from that
+    identity's alignment, refitted, and not searched. None: every phone searched
+    (``--refine full``; docs/vmtrack.md, Parameters)."""
     refine_passes: int = 2
     velocity_window_s: float = 7.0
     """Centred window of the least-squares velocity of the path's detections and of the phone's

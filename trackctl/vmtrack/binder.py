@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from trackctl.logs.messages import RssiScan, TrackState
-from trackctl.vmtrack.align import Alignment, CandidateTable, PairEvidence, lag_grid
-from trackctl.vmtrack.config import VmTrackConfig
+from trackctl.vmtrack.align import AlignConfig, Alignment, CandidateTable, PairEvidence, lag_grid
+from trackctl.vmtrack.config import BindingConfig
 from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.tracker import GroundTrack
 
@@ -53,14 +53,26 @@ class IdentityBinder:
 
     Args:
         phones: motion of every phone, by MID (empty for the visual-only baseline).
-        cfg: the run's configuration.
+        cfg: the binding stage's parameters.
+        align: the search ranges of each phone's alignment.
+        phones_aligned: every phone starts at the identity alignment (the paper's assumption).
+        keep_evidence: keep every never-bound phone's whole-log evidence for
+            :meth:`finish` (the online identity; the offline identity stage decides on its own).
     """
 
-    def __init__(self, phones: dict[str, PhoneMotion], cfg: VmTrackConfig) -> None:
+    def __init__(
+        self,
+        phones: dict[str, PhoneMotion],
+        cfg: BindingConfig,
+        align: AlignConfig,
+        *,
+        phones_aligned: bool = False,
+        keep_evidence: bool = False,
+    ) -> None:
         self.phones = phones
         self.cfg = cfg
-        self.acfg = cfg.align
-        self.lags = lag_grid(cfg.align)
+        self.acfg = align
+        self.lags = lag_grid(align)
         self._lag_ns = np.round(self.lags * 1e9).astype(np.int64)
         self.stats = BindingStats()
         self.bound: dict[str, GroundTrack] = {}
@@ -72,15 +84,15 @@ class IdentityBinder:
         self._bound_t: dict[str, int] = {}
         self.candidates: dict[str, CandidateTable] = {}
         # whole-log evidence of (never-bound phone, track) agreement, for the online identity's
-        # offline resolution (the offline identity stage, the default, decides on its own)
-        self.evidence: dict[str, CandidateTable] | None = {} if cfg.identity == "online" else None
+        # offline resolution
+        self.evidence: dict[str, CandidateTable] | None = {} if keep_evidence else None
         self.by_vid: dict[str, GroundTrack] = {}
         self.disagreement: dict[str, list[float]] = defaultdict(list)
         self.visual_disagreement: dict[str, list[float]] = defaultdict(list)
         self.pending_rssi: list[RssiScan] = []
         self._cache_t: int | None = None
         self._cache: dict[str, np.ndarray] = {}
-        if cfg.phones_aligned:
+        if phones_aligned:
             zero = Alignment(1 + 0j, 0.0, len(self.lags) // 2)
             self.last_align.update({mid: zero for mid in phones})
 
@@ -381,7 +393,7 @@ class IdentityBinder:
         cfg = self.cfg
         if not len(cands):
             return None, False
-        score = cands.scores(cfg.align, known) + cands.rssi_penalty(_RSSI_WEIGHT)
+        score = cands.scores(self.acfg, known) + cands.rssi_penalty(_RSSI_WEIGHT)
         frames = cands.frames()
         alive = np.flatnonzero(~((frames >= judge_after) & (score > cfg.reject_mps**2)))
         order = alive[np.argsort(score[alive], kind="stable")]
@@ -394,7 +406,7 @@ class IdentityBinder:
         vid = cands.vids[order[0]]
         trk = next(t for t in free if t.vid == vid)
         ev = cands.evidence(vid)
-        al = known if known is not None else ev.fit(cfg.align, self.lags)
+        al = known if known is not None else ev.fit(self.acfg, self.lags)
         return (trk, best, ev, al), False
 
     def _assign(
@@ -455,7 +467,7 @@ class IdentityBinder:
         """(score, VID) of the anonymous track that best fits a phone's whole-log evidence;
         None when it is outside the offline gate or the runner-up fits within ``ratio``."""
         cfg = self.cfg
-        score = cands.scores(cfg.align) + cands.rssi_penalty(_RSSI_WEIGHT)
+        score = cands.scores(self.acfg) + cands.rssi_penalty(_RSSI_WEIGHT)
         frames = cands.frames()
         scored = sorted(
             (float(score[i]), vid)
@@ -474,7 +486,7 @@ class IdentityBinder:
         trk = self.by_vid[vid]
         trk.first_mid = mid
         trk.first_bound_ns = trk.t_ns + 1  # the identity covers the whole track (back-dated)
-        al = (self.evidence or {})[mid].evidence(vid).fit(self.cfg.align, self.lags)
+        al = (self.evidence or {})[mid].evidence(vid).fit(self.acfg, self.lags)
         if al is not None:
             self.last_align[mid] = al
 
