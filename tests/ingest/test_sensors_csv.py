@@ -420,3 +420,18 @@ def test_any_column_order_reads_the_same_samples(order: list[int], header: bool)
     assert [s.t_ns for s in samples] == [i * 10_000_000 for i in range(5)]
     assert [s.accel_mps2.x for s in samples] == [float(i) for i in range(5)]
     assert [s.gyro_rps.z for s in samples] == pytest.approx([i / 10 for i in range(5)])
+
+
+def test_line_numbers_across_chunks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import trackctl.ingest.sensors_csv as sensors_csv
+
+    monkeypatch.setattr(sensors_csv, "CHUNK_ROWS", 3)
+    rows = [f"{0.01 * i:.2f},0,0,9.8" for i in range(8)]
+    rows[6] = "0.06,0,0,bad"
+    path = _csv(tmp_path, "t_s,ax,ay,az\n" + "\n".join(rows[:2]) + "\n\n" + "\n".join(rows[2:]))
+    # line 1 header, lines 2-3 samples 0-1, line 4 blank, sample k >= 2 on line k + 3
+    with pytest.raises(NonFiniteValueError, match=r"line 9, column az: 'bad'"):
+        list(read_imu(path, "p"))
+    rows[6] = "0.06,0,0,9.8"
+    path.write_text("t_s,ax,ay,az\n" + "\n".join(rows[:2]) + "\n\n" + "\n".join(rows[2:]))
+    assert len(list(read_imu(path, "p"))) == 8
