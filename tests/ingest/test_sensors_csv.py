@@ -7,10 +7,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from tests.conftest import examples
 from trackctl.errors import InputError, NonFiniteValueError, NonMonotonicTimeError
-from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv
-from trackctl.logs.messages import Quat
+from trackctl.ingest.sensors_csv import (
+    CsvLayout,
+    parse_column_options,
+    parse_columns,
+    read_imu,
+    read_odometry_csv,
+    read_rssi_csv,
+)
+from trackctl.logs.messages import Quat, Vec3
 
 
 def test_imu_csv(imu_csv: Path) -> None:
@@ -234,3 +244,194 @@ def test_epoch_seconds_are_valid_seconds(tmp_path: Path) -> None:
     path = _csv(tmp_path, "t_s,ax,ay,az\n1700000000.00,0,0,9.8\n1700000000.01,0,0,9.8\n")
     samples = list(read_imu(path, "p"))
     assert samples[1].t_ns - samples[0].t_ns == 10_000_000
+
+
+# -- column maps, header-less files, time units (record --columns / --no-header) -------------
+
+
+def test_header_less_file_is_read_by_index_map(tmp_path: Path) -> None:
+    path = _csv(tmp_path, "9.8,0.1,0,0.00\n9.7,0.2,0,0.01\n")
+    layout = CsvLayout(parse_columns("t=3,ax=1,ay=2,az=0"))
+    samples = list(read_imu(path, "p", layout=layout))
+    assert [s.t_ns for s in samples] == [0, 10_000_000]
+    assert (samples[1].accel_mps2.x, samples[1].accel_mps2.z) == pytest.approx((0.2, 9.7))
+    assert samples[0].gyro_rps is None
+
+
+def test_header_names_map_and_unmapped_fields_go_by_contract_name(tmp_path: Path) -> None:
+    path = _csv(
+        tmp_path, "time,accX,accY,accZ,gx,gy,gz\n1000,1,2,3,0.1,0.2,0.3\n1010,1,2,3,0,0,0\n"
+    )
+    layout = CsvLayout(parse_columns("t=time,ax=accX,ay=accY,az=accZ"))
+    samples = list(read_imu(path, "p", time_unit="ms", layout=layout))
+    assert [s.t_ns for s in samples] == [1_000_000_000, 1_010_000_000]
+    assert samples[0].accel_mps2 == Vec3(1.0, 2.0, 3.0)
+    assert samples[0].gyro_rps == Vec3(0.1, 0.2, 0.3)
+
+
+@pytest.mark.parametrize("unit, factor", [("s", 10**9), ("ms", 10**6), ("us", 10**3), ("ns", 1)])
+def test_time_units_of_a_mapped_time_column(tmp_path: Path, unit: str, factor: int) -> None:
+    path = _csv(tmp_path, "v,w,stamp\n0.5,0,7\n0.5,0,8\n0.5,0,9\n")
+    layout = CsvLayout(parse_columns("t=stamp,v_mps=v,omega_rps=w"))
+    if unit == "s":  # integer seconds a second apart look like milliseconds: refused, with a hint
+        with pytest.raises(InputError, match=r"line 2, column stamp: .*--time-unit"):
+            list(read_odometry_csv(path, "r", time_unit=unit, layout=layout))
+        return
+    out = list(read_odometry_csv(path, "r", time_unit=unit, layout=layout))
+    assert [o.t_ns for o in out] == [7 * factor, 8 * factor, 9 * factor]
+
+
+def test_forced_header_and_forced_no_header(tmp_path: Path) -> None:
+    numeric_header = _csv(tmp_path, "0,1,2,3\n0.0,0,0,9.8\n0.1,0,0,9.8\n")
+    layout = CsvLayout(parse_columns("t=0,ax=1,ay=2,az=3"), header=True)
+    assert len(list(read_imu(numeric_header, "p", layout=layout))) == 2
+    assert len(list(read_imu(numeric_header, "p", layout=CsvLayout(layout.columns)))) == 3
+    text_first = _csv(tmp_path, "x,0,0,9.8\n0.1,0,0,9.8\n", "t.csv")
+    with pytest.raises(NonFiniteValueError, match=r"t.csv: line 1, column 0 \(0-based\): 'x'"):
+        list(read_imu(text_first, "p", layout=CsvLayout(layout.columns, header=False)))
+
+
+def test_header_less_file_without_a_map_asks_for_columns(tmp_path: Path) -> None:
+    path = _csv(tmp_path, "0,0,0,9.8\n0.1,0,0,9.8\n")
+    with pytest.raises(
+        InputError, match=r"s.csv: line 1 holds numbers.*--columns t=0,ax=1,ay=2,az=3"
+    ):
+        list(read_imu(path, "p"))
+    with pytest.raises(InputError, match=r"(?s)--columns t=0,ax=1.*missing: ay, az"):
+        list(read_imu(path, "p", layout=CsvLayout({"t_s": 0, "ax": 1})))
+
+
+def test_errors_name_the_files_own_column_and_line_blank_lines_included(tmp_path: Path) -> None:
+    by_name = _csv(tmp_path, "time,accX,accY,accZ\n0,0,0,9.8\n\n0.1,0,oops,9.8\n")
+    layout = CsvLayout(parse_columns("t=time,ax=accX,ay=accY,az=accZ"))
+    with pytest.raises(NonFiniteValueError, match=r"s.csv: line 4, column accY: 'oops'"):
+        list(read_imu(by_name, "p", layout=layout))
+    by_index = _csv(tmp_path, "0,0,0,9.8\n\n\n0.1,0,0,\n", "i.csv")
+    with pytest.raises(
+        NonFiniteValueError, match=r"i.csv: line 4, column 3 \(0-based\): empty, expected a"
+    ):
+        list(read_imu(by_index, "p", layout=CsvLayout(parse_columns("t=0,ax=1,ay=2,az=3"))))
+    back = _csv(tmp_path, "stamp,observer,eid,rssi_dbm\n1,a,e,-50\n\n0.5,a,e,-50\n", "r.csv")
+    with pytest.raises(NonMonotonicTimeError, match=r"r.csv: line 4, column stamp: 0.5 s"):
+        list(read_rssi_csv(back, layout=CsvLayout({"t_s": "stamp"})))
+
+
+def test_duplicate_header_names_are_never_renamed(tmp_path: Path) -> None:
+    # pandas would call the second '0.0' column '0.0.1': that name is in no file
+    path = _csv(tmp_path, "t_s,0.0,0.0,az\n0,1,2,9.8\n0.1,x,2,9.8\n")
+    layout = CsvLayout({"ax": 1, "ay": 2})
+    with pytest.raises(NonFiniteValueError) as err:
+        list(read_imu(path, "p", layout=layout))
+    assert "line 3, column 0.0: 'x'" in str(err.value) and "0.0.1" not in str(err.value)
+    with pytest.raises(InputError, match=r"'0.0' heads columns 1 and 2 \(0-based\)") as dup:
+        list(read_imu(path, "p", layout=CsvLayout({"ax": "0.0", "ay": 2})))
+    assert "0.0.1" not in str(dup.value)
+    twice = _csv(tmp_path, "t_s,ax,ay,az,az\n0,0,0,9.8,1\n", "d.csv")
+    with pytest.raises(InputError, match=r"d.csv: line 1: header name 'az' heads columns 3 and 4"):
+        list(read_imu(twice, "p"))
+    assert len(list(read_imu(twice, "p", layout=CsvLayout({"az": 4})))) == 1
+
+
+@pytest.mark.parametrize(
+    "text, columns, header, message",
+    [
+        (
+            "t,a\n0,1\n",
+            {"t_s": 0, "ax": 9},
+            None,
+            r"--columns ax=9: the file has 2 columns \(0..1\)",
+        ),
+        ("0,1\n", {"t_s": 0, "ax": "accX"}, False, r"--columns ax=accX names a header column"),
+        (
+            "t,a\n0,1\n",
+            {"t_s": 0, "ax": "accX"},
+            None,
+            r"no column 'accX' in the header \(line 1: t,a\)",
+        ),
+        ("t,a\n0,1\n", {"t_s": 0, "v_mps": 1}, None, r"v_mps is not a field of an IMU CSV"),
+        ("t_s,ax,ay,az,g\n0,0,0,9,1\n", {"gx": 4}, None, r"--columns gives gx but not gy, gz"),
+    ],
+)
+def test_bad_column_maps_name_the_file_and_the_column(
+    tmp_path: Path,
+    text: str,
+    columns: dict[str, int | str],
+    header: bool | None,
+    message: str,
+) -> None:
+    path = _csv(tmp_path, text)
+    with pytest.raises(InputError, match=r"s.csv: .*" + message):
+        list(read_imu(path, "p", layout=CsvLayout(columns, header)))
+
+
+def test_rssi_and_odometry_by_index(tmp_path: Path) -> None:
+    rssi = _csv(tmp_path, "-50,ap1,007,0\n-60,ap1,008,0\n", "r.csv")
+    layout = CsvLayout(parse_columns("t=3,observer=1,eid=2,rssi_dbm=0"))
+    (scan,) = list(read_rssi_csv(rssi, layout=layout))
+    assert [r.eid for r in scan.readings] == ["007", "008"] and scan.observer == "ap1"
+    odom = _csv(tmp_path, "0,10,11\n0.1,20,22\n", "o.csv")
+    ticks = list(
+        read_odometry_csv(
+            odom, "r", layout=CsvLayout(parse_columns("t=0,left_ticks=1,right_ticks=2"))
+        )
+    )
+    assert ticks[1].right_ticks == 22
+    with pytest.raises(InputError, match=r"o.csv: line 1 holds numbers.*--columns t=0,left_ticks"):
+        list(read_odometry_csv(odom, "r"))
+
+
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ("t=0,ax", r"'ax' is not KEY=COLUMN"),
+        ("t=0,t_s=1", r"t_s given twice"),
+        ("t=0,ax=0", r"column 0 given for two fields"),
+        ("=1", r"'=1' is not KEY=COLUMN"),
+    ],
+)
+def test_parse_columns_errors(spec: str, message: str) -> None:
+    with pytest.raises(InputError, match=message):
+        parse_columns(spec)
+
+
+def test_parse_column_options_targets() -> None:
+    got = parse_column_options(["t=0,ax=1", "p1:t=time", "rssi:t=1"])
+    assert got == {"": {"t_s": 0, "ax": 1}, "p1": {"t_s": "time"}, "rssi": {"t_s": 1}}
+    with pytest.raises(InputError, match="a second --columns for p1"):
+        parse_column_options(["p1:t=0", "p1:ax=1"])
+    assert parse_column_options(["t=a:b"]) == {"": {"t_s": "a:b"}}  # ':' after '=' is a name
+
+
+@settings(max_examples=examples(25), deadline=None)
+@given(order=st.permutations(range(7)), header=st.booleans())
+def test_any_column_order_reads_the_same_samples(order: list[int], header: bool) -> None:
+    import tempfile
+
+    fields = ("t_s", "ax", "ay", "az", "gx", "gy", "gz")
+    rows = [[f"{0.01 * i:.2f}", str(i), "0.5", "9.8", "0", "0", f"{i / 10}"] for i in range(5)]
+    lines = ([",".join(f"c{j}" for j in range(7))] if header else []) + [
+        ",".join(r[order.index(j)] for j in range(7)) for r in rows
+    ]
+    columns = {f: (f"c{order[k]}" if header else order[k]) for k, f in enumerate(fields)}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "p.csv"
+        path.write_text("\n".join(lines) + "\n")
+        samples = list(read_imu(path, "p", layout=CsvLayout(columns)))
+    assert [s.t_ns for s in samples] == [i * 10_000_000 for i in range(5)]
+    assert [s.accel_mps2.x for s in samples] == [float(i) for i in range(5)]
+    assert [s.gyro_rps.z for s in samples] == pytest.approx([i / 10 for i in range(5)])
+
+
+def test_line_numbers_across_chunks(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import trackctl.ingest.sensors_csv as sensors_csv
+
+    monkeypatch.setattr(sensors_csv, "CHUNK_ROWS", 3)
+    rows = [f"{0.01 * i:.2f},0,0,9.8" for i in range(8)]
+    rows[6] = "0.06,0,0,bad"
+    path = _csv(tmp_path, "t_s,ax,ay,az\n" + "\n".join(rows[:2]) + "\n\n" + "\n".join(rows[2:]))
+    # line 1 header, lines 2-3 samples 0-1, line 4 blank, sample k >= 2 on line k + 3
+    with pytest.raises(NonFiniteValueError, match=r"line 9, column az: 'bad'"):
+        list(read_imu(path, "p"))
+    rows[6] = "0.06,0,0,9.8"
+    path.write_text("t_s,ax,ay,az\n" + "\n".join(rows[:2]) + "\n\n" + "\n".join(rows[2:]))
+    assert len(list(read_imu(path, "p"))) == 8

@@ -154,9 +154,28 @@ def record(
     time_unit: Annotated[
         str,
         typer.Option(
-            help="Unit of the CSV files' t_s column: s, ms, us or ns (converted to the log's ns)."
+            help="Unit of the CSV files' time column (t_s, or --columns t=...): s, ms, us or ns "
+            "(converted to the log's ns)."
         ),
     ] = "s",
+    columns: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--columns",
+            metavar="[NAME:]KEY=COL,...",
+            help="Which column of the --imu/--rssi/--odom CSV holds each field: 0-based indexes "
+            "(t=0,ax=1,ay=2,az=3) or header names (t=time,ax=accX,...); NAME: (an --imu/--odom "
+            "name, or rssi) limits it to that input. Unmapped fields go by their header name.",
+        ),
+    ] = None,
+    header: Annotated[
+        bool | None,
+        typer.Option(
+            "--header/--no-header",
+            help="Whether the CSV files' first row is a header (default: yes unless it is all "
+            "numbers); header-less files need --columns by index.",
+        ),
+    ] = None,
     video_start: Annotated[
         float,
         typer.Option(
@@ -214,6 +233,8 @@ def record(
         frame_times=frame_times,
         calib_units=calib_units,
         time_unit=time_unit,
+        columns=columns,
+        header=header,
         video_start=video_start,
         quiet=quiet or json_out,
     )
@@ -249,12 +270,15 @@ def _files_config(
     frame_times: str | None,
     calib_units: str | None,
     time_unit: str,
+    columns: list[str] | None,
+    header: bool | None,
     video_start: float,
     quiet: bool,
 ) -> RecordConfig:
     """The file sources of ``record``'s options (the ROS 2 plan printed unless quiet)."""
     from trackctl.geometry.calib import metres_per_unit
     from trackctl.ingest.record import RecordConfig, parse_named
+    from trackctl.ingest.sensors_csv import parse_column_options
     from trackctl.ingest.video import FrameSelection
 
     plan = _ros2_plan(ros2, ros2_map, robot, quiet)
@@ -276,6 +300,8 @@ def _files_config(
         frame_times=_frame_times(frame_times),
         calib_units=metres_per_unit(calib_units, "--calib-units"),
         time_unit=time_unit,
+        csv_columns=parse_column_options(columns or ()),
+        csv_header=header,
     )
 
 

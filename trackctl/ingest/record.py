@@ -27,7 +27,13 @@ from trackctl.ingest.live import (
 )
 from trackctl.ingest.mot import read_mot_detections
 from trackctl.ingest.ros2 import TopicPlan, read_ros2, ros_metadata
-from trackctl.ingest.sensors_csv import read_imu, read_odometry_csv, read_rssi_csv, seconds_to_ns
+from trackctl.ingest.sensors_csv import (
+    CsvLayout,
+    read_imu,
+    read_odometry_csv,
+    read_rssi_csv,
+    seconds_to_ns,
+)
 from trackctl.ingest.video import FrameSelection, frame_size, read_frames
 from trackctl.logs import topics
 from trackctl.logs.foxglove import detection_annotations
@@ -75,6 +81,12 @@ class RecordConfig:
     jpeg_quality: int = 90
     time_unit: str = "s"
     """Unit of the CSV files' ``t_s`` column: s, ms, us or ns."""
+    csv_columns: Mapping[str, Mapping[str, int | str]] = field(default_factory=dict)
+    """Column maps of the IMU/RSSI/odometry CSV files (``--columns``) by target: ``""`` for
+    every file, an ``imu``/``odom`` NAME, or ``"rssi"`` (see
+    :func:`~trackctl.ingest.sensors_csv.parse_column_options`)."""
+    csv_header: bool | None = None
+    """Whether the CSV files' first row is a header (None: unless it is all numbers)."""
     site: Path | None = None
     """The site file (:mod:`trackctl.ingest.site`), attached to the log as it was written."""
     site_records: Mapping[str, Mapping[str, str]] = field(default_factory=dict)
@@ -96,6 +108,23 @@ class RecordConfig:
             or self.detections
             or self.ros2
         )
+
+    def csv_layout(self, target: str) -> CsvLayout:
+        """The layout of the CSV file(s) of ``target`` (an ``imu``/``odom`` NAME or ``rssi``):
+        the map for every file, overridden field by field by the target's own.
+
+        Raises:
+            InputError: a ``csv_columns`` target names no CSV input.
+        """
+        known = {*self.imu, *self.odom, *(("rssi",) if self.rssi else ())}
+        unknown = sorted(t for t in self.csv_columns if t and t not in known)
+        if unknown:
+            raise InputError(
+                f"--columns {unknown[0]}:...: no --imu/--odom named {unknown[0]} (names: "
+                f"{', '.join(sorted(known - {'rssi'})) or 'none'}; rssi: for the --rssi files)"
+            )
+        columns = {**self.csv_columns.get("", {}), **self.csv_columns.get(target, {})}
+        return CsvLayout(columns=columns, header=self.csv_header)
 
     @property
     def inputs(self) -> tuple[Path, ...]:
@@ -239,15 +268,16 @@ def record_files(
     streams: list[Iterator[Stamped]] = []
     order = 0
     for name, path in cfg.imu.items():
-        streams.append(_stamped(read_imu(path, name, cfg.time_unit), topics.imu(name), order))
+        imu = read_imu(path, name, cfg.time_unit, cfg.csv_layout(name))
+        streams.append(_stamped(imu, topics.imu(name), order))
         order += 1
     for path in cfg.rssi:
-        streams.append(_stamped(read_rssi_csv(path, cfg.time_unit), topics.RSSI, order))
+        rssi = read_rssi_csv(path, cfg.time_unit, cfg.csv_layout("rssi"))
+        streams.append(_stamped(rssi, topics.RSSI, order))
         order += 1
     for name, path in cfg.odom.items():
-        streams.append(
-            _stamped(read_odometry_csv(path, name, cfg.time_unit), topics.odom(name), order)
-        )
+        odom = read_odometry_csv(path, name, cfg.time_unit, cfg.csv_layout(name))
+        streams.append(_stamped(odom, topics.odom(name), order))
         order += 1
     for name, path in cfg.video.items():
         streams.append(_frames(path, name, cfg, order))
@@ -295,6 +325,12 @@ class IngestPlan:
         """Raise InputError for a plan that cannot be recorded."""
         if self.files.time_unit not in TIME_UNITS:
             raise InputError(f"--time-unit {self.files.time_unit!r}: expected s, ms, us or ns")
+        csv_inputs = self.files.imu or self.files.rssi or self.files.odom
+        if (self.files.csv_columns or self.files.csv_header is not None) and not csv_inputs:
+            flag = "--columns" if self.files.csv_columns else "--header/--no-header"
+            raise InputError(f"{flag} describes CSV files: give --imu, --rssi or --odom")
+        if csv_inputs:
+            self.files.csv_layout("")  # a --columns NAME: that names no input
         if self.stdin and self.udp is not None:
             raise InputError("--stdin and --udp are exclusive; record one live source at a time")
         if self.files.empty and not self.live:
