@@ -37,6 +37,7 @@ def test_score_counts_hits_misses_and_false_positives() -> None:
     assert score.false_positives == 1  # frame 4 has no labels: not scored
     assert score.errors_m == pytest.approx((0.2, 0.5), abs=1e-6)
     assert score.summary()["label_recall"] == pytest.approx(2 / 3, abs=1e-4)
+    assert score.detections == 3 and score.precision == pytest.approx(2 / 3)
 
 
 def test_shipped_pets_labels_read(tmp_path: Path) -> None:
@@ -90,7 +91,7 @@ def test_score_tracks_mot_and_track_ids_per_person() -> None:
     assert score.track_ids == 3  # a, b, c ("o" sits on the occluded C, "zz" on no label frame)
     summary = score.summary()
     assert summary["track_ids_per_person_max"] == 2
-    assert summary["labelled_people_untracked"] == 0
+    assert summary["track_people_untracked"] == 0
 
 
 def test_score_tracks_matches_py_motmetrics() -> None:

@@ -81,16 +81,26 @@ class DetectionScore:
     """Detections farther than ``match_m`` from every label of their frame."""
     errors_m: tuple[float, ...]
     """Floor distance of each found person to its nearest detection."""
+    detections: int = 0
+    """Detections on the labelled frames."""
 
     @property
     def recall(self) -> float:
         return self.found / self.labels if self.labels else float("nan")
+
+    @property
+    def precision(self) -> float:
+        """Share of the labelled frames' detections within ``match_m`` of a label (occluded
+        labels included)."""
+        return 1.0 - self.false_positives / self.detections if self.detections else float("nan")
 
     def summary(self) -> dict[str, float | int | None]:
         err = np.array(self.errors_m)
         return {
             "labelled_people": self.labels,
             "label_recall": round(self.recall, 4) if self.labels else None,
+            "label_precision": round(self.precision, 4) if self.detections else None,
+            "label_detections": self.detections,
             "label_false_positives": self.false_positives,
             "label_error_m_mean": round(float(err.mean()), 4) if len(err) else None,
             "label_error_m_median": round(float(np.median(err)), 4) if len(err) else None,
@@ -110,13 +120,14 @@ def score_detections(
     by_frame: dict[int, list[FootLabel]] = {}
     for lab in labels:
         by_frame.setdefault(lab.frame, []).append(lab)
-    n = found = fp = 0
+    n = found = fp = n_dets = 0
     errors: list[float] = []
     for frame, labs in sorted(by_frame.items()):
         px = np.array([[lab.u_px, lab.v_px] for lab in labs])
         ground = camera.ground_point(px)[:, :2]
         visible = np.array([not lab.occluded for lab in labs])
         dets = np.asarray(detections.get(frame, np.empty((0, 2))), float).reshape(-1, 2)
+        n_dets += len(dets)
         for g, vis in zip(ground, visible, strict=True):
             if not vis or np.isnan(g).any():
                 continue
@@ -129,7 +140,7 @@ def score_detections(
         if len(dets):
             dist = np.linalg.norm(dets[:, None, :] - ground[None, :, :], axis=2)
             fp += int(np.sum(np.nan_to_num(dist, nan=np.inf).min(axis=1) >= match_m))
-    return DetectionScore(n, found, fp, tuple(errors))
+    return DetectionScore(n, found, fp, tuple(errors), n_dets)
 
 
 @dataclass(frozen=True, slots=True)
@@ -210,9 +221,9 @@ class TrackScore:
         per = np.array(list(self.ids_per_person.values()), float)
         m = self.mot
         return {
-            "labelled_frames": m.frames,
-            "labelled_people": len(per),
-            "labelled_people_untracked": int(np.sum(per == 0)),
+            "track_labelled_frames": m.frames,
+            "track_labelled_people": len(per),
+            "track_people_untracked": int(np.sum(per == 0)),
             "track_mota": round(m.mota, 4),
             "track_idf1": round(m.idf1, 4),
             "track_id_switches": m.id_switches,
