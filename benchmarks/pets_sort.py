@@ -15,7 +15,8 @@ that file:
 Scored the same way (``trackctl.metrics.footlabels.score_tracks``): on the ground plane, 1 m,
 against the hand-labelled identities of ``tests/data/pets2009_view001_people.csv`` on its
 labelled frames; "ids" is how many distinct track ids are matched to the labelled people. The
-first row is the video run's own tracks (same detector, the tracker also sees the frames).
+first row is the video run's own tracks (same detector, the tracker also sees the frames); the
+detections themselves are scored against the same labels first (recall, precision at 1 m).
 
     TRACKCTL_VTEST=.../vtest.avi python benchmarks/pets_sort.py [--fps 7] [--rate R]
 
@@ -42,7 +43,13 @@ from trackctl.geometry.camera import PinholeCamera
 from trackctl.ingest.calibration import read_calibration
 from trackctl.ingest.record import IngestPlan, RecordConfig, ingest
 from trackctl.logs.reader import LogReader
-from trackctl.metrics.footlabels import TrackScore, read_person_labels, score_tracks
+from trackctl.metrics.footlabels import (
+    FootLabel,
+    TrackScore,
+    read_person_labels,
+    score_detections,
+    score_tracks,
+)
 from trackctl.processing import run_processors
 from trackctl.vmtrack import Mode, VmTrackConfig, VmTrackProcessor
 
@@ -163,16 +170,29 @@ def main(argv: list[str] | None = None) -> int:
             for m in LogReader(out).messages(["/vmtrack/cam0/detections"])
         }
         ours_video = tracks_of(out, video_stamps)
+        ground = {
+            video_stamps[m.log_time_ns]: np.array(
+                [(d.ground_m.x, d.ground_m.y) for d in m.message.detections if d.ground_m]
+            ).reshape(-1, 2)
+            for m in LogReader(out).messages(["/vmtrack/cam0/detections"])
+        }
         ours = trackctl_on_det(work, det, Path(args.calib), frames, det_fps)
         t2 = time.perf_counter()
         sort = sort_on_det(det, cam, frames)
         t3 = time.perf_counter()
         n_boxes = len(det.read_text().splitlines())
     people = len({lab.person for lab in labels if not lab.occluded})
+    feet = [FootLabel(lab.frame, lab.u_px, lab.v_px, lab.occluded) for lab in labels]
+    dscore = score_detections(feet, ground, cam)
     print(
         f"PETS09-S2L1 view 001: det.txt of trackctl's own detector, {len(frames)} frames, "
         f"{n_boxes} boxes, recorded at {det_fps:g} fps; scored on the ground at 1 m against "
         f"{len({lab.frame for lab in labels})} labelled frames, {people} people"
+    )
+    print(
+        f"the detections against the labels: recall {dscore.recall:.3f}, precision "
+        f"{dscore.precision:.3f} ({dscore.found} of {dscore.labels} people, "
+        f"{dscore.false_positives} false of {dscore.detections})"
     )
     print(
         f"{'tracker':<22}{'MOTA':>7}{'IDF1':>7}{'IDsw':>6}{'FP':>5}{'FN':>5}{'ids':>5}{'ids/p':>8}"
