@@ -295,6 +295,11 @@ class IngestPlan:
         """Raise InputError for a plan that cannot be recorded."""
         if self.files.time_unit not in TIME_UNITS:
             raise InputError(f"--time-unit {self.files.time_unit!r}: expected s, ms, us or ns")
+        from trackctl.ingest.video import check_fps, check_log_seconds
+
+        check_log_seconds(self.files.video_start_s, "--video-start")
+        if self.files.fps is not None:
+            check_fps(self.files.fps)
         if self.stdin and self.udp is not None:
             raise InputError("--stdin and --udp are exclusive; record one live source at a time")
         if self.files.empty and not self.live:
