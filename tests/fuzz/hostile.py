@@ -150,6 +150,7 @@ _HOSTILE_NUMBERS: tuple[Callable[[random.Random], Any], ...] = (
     lambda r: -(10**25),
     lambda r: int("9" * 400),
     lambda r: 1e308,
+    lambda r: 1e14,
     lambda r: -1,
     lambda r: 0,
     lambda r: r.choice(["1", "x", None, [], {}]),
@@ -233,9 +234,11 @@ class Run:
     """The child's own peak resident memory (``wait4``'s rusage: this child only)."""
 
 
-def run_measured(args: list[str], cwd: Path | None = None, timeout_s: float = 300.0) -> Run:
-    """``python -m trackctl ARGS`` in a child process, with its exit code, output and peak RSS
-    (``resource``'s ``ru_maxrss`` of that child, KiB on Linux)."""
+def run_measured(
+    args: list[str], cwd: Path | None = None, timeout_s: float = 300.0, stdin: Path | None = None
+) -> Run:
+    """``python -m trackctl ARGS`` in a child process (``stdin``: a file to read from), with its
+    exit code, output and peak RSS (``resource``'s ``ru_maxrss`` of that child, KiB on Linux)."""
     import os
     import signal
     import subprocess
@@ -245,12 +248,16 @@ def run_measured(args: list[str], cwd: Path | None = None, timeout_s: float = 30
 
     root = Path(__file__).resolve().parents[2]
     env = {**os.environ, "PYTHONPATH": str(root), "COLUMNS": "200"}
-    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+    with (
+        tempfile.TemporaryFile() as out,
+        tempfile.TemporaryFile() as err,
+        stdin.open("rb") if stdin is not None else open(os.devnull, "rb") as inp,
+    ):
         proc = subprocess.Popen(
             [sys.executable, "-m", "trackctl", *args],
             stdout=out,
             stderr=err,
-            stdin=subprocess.DEVNULL,
+            stdin=inp,
             cwd=cwd or root,
             env=env,
         )

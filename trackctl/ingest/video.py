@@ -218,10 +218,10 @@ def _name_times(path: Path, files: list[Path], scale: float) -> np.ndarray:
     """Seconds of every image file from its numeric name (in units of ``scale`` seconds)."""
     try:
         out = np.array([float(f.stem) for f in files]) * scale
-        bad = ~(np.isfinite(out) & (np.abs(out) <= MAX_LOG_SECONDS))
-        if bad.any():
+        far = ~(np.isfinite(out) & (np.abs(out) <= MAX_LOG_SECONDS))
+        if far.any():
             raise InputError(
-                f"{path}: image name {files[int(np.argmax(bad))].name} is not a time within "
+                f"{path}: image name {files[int(np.argmax(far))].name} is not a time within "
                 f"{MAX_LOG_SECONDS:g} s"
             )
         return out

@@ -26,6 +26,7 @@ import dataclasses
 import enum
 import inspect
 import json
+import math
 import re
 import types
 import typing
@@ -76,8 +77,10 @@ def _time_to_json(t_ns: int) -> dict[str, int]:
 
 
 MAX_JSON_FLOAT = 1e15
-"""Largest magnitude of a decoded float field: no physical value a trackctl message carries
-(metres, m/s, radians, pixels, dBm) comes near it, and squaring it cannot overflow."""
+"""Largest magnitude of a finite decoded float field: no physical value a trackctl message
+carries (metres, m/s, radians, pixels, dBm) comes near it, and squaring it cannot overflow. NaN
+and infinities (which another tool may write as ``NaN``/``Infinity``) pass: the check processor
+counts them and processors treat them as missing."""
 _INT64 = (-(1 << 63), (1 << 63) - 1)
 
 
@@ -95,14 +98,14 @@ def _int64(value: Any) -> int:
 
 
 def _float(value: Any) -> float:
-    """A float field: a finite JSON number of magnitude at most :data:`MAX_JSON_FLOAT`."""
+    """A float field: a JSON number of magnitude at most :data:`MAX_JSON_FLOAT` (or NaN/inf)."""
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise TypeError(f"{_short(value)} is not a number")
     if isinstance(value, int) and abs(value) > MAX_JSON_FLOAT:
         raise ValueError(f"{_short(value)} is out of range (|x| <= {MAX_JSON_FLOAT:g})")
     number = float(value)
-    if not abs(number) <= MAX_JSON_FLOAT:  # NaN fails this too
-        raise ValueError(f"{_short(value)} is not a finite number within {MAX_JSON_FLOAT:g}")
+    if MAX_JSON_FLOAT < abs(number) < math.inf:
+        raise ValueError(f"{_short(value)} is out of range (|x| <= {MAX_JSON_FLOAT:g})")
     return number
 
 

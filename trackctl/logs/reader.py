@@ -41,6 +41,7 @@ from trackctl.errors import (
     MissingTopicError,
     NotAFileError,
     NotAnMcapError,
+    SchemaError,
     TruncatedLogWarning,
 )
 from trackctl.logs.codecs import Codec, codec_for
@@ -243,6 +244,7 @@ class LogReader:
         self.warnings: list[str] = []
         self.damage: dict[int, Damage] = {}
         self.decode_errors = 0
+        self._undecodable: set[tuple[str, str]] = set()
         self.truncated = layout is None
         self._summary: Summary | None = None if layout is None else layout.summary
         self._data_end = None if layout is None else layout.data_end
@@ -536,11 +538,19 @@ class LogReader:
         )
 
     def skip_undecodable(self, raw: RawMessage, err: BaseException) -> None:
-        """Count and warn about a message that does not decode (it is skipped)."""
+        """Count and warn about a message that does not decode (it is skipped): one warning
+        per topic and kind of failure (a log with a million bad messages gives a few lines;
+        :attr:`decode_errors` counts them all)."""
         self.decode_errors += 1
+        cause = err.__cause__ if isinstance(err, SchemaError) and err.__cause__ else err
+        key = (raw.topic, type(cause).__name__)
+        if key in self._undecodable:
+            return
+        self._undecodable.add(key)
         self._warn(
             f"{self.path}: {raw.topic} at {raw.log_time_ns} ns: cannot decode "
-            f"{raw.schema_name or 'the message'} ({one_line_reason(err)}); skipped"
+            f"{raw.schema_name or 'the message'} ({one_line_reason(err)}); skipped (later "
+            "messages of this topic that fail alike are skipped and counted without a warning)"
         )
 
     def messages(
