@@ -140,7 +140,8 @@ def record_number(values: Mapping[str, str], key: str, default: float, where: st
         value: float = float(text)
     except (TypeError, ValueError, OverflowError):
         raise InputError(f"{where}: {key}={short_repr(text)} is not a number") from None
-    _number(value, f"{where}: {key}", int if SITE_RANGES.get(key, (0, 0, False))[2] else float, key)
+    integer = key in SITE_RANGES and SITE_RANGES[key][2]
+    _number(value, f"{where}: {key}", int if integer else float, key)
     return value
 
 
@@ -228,7 +229,9 @@ def _hue_range(value: Any, where: str) -> str:
         or len(value) != 2
         or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)
     ):
-        raise InputError(f"{where}: {value!r} is not a hue range [LO, HI] (OpenCV hue, 0..180)")
+        raise InputError(
+            f"{where}: {short_repr(value)} is not a hue range [LO, HI] (OpenCV hue, 0..180)"
+        )
     lo, hi = value
     if not 0 <= lo <= hi <= 180:
         raise InputError(f"{where}: {value!r}: need 0 <= LO <= HI <= 180")
