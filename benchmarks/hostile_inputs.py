@@ -460,6 +460,17 @@ def path_cases(d: Path) -> list[Case]:
     ]
 
 
+def _once_per_topic(lines: list[str]) -> bool:
+    """Exit 0 with warnings: each topic's kind of problem is said once (a warning per message
+    would be thousands of lines on a real log)."""
+    keys = [
+        (line.split(" ")[2] if len(line.split(" ")) > 2 else line, line.split("(")[1][:40])
+        for line in lines
+        if line.startswith("warning:") and "(" in line
+    ]
+    return len(keys) == len(set(keys))
+
+
 def run_case(case: Case) -> bool:
     before = {p: sha256(p) for p in case.inputs}
     run = run_measured(case.args, timeout_s=120)
@@ -467,18 +478,18 @@ def run_case(case: Case) -> bool:
     lines = [x for x in run.stderr.splitlines() if x.strip()]
     tb = "Traceback" in run.stderr or "Traceback" in run.stdout
     extra = case.after() if case.after else ""
-    said = " | ".join(lines) if lines else "(nothing on stderr)"
     ok = (
         run.code in case.expect
         and not tb
         and not changed
         and not extra
         and (case.must_say in run.stderr)
-        and (len(lines) == 1 or (run.code == 0 and len(lines) <= 3))
+        and (len(lines) == 1 or (run.code == 0 and _once_per_topic(lines)))
     )
     unchanged = "inputs unchanged" if not changed else f"CHANGED: {', '.join(changed)}"
     print(f"{'ok ' if ok else 'BAD'} {case.name}: exit {run.code}; {unchanged}; {extra}")
-    print(f"    {said[:400]}")
+    for line in lines or ["(nothing on stderr)"]:
+        print(f"    {line[:300]}")
     return ok
 
 
