@@ -4,6 +4,7 @@ stores them; ``smirror/bridgeloc --site`` lay them over a log."""
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -72,12 +73,42 @@ def test_led_colours_reach_the_robot(tmp_path: Path) -> None:
         ({"bridgeloc": {"tag_n": 2.5}}, "is not an integer"),
         ({"bridgeloc": {"robot_camera": 5}}, "expected a name"),
         ([1, 2], "expected a mapping"),
+        ({"bridgeloc": {"tag_n": 0}}, r"bridgeloc.tag_n: 0 is out of range; expected an integer"),
+        ({"bridgeloc": {"tag_n": -3}}, r"bridgeloc.tag_n: -3 is out of range"),
+        ({"robots": {"r1": {"ticks_per_m": 1e-300}}}, r"ticks_per_m: 1e-300 is out of range"),
+        ({"robots": {"r1": {"led_height_m": 10**400}}}, r"led_height_m: .* is out of range"),
+        ({"smirror": {"floorplan": {"size_m": [1], "walls": []}}}, r"size_m: \[1\] is not a"),
+        (
+            {"smirror": {"floorplan": {"size_m": [9, 9], "walls": [[[0, 0], [1, 1]]] * 5001}}},
+            r"smirror.floorplan.walls: 5,001 walls; expected at most 5,000",
+        ),
+        (
+            {"smirror": {"floorplan": {"size_m": [9, 9], "walls": [[[0, 0], [1, "x"]]]}}},
+            r"smirror.floorplan.walls\[0\]\[1\]\[1\]: 'x' is not a number",
+        ),
     ],
 )
 def test_bad_sites_name_file_and_key(data: object, message: str) -> None:
     with pytest.raises(InputError, match=message) as err:
         site_records(data, "site.yaml")
     assert str(err.value).startswith("site.yaml")
+
+
+def test_log_metadata_is_checked_like_a_site_file() -> None:
+    from trackctl.ingest.site import record_number
+
+    assert record_number({"tag_n": "3"}, "tag_n", 2, "log") == 3
+    assert record_number({}, "tag_n", 2, "log") == 2
+    for bad in ("0", "nan", "1e400", "x", "9" * 5000):
+        with pytest.raises(InputError, match=r"^log: tag_n"):
+            record_number({"tag_n": bad}, "tag_n", 2, "log")
+
+
+def test_a_fifo_site_is_refused_without_waiting(tmp_path: Path) -> None:
+    fifo = tmp_path / "site.yaml"
+    os.mkfifo(fifo)
+    with pytest.raises(InputError, match="is a FIFO; expected a regular file"):
+        read_site(fifo)
 
 
 def test_read_site_errors(tmp_path: Path) -> None:

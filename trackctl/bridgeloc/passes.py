@@ -48,7 +48,7 @@ from trackctl.bridgeloc.tags import check_family
 from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.geometry.odometry import DiffDrive, increment, integrate_step
-from trackctl.ingest.site import warn_site_defaults
+from trackctl.ingest.site import record_number, warn_site_defaults
 from trackctl.logs import topics
 from trackctl.logs.foxglove import (
     map_base_transform,
@@ -212,7 +212,8 @@ def load_setup(reader: LogReader, cfg: BridgeLocConfig) -> Setup:
             f"{reader.path}: no infrastructure camera with images and a /NAME/camera_model world "
             f"pose; bridgeloc needs at least one"
         )
-    n = cfg.tag_n or int(meta.get("tag_n", 2))
+    where = f"{reader.path}: metadata bridgeloc"
+    n = cfg.tag_n or int(record_number(meta, "tag_n", 2, where))
     family = cfg.tag_family or meta.get("tag_family", "plain")
     check_family(family, n)
     rgeo = CameraGeometry.from_model(models[rcam_name]) if needs_robot else None
@@ -222,8 +223,8 @@ def load_setup(reader: LogReader, cfg: BridgeLocConfig) -> Setup:
         robot=cfg.robot or meta.get("robot", "r1"),
         rcam_name=rcam_name,
         tag_n=n,
-        tag_size_m=cfg.tag_size_m or float(meta.get("tag_size_m", 0.30)),
-        ir_height_m=cfg.ir_height_m or float(meta.get("ir_height_m", 0.65)),
+        tag_size_m=cfg.tag_size_m or record_number(meta, "tag_size_m", 0.30, where),
+        ir_height_m=cfg.ir_height_m or record_number(meta, "ir_height_m", 0.65, where),
         needs_robot=needs_robot,
         infra=infra,
         det_cfg=DetectorConfig(n=n, family=family),
@@ -604,9 +605,10 @@ class RobotPass:
             **cfg.site.get(f"robot/{setup.robot}", {}),
         }
         default = DiffDrive()
+        where = f"{reader.path}: metadata robot/{setup.robot}"
         self.drive = DiffDrive(
-            float(rmeta.get("ticks_per_m", default.ticks_per_m)),
-            float(rmeta.get("wheel_base_m", default.wheel_base_m)),
+            record_number(rmeta, "ticks_per_m", default.ticks_per_m, where),
+            record_number(rmeta, "wheel_base_m", default.wheel_base_m, where),
         )
         self.ekf = RobotEkf(
             cfg.ekf, RtsSmoother(self._emit_full, cfg.smooth_lag_s) if cfg.smooth else None
@@ -625,7 +627,7 @@ class RobotPass:
         self.max_range_m = (
             cfg.max_range_m
             if cfg.max_range_m is not None
-            else float(setup.meta.get("max_range_m", 4.5))
+            else record_number(setup.meta, "max_range_m", 4.5, f"{reader.path}: metadata bridgeloc")
         )
         self._bad_frames = 0
         self._icam_rejects = 0

@@ -7,6 +7,7 @@ render the same rooms; neither owns it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -28,6 +29,11 @@ class FloorPlan:
     rooms: tuple[Room, ...]
     """Each room as (x0, y0, x1, y1), metres."""
     wall_height_m: float = 2.6
+
+    @cached_property
+    def wall_array(self) -> np.ndarray:
+        """The walls as one (n, 2, 2) array (built once: line of sight is tested per frame)."""
+        return np.asarray(self.walls, float).reshape(-1, 2, 2)
 
     def to_json(self) -> dict[str, object]:
         """The plan as a JSON object (metadata ``smirror/floorplan``)."""
@@ -72,10 +78,10 @@ def three_rooms() -> FloorPlan:
     return FloorPlan((3 * w, h), tuple(walls), rooms)
 
 
-def line_of_sight(a: np.ndarray, b: np.ndarray, walls: tuple[Wall, ...]) -> bool:
+def line_of_sight(a: np.ndarray, b: np.ndarray, walls: tuple[Wall, ...] | np.ndarray) -> bool:
     """True when the segment a-b (ground plane) crosses no wall (touching a wall end counts as
     clear, so a camera mounted in a corner sees past its own walls)."""
-    if not walls:
+    if len(walls) == 0:
         return True
     w = np.asarray(walls, float)  # (n, 2, 2)
     p, r = np.asarray(a, float)[:2], np.asarray(b, float)[:2] - np.asarray(a, float)[:2]

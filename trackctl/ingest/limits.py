@@ -270,7 +270,14 @@ def load_yaml(data: bytes | str, where: str, limits: YamlLimits | None = None) -
     _check_flow_depth(
         _COMMENT.sub(rb"\1", _QUOTED.sub(b'""', data.encode())), where, limits.max_depth
     )
-    loader = _BoundedLoader(data, limits)
+    try:
+        # the reader refuses control characters as it is built: inside the try
+        loader = _BoundedLoader(data, limits)
+    except yaml.reader.ReaderError as err:
+        raise InputError(
+            f"{where}: not valid YAML (character #x{err.character:04x} at position "
+            f"{err.position}: special characters are not allowed)"
+        ) from None
     try:
         node = loader.get_single_node()
         return None if node is None else loader.construct_document(node)

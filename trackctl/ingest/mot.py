@@ -203,8 +203,11 @@ def read_mot_detections(
         InputError: no such file, a bad ``fps``, or no usable line (or none at ``min_score``).
     """
     path = Path(path)
+    from trackctl.ingest.video import check_fps
+
     if not (math.isfinite(fps) and fps > 0):
         raise InputError(f"--fps {fps}: the detections' frame rate must be positive")
+    check_fps(fps)
     if not path.is_file():
         raise InputError(f"{path}: no such file (--detections {camera})")
     by_frame, skipped, below, first = _collect(path, min_score)

@@ -331,6 +331,11 @@ class IngestPlan:
             raise InputError(f"{flag} describes CSV files: give --imu, --rssi or --odom")
         if csv_inputs:
             self.files.csv_layout("")  # a --columns NAME: that names no input
+        from trackctl.ingest.video import check_fps, check_log_seconds
+
+        check_log_seconds(self.files.video_start_s, "--video-start")
+        if self.files.fps is not None:
+            check_fps(self.files.fps)
         if self.stdin and self.udp is not None:
             raise InputError("--stdin and --udp are exclusive; record one live source at a time")
         if self.files.empty and not self.live:

@@ -9,6 +9,7 @@ Timestamps are true: a video's frame ``i`` is at ``start + i / rate`` (the file'
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -22,6 +23,11 @@ from trackctl.errors import IncompleteInputWarning, InputError
 
 __all__ = [
     "read_frames",
+    "check_fps",
+    "check_log_seconds",
+    "MAX_LOG_SECONDS",
+    "MIN_FPS",
+    "MAX_FPS",
     "IMAGE_SUFFIXES",
     "make_compressed_image",
     "frame_size",
@@ -30,6 +36,52 @@ __all__ = [
 
 IMAGE_SUFFIXES = {".jpg": "jpeg", ".jpeg": "jpeg", ".png": "png", ".webp": "webp"}
 _NS_PER_UNIT = {"s": 1e9, "ms": 1e6, "us": 1e3, "ns": 1.0}
+MAX_LOG_SECONDS = 9.2e9
+"""Latest log time a frame may get, seconds (log times are int64 nanoseconds: 2^63 ns is 9.22e9 s,
+the year 2262)."""
+MIN_FPS = 1e-6
+"""Slowest frame rate accepted (one frame in 11.6 days)."""
+MAX_FPS = 1e6
+"""Fastest frame rate accepted (frames 1 us apart; nanosecond stamps stay distinct)."""
+
+
+def check_fps(fps: float, option: str = "--fps") -> float:
+    """``fps`` if it is a frame rate trackctl can stamp with: finite, in [1e-6, 1e6] Hz.
+
+    Raises:
+        InputError: naming ``option``, the value and the accepted range.
+    """
+    if not (math.isfinite(fps) and MIN_FPS <= fps <= MAX_FPS):
+        raise InputError(
+            f"{option} {fps:g}: expected a frame rate in [{MIN_FPS:g}, {MAX_FPS:g}] Hz"
+            + (" (must be positive)" if fps <= 0 else "")
+        )
+    return fps
+
+
+def check_log_seconds(t_s: float, option: str) -> float:
+    """``t_s`` if it is a log time in seconds that fits int64 nanoseconds ([0, 9.2e9] s).
+
+    Raises:
+        InputError: naming ``option``, the value and the accepted range.
+    """
+    if not (math.isfinite(t_s) and 0 <= t_s <= MAX_LOG_SECONDS):
+        raise InputError(
+            f"{option} {t_s:g}: expected seconds in [0, {MAX_LOG_SECONDS:g}] (log times are int64 "
+            "nanoseconds)"
+        )
+    return t_s
+
+
+def _stamp(start_ns: int, t_s: float, where: str) -> int:
+    """``start_ns + t_s`` in integer nanoseconds, refused when it does not fit int64."""
+    t_ns = start_ns + t_s * 1e9
+    if not (math.isfinite(t_ns) and 0 <= t_ns <= MAX_LOG_SECONDS * 1e9):
+        raise InputError(
+            f"{where}: frame time {t_ns / 1e9:g} s is outside [0, {MAX_LOG_SECONDS:g}] s (log "
+            "times are int64 nanoseconds); check --fps, --frame-times and --video-start"
+        )
+    return start_ns + int(round(t_s * 1e9))
 
 
 def make_compressed_image(t_ns: int, frame_id: str, data: bytes, fmt: str) -> CompressedImage:
@@ -52,6 +104,13 @@ class FrameSelection:
     end_s: float | None = None
 
     def check(self) -> None:
+        for option, value in (
+            ("--rate", self.rate_hz),
+            ("--start", self.start_s),
+            ("--end", self.end_s),
+        ):
+            if value is not None and not math.isfinite(value):
+                raise InputError(f"{option} {value}: expected a finite number")
         if self.every < 1:
             raise InputError(f"--every must be >= 1, got {self.every}")
         if self.rate_hz is not None and not self.rate_hz > 0:
@@ -138,11 +197,17 @@ def _csv_times(
             continue
         name, _, value = line.partition(",")
         try:
-            table[Path(name.strip()).name] = float(value) * scale
+            t = float(value) * scale
         except ValueError:
             if lineno == 1:
                 continue  # header
             raise InputError(f"{times}:{lineno}: expected file,t (t in {time_unit})") from None
+        if not (math.isfinite(t) and abs(t) <= MAX_LOG_SECONDS):
+            raise InputError(
+                f"{times}:{lineno}: t={value.strip()[:40]} is not a time; expected a finite number "
+                f"of {time_unit} within {MAX_LOG_SECONDS:g} s"
+            )
+        table[Path(name.strip()).name] = t
     missing = [f.name for f in files if f.name not in table]
     if missing:
         raise InputError(f"{times}: no time for image {missing[0]} of {path}")
@@ -152,7 +217,14 @@ def _csv_times(
 def _name_times(path: Path, files: list[Path], scale: float) -> np.ndarray:
     """Seconds of every image file from its numeric name (in units of ``scale`` seconds)."""
     try:
-        return np.array([float(f.stem) for f in files]) * scale
+        out = np.array([float(f.stem) for f in files]) * scale
+        far = ~(np.isfinite(out) & (np.abs(out) <= MAX_LOG_SECONDS))
+        if far.any():
+            raise InputError(
+                f"{path}: image name {files[int(np.argmax(far))].name} is not a time within "
+                f"{MAX_LOG_SECONDS:g} s"
+            )
+        return out
     except ValueError:
         bad = next(f.name for f in files if not f.stem.replace(".", "", 1).isdigit())
         raise InputError(
@@ -209,8 +281,8 @@ def read_frames(
     sel.check()
     if not path.exists():
         raise InputError(f"{path}: no such video file or image folder (camera {camera})")
-    if fps is not None and fps <= 0:
-        raise InputError(f"--fps must be positive, got {fps}")
+    if fps is not None:
+        check_fps(fps)
     picker = _Picker(sel)
     if path.is_dir():
         files = _image_files(path, camera)
@@ -221,7 +293,7 @@ def read_frames(
                 break
             if not picker.keep(t_s):
                 continue
-            t_ns = start_ns + int(round(t_s * 1e9))
+            t_ns = _stamp(start_ns, float(t_s), f"{f} (camera {camera})")
             fmt = IMAGE_SUFFIXES[f.suffix.lower()]
             kept += 1
             yield t_ns, make_compressed_image(t_ns, camera, f.read_bytes(), fmt)
@@ -239,9 +311,11 @@ def _video_rate(
     if not cap.isOpened():
         raise InputError(f"{path}: OpenCV cannot open this video (camera {camera})")
     own = cap.get(cv2.CAP_PROP_FPS)
+    if not (math.isfinite(own) and MIN_FPS <= own <= MAX_FPS):
+        own = 0.0  # none, or junk: treated as none
     rate = fps or own
-    if not rate or rate <= 0:
-        raise InputError(f"{path}: the video has no frame rate; pass --fps")
+    if not rate:
+        raise InputError(f"{path}: the video has no usable frame rate; pass --fps")
     if fps is not None and own and own > 0 and abs(fps - own) > 1e-3 and every == 1:
         warnings.warn(
             f"{path}: --fps {fps:g} restamps the video's {own:g} fps frames (every frame "
@@ -286,7 +360,7 @@ def _video_frames(
             ok, buf = cv2.imencode(".jpg", frame, params)
             if not ok:
                 raise InputError(f"{path}: frame {i} cannot be encoded as JPEG")
-            t_ns = start_ns + int(round(t_s * 1e9))
+            t_ns = _stamp(start_ns, t_s, f"{path}: frame {i} (camera {camera})")
             kept += 1
             yield t_ns, make_compressed_image(t_ns, camera, buf.tobytes(), "jpeg")
         if kept == 0:

@@ -26,6 +26,7 @@ import dataclasses
 import enum
 import inspect
 import json
+import math
 import re
 import types
 import typing
@@ -75,8 +76,49 @@ def _time_to_json(t_ns: int) -> dict[str, int]:
     return {"sec": sec, "nsec": nsec}
 
 
+MAX_JSON_FLOAT = 1e15
+"""Largest magnitude of a finite decoded float field: no physical value a trackctl message
+carries (metres, m/s, radians, pixels, dBm) comes near it, and squaring it cannot overflow. NaN
+and infinities (which another tool may write as ``NaN``/``Infinity``) pass: the check processor
+counts them and processors treat them as missing."""
+_INT64 = (-(1 << 63), (1 << 63) - 1)
+
+
+def _int64(value: Any) -> int:
+    """An int field: an integral JSON number within int64."""
+    if isinstance(value, float):
+        if not (value.is_integer() and abs(value) < 2.0**63):
+            raise ValueError(f"{_short(value)} is not an integer within int64")
+        value = int(value)
+    if not isinstance(value, int):
+        raise TypeError(f"{_short(value)} is not an integer")
+    if not _INT64[0] <= value <= _INT64[1]:
+        raise ValueError(f"{_short(value)} does not fit int64")
+    return value
+
+
+def _float(value: Any) -> float:
+    """A float field: a JSON number of magnitude at most :data:`MAX_JSON_FLOAT` (or NaN/inf)."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise TypeError(f"{_short(value)} is not a number")
+    if isinstance(value, int) and abs(value) > MAX_JSON_FLOAT:
+        raise ValueError(f"{_short(value)} is out of range (|x| <= {MAX_JSON_FLOAT:g})")
+    number = float(value)
+    if MAX_JSON_FLOAT < abs(number) < math.inf:
+        raise ValueError(f"{_short(value)} is out of range (|x| <= {MAX_JSON_FLOAT:g})")
+    return number
+
+
+def _short(value: Any) -> str:
+    text = repr(value) if not isinstance(value, int) or abs(value) < 10**30 else "a huge integer"
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 def _time_from_json(obj: Mapping[str, Any]) -> int:
-    return int(obj["sec"]) * NS_PER_S + int(obj.get("nsec", 0))
+    t_ns = _int64(obj["sec"]) * NS_PER_S + _int64(obj.get("nsec", 0))
+    if not _INT64[0] <= t_ns <= _INT64[1]:
+        raise ValueError(f"timestamp {_short(obj['sec'])} s does not fit int64 nanoseconds")
+    return t_ns
 
 
 def _is_named_tuple(tp: Any) -> bool:
@@ -141,7 +183,11 @@ def _class_converters(tp: Any) -> tuple[Encoder, Decoder]:
     Raises:
         TypeError: any other type.
     """
-    if tp in (int, float, str, bool):
+    if tp is int:
+        return _identity, _int64
+    if tp is float:
+        return _identity, _float
+    if tp in (str, bool):
         return _identity, tp
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
         return (lambda v: v.value), tp

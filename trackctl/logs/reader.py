@@ -41,6 +41,7 @@ from trackctl.errors import (
     MissingTopicError,
     NotAFileError,
     NotAnMcapError,
+    SchemaError,
     TruncatedLogWarning,
 )
 from trackctl.logs.codecs import Codec, codec_for
@@ -243,6 +244,7 @@ class LogReader:
         self.warnings: list[str] = []
         self.damage: dict[int, Damage] = {}
         self.decode_errors = 0
+        self._undecodable: set[tuple[str, str]] = set()
         self.truncated = layout is None
         self._summary: Summary | None = None if layout is None else layout.summary
         self._data_end = None if layout is None else layout.data_end
@@ -501,14 +503,22 @@ class LogReader:
             raw.schema_name, raw.message_encoding, raw.schema_encoding, raw.schema_data
         )
 
-    def decoded(self, raws: Iterable[RawMessage]) -> Iterator[LogMessage]:
+    def decoded(
+        self, raws: Iterable[RawMessage], expect: Mapping[str, str] | None = None
+    ) -> Iterator[LogMessage]:
         """Decode raw messages with their channel's codec (looked up once per channel).
 
         A message that does not decode is skipped with a warning naming its topic and time (a
         log written by another tool may hold anything); the count is in :attr:`decode_errors`.
+        ``expect`` maps topics to the schema name their reader needs: a message of such a topic
+        under another schema (a channel whose schema lies) is skipped and counted, with one
+        warning per topic.
         """
         codecs: dict[tuple[str, str, bytes], Codec] = {}
         for raw in raws:
+            if expect and raw.topic in expect and raw.schema_name != expect[raw.topic]:
+                self._wrong_schema(raw, expect[raw.topic])
+                continue
             key = (raw.schema_name, raw.message_encoding, raw.schema_data)
             codec = codecs.get(key)
             if codec is None:
@@ -520,12 +530,27 @@ class LogReader:
                 continue
             yield LogMessage(raw.topic, raw.log_time_ns, raw.schema_name, decoded)
 
-    def skip_undecodable(self, raw: RawMessage, err: BaseException) -> None:
-        """Count and warn about a message that does not decode (it is skipped)."""
+    def _wrong_schema(self, raw: RawMessage, expected: str) -> None:
         self.decode_errors += 1
         self._warn(
+            f"{self.path}: {raw.topic} has schema {raw.schema_name or '(none)'!r} where "
+            f"{expected} is expected; its messages are skipped"
+        )
+
+    def skip_undecodable(self, raw: RawMessage, err: BaseException) -> None:
+        """Count and warn about a message that does not decode (it is skipped): one warning
+        per topic and kind of failure (a log with a million bad messages gives a few lines;
+        :attr:`decode_errors` counts them all)."""
+        self.decode_errors += 1
+        cause = err.__cause__ if isinstance(err, SchemaError) and err.__cause__ else err
+        key = (raw.topic, type(cause).__name__)
+        if key in self._undecodable:
+            return
+        self._undecodable.add(key)
+        self._warn(
             f"{self.path}: {raw.topic} at {raw.log_time_ns} ns: cannot decode "
-            f"{raw.schema_name or 'the message'} ({one_line_reason(err)}); skipped"
+            f"{raw.schema_name or 'the message'} ({one_line_reason(err)}); skipped (later "
+            "messages of this topic that fail alike are skipped and counted without a warning)"
         )
 
     def messages(
@@ -533,10 +558,11 @@ class LogReader:
         topics: Iterable[str] | None = None,
         start_ns: int | None = None,
         end_ns: int | None = None,
+        expect: Mapping[str, str] | None = None,
     ) -> Iterator[LogMessage]:
         """Decoded messages in log-time order (see :meth:`raw` for the filters and
-        :meth:`decoded` for undecodable messages)."""
-        return self.decoded(self.raw(topics, start_ns, end_ns))
+        :meth:`decoded` for undecodable messages and ``expect``)."""
+        return self.decoded(self.raw(topics, start_ns, end_ns), expect)
 
     def verify_data_crc(self) -> bool | None:
         """Whether the data section's CRC (in its DataEnd record) matches; None when the log has

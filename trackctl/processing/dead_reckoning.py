@@ -536,10 +536,13 @@ class _Run:
         return "ticks" if ticks and (self.config.prefer_ticks or not velocity) else "twist"
 
     def _drive(self, robot: str) -> DiffDrive:
+        from trackctl.ingest.site import record_number
+
         md = self.metadata.get(f"robot/{robot}", {})
+        where = f"metadata robot/{robot}"
         return DiffDrive(
-            float(md.get("ticks_per_m", self.config.drive.ticks_per_m)),
-            float(md.get("wheel_base_m", self.config.drive.wheel_base_m)),
+            record_number(md, "ticks_per_m", self.config.drive.ticks_per_m, where),
+            record_number(md, "wheel_base_m", self.config.drive.wheel_base_m, where),
         )
 
     def _step(self, s: _Source, last: WheelOdometry, odo: WheelOdometry) -> tuple[float, ...]:

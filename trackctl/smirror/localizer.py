@@ -132,8 +132,16 @@ class Localizer:
 
     def wanted_topics(self) -> list[str]:
         """Node images, odometry (mirror+odom) and ground truth (for the metrics)."""
+        return list(self.expected_schemas())
+
+    def expected_schemas(self) -> dict[str, str]:
+        """The schema each wanted topic must have (a topic whose schema lies is skipped)."""
         odom = [r.site.odom_topic for r in self.robots] if self.site.use_odom else []
-        return self.site.image_topics + odom + [topics.GROUND_TRUTH]
+        return {
+            **{t: "foxglove.CompressedImage" for t in self.site.image_topics},
+            **{t: WheelOdometry.SCHEMA for t in odom},
+            topics.GROUND_TRUTH: GroundTruth.SCHEMA,
+        }
 
     # -- dispatch -------------------------------------------------------------------------------
     def on_message(self, msg: LogMessage) -> None:

@@ -45,13 +45,14 @@ __all__ = [
 
 
 def _stream(
-    reader: LogReader, wanted: list[str], images: set[str], res: SmirrorResult
+    reader: LogReader, wanted: dict[str, str], images: set[str], res: SmirrorResult
 ) -> Iterator[LogMessage]:
     """Decoded messages in log order through the reader's one decode path; a message that does
-    not decode is skipped with a warning and counted (a camera glitch must not end a run)."""
+    not decode, or whose topic has another schema than ``wanted`` says, is skipped with a
+    warning and counted (a camera glitch must not end a run)."""
     start = reader.decode_errors
     try:
-        yield from reader.messages(wanted)
+        yield from reader.messages(list(wanted), expect=wanted)
     finally:
         res.decode_failures += reader.decode_errors - start
 
@@ -71,7 +72,7 @@ def localize(
     loc = Localizer(site, cfg, writer)
     images = set(site.image_topics)
     total = reader.count(loc.wanted_topics())
-    for count, msg in enumerate(_stream(reader, loc.wanted_topics(), images, loc.res), 1):
+    for count, msg in enumerate(_stream(reader, loc.expected_schemas(), images, loc.res), 1):
         if progress is not None and count % 50 == 0:
             progress(count, total, "localizing")
         loc.on_message(msg)

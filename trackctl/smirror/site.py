@@ -14,7 +14,7 @@ from trackctl.errors import InputError, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.geometry.floorplan import FloorPlan, line_of_sight
 from trackctl.geometry.odometry import DiffDrive
-from trackctl.ingest.site import warn_site_defaults
+from trackctl.ingest.site import SITE_RANGES, floorplan_from_json, record_number, warn_site_defaults
 from trackctl.logs import topics
 from trackctl.logs.messages import CameraModel, WheelOdometry
 from trackctl.logs.reader import LogReader
@@ -57,7 +57,7 @@ class Coverage:
             if not (front[0] and m <= u < mod.width_px - m and m <= v < mod.height_px - m):
                 continue
             if self.plan is not None and not line_of_sight(
-                cam.position[:2], np.array([x, y]), self.plan.walls
+                cam.position[:2], np.array([x, y]), self.plan.wall_array
             ):
                 continue
             best = (name, rng)
@@ -112,10 +112,12 @@ def floorplan(reader: LogReader, metadata: Mapping[str, Mapping[str, str]]) -> F
     md = metadata.get("smirror/floorplan")
     if not md or "plan" not in md:
         return None
+    where = f"{reader.path}: metadata smirror/floorplan"
     try:
-        return FloorPlan.from_json(json.loads(md["plan"]))
-    except (ValueError, KeyError, TypeError) as err:
-        raise InputError(f"{reader.path}: metadata smirror/floorplan is malformed: {err}") from err
+        obj = json.loads(md["plan"])
+    except (ValueError, RecursionError) as err:
+        raise InputError(f"{where}: plan is not JSON ({err})") from None
+    return floorplan_from_json(obj, f"{where} plan")
 
 
 _ROBOT_KEYS = ("led_height_m", "led_front_m", "led_back_m", "ticks_per_m", "wheel_base_m")
@@ -171,7 +173,10 @@ def _warn_defaults(
 
 
 def metadata_float(values: Mapping[str, str], key: str, default: float, where: str) -> float:
-    """A finite number from a metadata record, ``default`` when the key is absent."""
+    """A finite number from a metadata record, ``default`` when the key is absent (a site key is
+    checked against its range, :data:`trackctl.ingest.site.SITE_RANGES`)."""
+    if key in SITE_RANGES:
+        return record_number(values, key, default, where)
     if key not in values:
         return default
     try:
@@ -261,7 +266,14 @@ def load_site(reader: LogReader, cfg: SmirrorConfig) -> Site:
             f"{reader.path}: --start gives one robot's start pose, but the log has robots "
             f"{', '.join(names)}; choose one with --robot"
         )
-    n_req = cfg.requesters or int(metadata.get("smirror/requesters", {}).get("count", 1))
+    n_req = cfg.requesters or int(
+        record_number(
+            {"requesters": v} if (v := metadata.get("smirror/requesters", {}).get("count")) else {},
+            "requesters",
+            1,
+            f"{reader.path}: metadata smirror/requesters",
+        )
+    )
     plan = floorplan(reader, metadata)
     _warn_defaults(reader, [(r.name, rmd, r.led, r.drive) for r, rmd in robots], plan)
     cams = {n: PinholeCamera(m) for n, m in models.items()}

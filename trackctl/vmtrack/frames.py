@@ -84,6 +84,12 @@ def image_cameras(reader: LogReader, present: dict[str, TopicInfo]) -> dict[str,
         name = topic.strip("/").split("/")[0]
         model_topic = topics.camera_model(name)
         model: CameraModel | None = None
+        if model_topic in present and present[model_topic].schema_name != CameraModel.SCHEMA:
+            raise MissingTopicError(
+                f"{reader.path}: {model_topic} has schema {present[model_topic].schema_name!r}, "
+                f"expected {CameraModel.SCHEMA}; vm-track needs it to place people found in "
+                f"{topic} on the ground"
+            )
         if model_topic in present:
             for m in reader.messages([model_topic]):
                 model = m.message

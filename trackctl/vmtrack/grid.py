@@ -36,6 +36,9 @@ class DoorModel(Protocol):
     def door_smooth_m(self) -> float: ...
 
 
+MAX_CELLS = 50_000_000
+"""Cells a position grid may hold (a 700 m square site at 0.1 m)."""
+
 Visit = tuple[np.ndarray, "float | np.ndarray"]
 """Door costs per cell, and the cost of a frame out of view (one for all, or per frame)."""
 
@@ -50,6 +53,13 @@ class SiteGrid:
         hi = allp.max(axis=0) + 2.0
         self.cell = cell_m
         size = ((hi - self.lo) / cell_m).astype(int) + 1
+        if not np.isfinite(hi - self.lo).all() or float(np.prod(size.astype(float))) > MAX_CELLS:
+            from trackctl.errors import ProcessorError
+
+            raise ProcessorError(
+                f"the detections span {hi - self.lo} m: a position grid of {cell_m:g} m cells "
+                f"would exceed {MAX_CELLS:,} cells"
+            )
         self.shape = (int(size[1]), int(size[0]))
         self.visit: Visit | None = None
         """Door costs per cell and the cost per frame out of view (None: always in view)."""

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from trackctl.errors import MissingTopicError
+from trackctl.errors import IncompleteInputWarning, MissingTopicError
 from trackctl.geometry.camera import PinholeCamera
 from trackctl.logs import topics
 from trackctl.logs.messages import (
@@ -37,7 +37,7 @@ def _detection_points(reader: LogReader, det_topics: list[str]) -> dict[str, Pin
         cam = topic.split("/")[1]
         model_topic = topics.camera_model(cam)
         if model_topic in present:
-            for m in reader.messages([model_topic]):
+            for m in reader.messages([model_topic], expect={model_topic: CameraModel.SCHEMA}):
                 model: CameraModel = m.message
                 if model.world_from_camera is not None:
                     cams[cam] = PinholeCamera(model)
@@ -45,7 +45,7 @@ def _detection_points(reader: LogReader, det_topics: list[str]) -> dict[str, Pin
         if cam in cams:
             continue
         # Fail before any work when the first frame with boxes already needs the calibration.
-        for m in reader.messages([topic]):
+        for m in reader.messages([topic], expect={topic: Detections.SCHEMA}):
             dets: Detections = m.message
             if not dets.detections:
                 continue
@@ -133,15 +133,35 @@ def phone_motions(reader: LogReader, inputs: Inputs, cfg: VmTrackConfig) -> dict
     return phones
 
 
+MAX_GROUND_M = 1e4
+"""Farthest ground point from the site origin vm-track uses (10 km: an indoor site is far
+smaller; the position grid spans the points)."""
+
+
+def _on_site(xy: np.ndarray) -> bool:
+    return bool(np.isfinite(xy).all() and (np.abs(xy) <= MAX_GROUND_M).all())
+
+
 def ground_points(
     reader: LogReader, topic: str, dets: Detections, cams: dict[str, PinholeCamera]
 ) -> list[tuple[str, np.ndarray]]:
     """Ground points (camera, xy) of a detections message: given, or the box's foot point
-    projected through the calibrated camera."""
+    projected through the calibrated camera. A given point that is not finite or lies farther
+    than :data:`MAX_GROUND_M` from the origin (junk from another tool) is skipped, with one
+    warning per topic; a projected one is dropped silently (a foot at the horizon)."""
     out = []
     for d in dets.detections:
         if d.ground_m is not None:
-            out.append((dets.camera, np.array([d.ground_m.x, d.ground_m.y])))
+            xy = np.array([d.ground_m.x, d.ground_m.y])
+            if _on_site(xy):
+                out.append((dets.camera, xy))
+            else:
+                warnings.warn(
+                    f"{reader.path}: {topic}: detections whose ground point is NaN, infinite "
+                    f"or beyond {MAX_GROUND_M:g} m are skipped",
+                    IncompleteInputWarning,
+                    stacklevel=2,
+                )
             continue
         cam = cams.get(dets.camera)
         if cam is None:
@@ -151,6 +171,6 @@ def ground_points(
             )
         foot = np.array([[d.box.x_px + d.box.w_px / 2, d.box.y_px + d.box.h_px]])
         g = cam.ground_point(foot)[0]
-        if not np.isnan(g).any():
+        if _on_site(g[:2]):
             out.append((dets.camera, g[:2]))
     return out
