@@ -158,10 +158,10 @@ def test_real_walks_at_5_hz_hold_stretched_and_resampled(
     assert abs(detect_steps(tau, a).steps - true) <= 0.05 * true
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("carry", CARRIES)
 @pytest.mark.parametrize("cadence_scale", [1 / 1.15, 1.15])
 def test_real_walks_at_5_hz_hold_stretched_at_every_phase(carry: str, cadence_scale: float) -> None:
+    """Walkers stepping 13 % slower and 15 % faster, sampled at 5 Hz at 20 phases 0.01 s apart."""
     t, acc, true = _trace(carry)
     good = np.linalg.norm(acc, axis=1) > 1.0
     errors = {}
