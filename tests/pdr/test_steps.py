@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pandas as pd
@@ -169,3 +170,38 @@ def test_real_walks_at_5_hz_hold_stretched_at_every_phase(carry: str, cadence_sc
         tau, a = _resampled(t[good], acc[good], 1 / cadence_scale, o / 100, 5.0)
         errors[o] = detect_steps(tau, a).steps - true
     assert all(abs(e) <= 0.05 * true for e in errors.values()), errors
+
+
+def _walk_varying(
+    rate: float, cadence_hz: Callable[[np.ndarray], np.ndarray], total_s: float, stride: float
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Like ``_walk`` with a cadence that changes in time (0 = standing)."""
+    rng = np.random.default_rng(0)
+    fine = np.arange(0.0, total_s, 0.001)
+    phase_fine = 2 * math.pi * np.cumsum(cadence_hz(fine)) * 0.001
+    t = np.arange(0.0, total_s, 1.0 / rate)
+    ph = np.interp(t, fine, phase_fine)
+    walking = cadence_hz(t) > 0
+    bounce = 2.5 * np.sin(ph) + stride * 2.5 * np.sin(ph / 2 + 0.3) + 0.8 * np.sin(2 * ph + 1.0)
+    vert = np.where(walking, bounce, 0.0) + rng.normal(0, 0.05, len(t))
+    fwd = np.where(walking, 0.8 * np.sin(ph + 0.7), 0.0)
+    acc = np.column_stack([fwd, np.zeros(len(t)), G + vert]) + rng.normal(0, 0.1, (len(t), 3))
+    return t, acc, int(math.floor(phase_fine[-1] / (2 * math.pi)))
+
+
+@pytest.mark.parametrize("rate", [5.0, 7.0, 10.0])
+@pytest.mark.parametrize(
+    "cadence_hz",
+    [
+        lambda x: np.where((x > 5) & (x < 35), 1.6, np.where((x >= 35) & (x < 65), 2.1, 0.0)),
+        lambda x: np.where((x > 5) & (x < 65), 1.5 + 0.75 * (x - 5) / 60, 0.0),
+    ],
+    ids=["1.6-then-2.1", "ramp-1.5-to-2.25"],
+)
+def test_low_rate_cadence_path_follows_a_change_of_pace(
+    rate: float, cadence_hz: Callable[[np.ndarray], np.ndarray]
+) -> None:
+    """The cadence path's cost holds off fold-overs, yet a change of pace that lasts is followed."""
+    for stride in (0.0, 1.0, 2.0):
+        t, acc, true = _walk_varying(rate, cadence_hz, 70.0, stride)
+        assert abs(detect_steps(t, acc).steps - true) <= 0.03 * true + 1

@@ -80,9 +80,11 @@ class StepConfig:
     rate, where a pocket's impacts still carry power)."""
     aliased_tooth_weight: float = 0.5
     """Weight of each comb tooth other than the step fundamental (weight 1)."""
-    cadence_change_cost: float = 10.0
+    cadence_change_cost: float = 30.0
     """Cost of a change of the step rate between windows, per Hz, in units of one window's best
-    comb score (the aliased path only)."""
+    comb score (the aliased path only): a 0.5 Hz change costs 15 windows (3 s at 5 Hz) of
+    evidence. The held-out protocol (``benchmarks/pdr_cadence.py --holdout``) chose 30 on both
+    halves; 10 let a back-pocket walk at 1.52 Hz (f / fs near 4/13) be read at 2.3 Hz."""
     aliased_gap_s: float = 3.0
     """Gaps in the short-term amplitude shorter than this are closed at aliased rates."""
 
