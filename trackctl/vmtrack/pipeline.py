@@ -8,9 +8,12 @@ and each hands the next a typed record (keyed by the tracks' serial keys, never 
    walking velocity series (PDR) -> ``PhoneMotion`` by MID;
 2. online association (:mod:`~trackctl.vmtrack.association`): detection, association under an
    injected :class:`~trackctl.vmtrack.cost.AssociationCost` and the online binding of phones,
-   frame by frame -> ``FrameOut`` per frame;
+   frame by frame -> ``FrameOut`` per frame (and each frame's detection boxes, kept for 3b);
 3. smoothing (:mod:`~trackctl.vmtrack.smooth`, RTS) -> state per (track key, history index);
-4. offline (:mod:`~trackctl.vmtrack.offline`): publication plan, offline identity, identity
+   3b. appearance (:mod:`~trackctl.vmtrack.appearance`): each track's colour signature from the
+   frames in the log (one more pass, decoding only the frames sampled) -> signature by key;
+4. offline (:mod:`~trackctl.vmtrack.offline`): publication plan (stitching, and re-identification
+   by the signatures across gaps the motion gate cannot bridge), offline identity, identity
    refinement (an injected :class:`~trackctl.vmtrack.offline.Refinement`; by default the
    re-tracking) -> ``Offline``;
 5. naming (:mod:`~trackctl.vmtrack.naming`, whose docstring states the rule) and writing

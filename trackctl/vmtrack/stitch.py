@@ -210,12 +210,12 @@ def reidentify(
     cfg: StitchConfig,
 ) -> dict[int, int]:
     """Chain heads after joining chains that the motion gate could not (a gap longer than
-    ``max_gap_s``, or a return elsewhere) by their colours: a chain's end continues into another's start
-    when their colours are within ``reid_max_distance``, the start is reachable from the end at
-    ``reid_speed_mps``, and the pair is ``reid_margin`` closer in colour than any other
-    candidate of either chain (so the matches are mutual bests and one to one; a global
-    assignment would instead pair up as many chains as it can, at the price of ambiguous
-    pairs). Without signatures the heads come back unchanged."""
+    ``max_gap_s``, or a return elsewhere) by their colours. A chain's end continues into
+    another's start when their colours are within ``reid_max_distance``, the start is
+    reachable from the end at ``reid_speed_mps``, and the pair is ``reid_margin`` closer in
+    colour than any other candidate of either chain: the matches are mutual bests, so one to
+    one (a global assignment would instead pair up as many chains as it can, ambiguous pairs
+    included). Without signatures the heads come back unchanged."""
     chains = _chains(tracklets, heads, appearance)
     if len(chains) < 2:
         return heads
@@ -249,6 +249,9 @@ class Publication:
     """Chain head (key of its first track) of every track in the plan."""
     head_of_name: dict[str, int] = field(default_factory=dict)
     """Chain head of every published name."""
+    reidentified: int | None = None
+    """Links (of ``links``) that the tracks' colours made across a gap the motion gate could
+    not bridge; None when no track had a colour signature (no frames in the log)."""
 
 
 def _clutter_spots(
@@ -410,16 +413,20 @@ def _chain_heads(
     tracklets: Sequence[Tracklet],
     cfg: StitchConfig,
     appearance: Mapping[int, np.ndarray],
-) -> tuple[dict[int, int], set[int]]:
+) -> tuple[dict[int, int], set[int], int | None]:
     """Chain head of every planned track (stitched and re-identified when enabled; a track
-    left without a tracklet, all its rows at clutter, heads itself); and those clutter
-    tracks."""
+    left without a tracklet, all its rows at clutter, heads itself); those clutter tracks;
+    and how many chains colour joined to an earlier one (None without colours)."""
     clutter = {key for key in keys if key not in {t.key for t in tracklets}}
     heads = {t.key: t.key for t in tracklets}
+    joined = None
     if cfg.enabled:
-        heads = reidentify(tracklets, stitch(tracklets, cfg), appearance, cfg)
+        moved = stitch(tracklets, cfg)
+        heads = reidentify(tracklets, moved, appearance, cfg)
+        if appearance:
+            joined = len(set(moved.values())) - len(set(heads.values()))
     heads.update({key: key for key in clutter})
-    return heads, clutter
+    return heads, clutter, joined
 
 
 def plan_publication(
@@ -442,7 +449,7 @@ def plan_publication(
         kept = _hide_tail_and_parked(key, seq, tracks[key], spot_tree, cfg, hidden)
         if kept:
             tracklets.append(_tracklet(key, kept, tracks[key], positions))
-    heads, clutter = _chain_heads(rows, tracklets, cfg, appearance or {})
+    heads, clutter, joined = _chain_heads(rows, tracklets, cfg, appearance or {})
     name = {key: tracks[heads[key]].vid for key in rows}
     dropped = _short_or_still_chains(tracklets, heads, cfg) | clutter
     for key, seq in rows.items():
@@ -450,4 +457,4 @@ def plan_publication(
             hidden.update((key, t) for t, _ in seq)
     fills, links = _gap_fills(frames, tracklets, heads, dropped, name, cfg.max_gap_s)
     head_of_name = {name[h]: h for h in set(heads.values()) if h in name}
-    return Publication(name, hidden, fills, len(dropped), links, dict(heads), head_of_name)
+    return Publication(name, hidden, fills, len(dropped), links, dict(heads), head_of_name, joined)
