@@ -63,18 +63,24 @@ def associate_online(
         frame_t = msg.log_time_ns
         if detector is None:
             points.extend(ground_points(reader, msg.topic, msg.message, inputs.cams))
-            overlay.add(msg.log_time_ns, msg.message.t_ns, msg.message)
-            if book is not None:
-                book.add(msg.log_time_ns, msg.message.camera, msg.message)
+            _keep(msg.log_time_ns, msg.message.t_ns, msg.message, overlay, book)
             continue
         found = _detect_in_frame(msg, detector, online, writer, search_full, points, covs)
-        overlay.add(msg.log_time_ns, _image_stamp(msg), found)
-        if book is not None:
-            book.add(msg.log_time_ns, found.camera, found)
+        _keep(msg.log_time_ns, _image_stamp(msg), found, overlay, book)
     if frame_t is not None:
         online.process_frame(frame_t, points, covs)
     online.close()
     return truth
+
+
+def _keep(
+    t_ns: int, stamp_ns: int, found: Detections, overlay: TrackOverlay, book: AppearanceBook | None
+) -> None:
+    """Keep a camera's detections of the frame at ``t_ns``: in the overlay (for the track
+    boxes, at the image's own stamp) and in ``book`` (for the tracks' colours)."""
+    overlay.add(t_ns, stamp_ns, found)
+    if book is not None:
+        book.add(t_ns, found.camera, found)
 
 
 def _detect_in_frame(
