@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
+import cv2
+import numpy as np
 import pytest
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from typer.testing import CliRunner
@@ -15,11 +19,11 @@ from tests.conftest import ROOT, run_cli
 from tests.logcompare import assert_same_log
 from tests.logs.test_plain_readers import assert_plain_decodable
 from trackctl.cli.main import app
-from trackctl.logs import LogReader, LogWriter
+from trackctl.logs import LogReader, LogWriter, TopicInfo
 from trackctl.processing import run_processors
 from trackctl.sim.vm import VmScenario, simulate_vm
 from trackctl.vmtrack import FrameConfig, VmTrackConfig, VmTrackProcessor
-from trackctl.vmtrack.frames import detections_topic
+from trackctl.vmtrack.frames import FrameDetector, detections_topic
 from trackctl.vmtrack.pipeline import SCENE_TOPIC, TRACKS_TOPIC
 from trackctl.vmtrack.retrack import RetrackConfig
 
@@ -163,3 +167,37 @@ def test_source_detections_on_a_frames_log_is_a_clear_error(
     )
     assert proc.returncode == 2
     assert "no trackctl.Detections topic" in proc.stderr.decode()
+
+
+S = 1_000_000_000
+
+
+class _FramesOnly:
+    """A log of 60 grey frames at 1 Hz with a dark person standing at one spot for the first
+    20 s (what :class:`FrameDetector` reads to build its background)."""
+
+    path = Path("standing.mcap")
+    topic = "/cam0/image"
+
+    def topics(self) -> dict[str, TopicInfo]:
+        info = TopicInfo(self.topic, "foxglove.CompressedImage", "protobuf", 60, 0, 59 * S)
+        return {self.topic: info}
+
+    def messages(self, wanted: list[str]) -> Iterator[SimpleNamespace]:
+        for k in range(60):
+            img = np.full((48, 64, 3), 150, np.uint8)
+            if k < 20:
+                img[10:40, 20:30] = 20
+            ok, jpg = cv2.imencode(".png", img)
+            assert ok
+            yield SimpleNamespace(log_time_ns=k * S, message=SimpleNamespace(data=jpg.tobytes()))
+
+
+def test_the_starting_background_is_the_whole_logs_so_people_standing_first_are_seen() -> None:
+    cams = {"cam0": None}
+    detector = FrameDetector(_FramesOnly(), cams, FrameConfig())  # type: ignore[arg-type]
+    spot = detector.backgrounds["cam0"].image[10:40, 20:30]
+    assert abs(float(spot.mean()) - 150) < 3  # the floor: the person is foreground from frame 0
+    # sampled from the first 10 s only, the person standing there is in the background
+    first = FrameDetector(_FramesOnly(), cams, FrameConfig(background_init_s=10.0))  # type: ignore[arg-type]
+    assert abs(float(first.backgrounds["cam0"].image[10:40, 20:30].mean()) - 20) < 3

@@ -11,8 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import examples
+from trackctl.logs.messages import TrackState
 from trackctl.vmtrack.binder import IdentityBinder
-from trackctl.vmtrack.config import Mode, VmTrackConfig
+from trackctl.vmtrack.config import Identity, Mode, VmTrackConfig
 from trackctl.vmtrack.cost import CostTrack, VisualCost, VisualMotionCost
 from trackctl.vmtrack.online import OnlineTracker
 from trackctl.vmtrack.tracker import (
@@ -145,3 +146,25 @@ def test_the_phone_velocity_term_moves_the_match() -> None:
         visual.probabilities([trk], dets, covs, pred, [0.5], [None]),
         fused.probabilities([trk], dets, covs, pred, [0.5], [None]),
     )
+
+
+def _rows_per_frame(identity: Identity) -> list[list[tuple[str, TrackState]]]:
+    cfg = VmTrackConfig(mode=Mode.V_AF, identity=identity)
+    online = OnlineTracker(cfg, IdentityBinder({}, cfg.binding, cfg.align), Mode.V_AF, VisualCost())
+    for k in range(6):
+        points = [("cam0", np.array([0.6 * k, 0.0]))]
+        if k == 2:
+            points.append(("cam0", np.array([9.0, 9.0])))  # one frame of clutter
+        online.process_frame(k * 1_000_000_000, points)
+    online.close()
+    return [[(trk.vid, state) for trk, _, state, _ in fr.rows] for fr in online.frames]
+
+
+def test_offline_a_track_is_published_from_its_first_detection() -> None:
+    # offline the walker's first frames (before confirm_hits made it a track) are published
+    # as tracked; the clutter that never became a track is not
+    offline = _rows_per_frame(Identity.OFFLINE)
+    assert offline == [[("v1", TrackState.TRACKED)]] * 6
+    # the online output cannot know the future: the track appears once confirmed
+    online = _rows_per_frame(Identity.ONLINE)
+    assert online[:2] == [[], []] and all(r == [("v1", TrackState.TRACKED)] for r in online[2:])

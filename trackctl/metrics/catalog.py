@@ -225,6 +225,7 @@ register_catalog(
                 "tracks_started",
                 "tracks_published",
                 "tracks_stitched",
+                "tracks_reidentified",
                 "tracks_dropped_short",
                 "track_frames_median",
                 "track_frames_p10",

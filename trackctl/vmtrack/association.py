@@ -13,6 +13,7 @@ from trackctl.logs.messages import Detections, GroundTruth
 from trackctl.logs.reader import LogMessage, LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import Progress
+from trackctl.vmtrack.appearance import AppearanceBook
 from trackctl.vmtrack.config import Mode, VmTrackConfig
 from trackctl.vmtrack.cost import AssociationCost, VisualCost, VisualMotionCost
 from trackctl.vmtrack.frames import FrameDetector, detections_topic
@@ -28,10 +29,12 @@ def associate_online(
     online: OnlineTracker,
     progress: Progress | None,
     overlay: TrackOverlay,
+    book: AppearanceBook | None = None,
 ) -> dict[int, GroundTruth]:
     """Stage 2 (detection, association, identity): stream the log frame by frame through the
-    online tracker, each camera's view kept in ``overlay`` for the track boxes; returns the
-    ground truth seen (for the metrics only)."""
+    online tracker, each camera's view kept in ``overlay`` for the track boxes and its
+    detections' boxes in ``book`` (for the tracks' colours); returns the ground truth seen
+    (for the metrics only)."""
     detector = inputs.detector
     truth: dict[int, GroundTruth] = {}
     frame_t: int | None = None
@@ -60,14 +63,24 @@ def associate_online(
         frame_t = msg.log_time_ns
         if detector is None:
             points.extend(ground_points(reader, msg.topic, msg.message, inputs.cams))
-            overlay.add(msg.log_time_ns, msg.message.t_ns, msg.message)
+            _keep(msg.log_time_ns, msg.message.t_ns, msg.message, overlay, book)
             continue
         found = _detect_in_frame(msg, detector, online, writer, search_full, points, covs)
-        overlay.add(msg.log_time_ns, _image_stamp(msg), found)
+        _keep(msg.log_time_ns, _image_stamp(msg), found, overlay, book)
     if frame_t is not None:
         online.process_frame(frame_t, points, covs)
     online.close()
     return truth
+
+
+def _keep(
+    t_ns: int, stamp_ns: int, found: Detections, overlay: TrackOverlay, book: AppearanceBook | None
+) -> None:
+    """Keep a camera's detections of the frame at ``t_ns``: in the overlay (for the track
+    boxes, at the image's own stamp) and in ``book`` (for the tracks' colours)."""
+    overlay.add(t_ns, stamp_ns, found)
+    if book is not None:
+        book.add(t_ns, found.camera, found)
 
 
 def _detect_in_frame(

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 
 from trackctl.vmtrack.align import AlignConfig
+from trackctl.vmtrack.appearance import AppearanceConfig
 from trackctl.vmtrack.frames import FrameConfig
 from trackctl.vmtrack.identify import IdentifyConfig
 from trackctl.vmtrack.motion import MotionConfig
@@ -134,8 +135,11 @@ class VmTrackConfig:
     binding: BindingConfig = field(default_factory=BindingConfig)
     smooth: bool = True
     """RTS-smooth every track (offline)."""
+    appearance: AppearanceConfig = field(default_factory=AppearanceConfig)
+    """The tracks' colour signatures, from the frames in the log (re-identification)."""
     stitch: StitchConfig = field(default_factory=StitchConfig)
-    """Offline clean-up of visual-only tracks (coasting tails, fragments, short tracks)."""
+    """Offline clean-up of visual-only tracks (coasting tails, fragments, short tracks) and
+    their re-identification by colour."""
     identity: Identity = Identity.OFFLINE
     identify: IdentifyConfig = field(default_factory=IdentifyConfig)
     """Offline identity parameters."""

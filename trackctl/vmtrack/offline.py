@@ -9,7 +9,7 @@ user passes their own to :func:`~trackctl.vmtrack.pipeline.run_stages`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -102,6 +102,7 @@ def offline_stages(
     mode: Mode,
     progress: Progress,
     refinement: Refinement | None = None,
+    appearance: Mapping[int, np.ndarray] | None = None,
 ) -> Offline:
     """The offline stages: the publication plan, then (VM with the offline identity) the
     identities, then the identity refinement (``refinement``, by default the configuration's:
@@ -110,7 +111,14 @@ def offline_stages(
     offline = mode is Mode.VM and cfg.identity is Identity.OFFLINE
     deaths = np.array(online.static_death_log, float).reshape(-1, 2)
     progress(0, None, "stitching and identifying")
-    plan = plan_publication(frames, positions, cfg.stitch, all_tracks=offline, static_deaths=deaths)
+    plan = plan_publication(
+        frames,
+        positions,
+        cfg.stitch,
+        all_tracks=offline,
+        static_deaths=deaths,
+        appearance=appearance,
+    )
     ids = (
         identify(frames, plan, phones, cfg.align, cfg.identify, cfg.phones_aligned)
         if offline

@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 
 from trackctl.logs.messages import RssiScan, TrackState
 from trackctl.vmtrack.binder import IdentityBinder
-from trackctl.vmtrack.config import Mode, VmTrackConfig
+from trackctl.vmtrack.config import Identity, Mode, VmTrackConfig
 from trackctl.vmtrack.cost import AssociationCost
 from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.tracker import (
@@ -353,17 +353,26 @@ class OnlineTracker:
 
     def _snapshot(self, t_ns: int) -> None:
         owner = self.identity.owners()
+        lead_in = self.cfg.identity is Identity.OFFLINE
         rows = [
-            (trk, owner.get(trk.key), trk.state, len(trk.history))
+            (trk, owner.get(trk.key), _row_state(trk, t_ns), len(trk.history))
             for trk in self.tracks
-            if trk.state is not TrackState.TENTATIVE
+            if lead_in or trk.state is not TrackState.TENTATIVE
         ]
         self.frames.append(FrameOut(t_ns, rows))
 
     def close(self) -> None:
-        """The log ended: snapshot every live track's final state into its history."""
+        """The log ended: snapshot every live track's final state into its history, and settle
+        the frames' rows. Offline, a confirmed track is published from its first detection
+        (its *lead-in*: the frames before ``confirm_hits`` made it a track, which the online
+        output could not know yet); the rows of tracks that were never confirmed go."""
         for trk in self.tracks:
             trk.history.append((trk.t_ns, trk.kf.x.copy(), trk.kf.P.copy(), True))
+        if self.cfg.identity is Identity.OFFLINE:
+            need = self.tcfg.confirm_hits
+            self.frames = [
+                FrameOut(fr.t_ns, [r for r in fr.rows if r[0].hits >= need]) for fr in self.frames
+            ]
 
     # -- search planning for camera frames --------------------------------------------------------
     def predictions(self, t_ns: int, moved_only: bool = False) -> list[Prediction]:
@@ -394,3 +403,11 @@ class OnlineTracker:
         if not self.cfg.frames.predicted or not self.tracks:
             return True
         return self.frame_index % max(1, self.cfg.frames.full_search_every) == 0
+
+
+def _row_state(trk: GroundTrack, t_ns: int) -> TrackState:
+    """A row's published state: a tentative track's row is its lead-in (tracked where it took
+    a detection, else predicted)."""
+    if trk.state is not TrackState.TENTATIVE:
+        return trk.state
+    return TrackState.TRACKED if trk.last_hit_ns == t_ns else TrackState.PREDICTED

@@ -8,9 +8,12 @@ and each hands the next a typed record (keyed by the tracks' serial keys, never 
    walking velocity series (PDR) -> ``PhoneMotion`` by MID;
 2. online association (:mod:`~trackctl.vmtrack.association`): detection, association under an
    injected :class:`~trackctl.vmtrack.cost.AssociationCost` and the online binding of phones,
-   frame by frame -> ``FrameOut`` per frame;
+   frame by frame -> ``FrameOut`` per frame (and each frame's detection boxes, kept for 3b);
 3. smoothing (:mod:`~trackctl.vmtrack.smooth`, RTS) -> state per (track key, history index);
-4. offline (:mod:`~trackctl.vmtrack.offline`): publication plan, offline identity, identity
+   3b. appearance (:mod:`~trackctl.vmtrack.appearance`): each track's colour signature from the
+   frames in the log (one more pass, decoding only the frames sampled) -> signature by key;
+4. offline (:mod:`~trackctl.vmtrack.offline`): publication plan (stitching, and re-identification
+   by the signatures across gaps the motion gate cannot bridge), offline identity, identity
    refinement (an injected :class:`~trackctl.vmtrack.offline.Refinement`; by default the
    re-tracking) -> ``Offline``;
 5. naming (:mod:`~trackctl.vmtrack.naming`, whose docstring states the rule) and writing
@@ -23,16 +26,19 @@ and each hands the next a typed record (keyed by the tracks' serial keys, never 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from trackctl.logs.messages import MetricReport
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.processing.base import Progress
+from trackctl.vmtrack.appearance import AppearanceBook, track_appearance
 from trackctl.vmtrack.association import associate_online, association_cost
 from trackctl.vmtrack.binder import IdentityBinder
 from trackctl.vmtrack.config import Identity, Mode, Source, VmTrackConfig
 from trackctl.vmtrack.cost import AssociationCost
 from trackctl.vmtrack.inputs import phone_motions, plan_inputs
-from trackctl.vmtrack.interfaces import VmResult
+from trackctl.vmtrack.interfaces import FrameOut, VmResult
 from trackctl.vmtrack.offline import Refinement, offline_stages
 from trackctl.vmtrack.online import OnlineTracker
 from trackctl.vmtrack.overlay import TrackOverlay
@@ -45,6 +51,7 @@ from trackctl.vmtrack.report import (
 )
 from trackctl.vmtrack.score import TruthScore
 from trackctl.vmtrack.smooth import smoothed_positions
+from trackctl.vmtrack.tracker import GroundTrack
 from trackctl.vmtrack.write import SCENE_TOPIC, TRACKS_TOPIC, write_frames
 
 __all__ = ["Mode", "Source", "VmResult", "VmTrackConfig", "run", "run_stages"]
@@ -94,13 +101,21 @@ def run_stages(
     online = OnlineTracker(cfg, identity, inputs.mode, cost or association_cost(inputs.mode, cfg))
     cams = inputs.detector.cams if inputs.detector is not None else inputs.cams
     overlay = TrackOverlay(cams, cfg.frames.detector.person_height_m)
-    truth = associate_online(reader, writer, inputs, online, progress, overlay)
+    book = AppearanceBook() if cfg.appearance.enabled else None
+    truth = associate_online(reader, writer, inputs, online, progress, overlay, book)
     if inputs.mode is Mode.VM:
         identity.finish()
     clock.lap("tracking")
     progress(0, None, "smoothing")
     positions = smoothed_positions(online.frames, cfg.smooth, cfg.association.tracker)
-    offline = offline_stages(online, positions, phones, cfg, inputs.mode, progress, refinement)
+    looks = (
+        track_appearance(reader, book, _all_tracks(online.frames), cfg.appearance)
+        if book is not None
+        else {}
+    )
+    offline = offline_stages(
+        online, positions, phones, cfg, inputs.mode, progress, refinement, looks
+    )
     score = TruthScore(truth, online, cfg.report.eval_threshold_m, inputs.mode, set(phones))
     gate_m = cfg.refinement.gate_m
     tally = write_frames(
@@ -131,6 +146,15 @@ def run_stages(
         },
     )
     return VmResult(tuple(tally.written), report)
+
+
+def _all_tracks(frames: Sequence[FrameOut]) -> list[GroundTrack]:
+    """Every track of the frames' rows, once each, in order of first appearance."""
+    seen: dict[int, GroundTrack] = {}
+    for fr in frames:
+        for trk, _, _, _ in fr.rows:
+            seen.setdefault(trk.key, trk)
+    return list(seen.values())
 
 
 def _silent(done: int, total: int | None, stage: str | None = None) -> None:

@@ -53,6 +53,10 @@ def unmeasured(
         why.update(
             {k: reason for k, v in metrics.items() if k.startswith(_RETRACK_ONLY) and v is None}
         )
+    if metrics.get("tracks_reidentified", 0) is None:
+        why["tracks_reidentified"] = (
+            "no track has a colour signature (no camera frames in the log, or no clear view)"
+        )
     return why
 
 
@@ -212,6 +216,7 @@ def _no_truth_metrics(
         "tracks_started": online.tracks_started,
         "tracks_published": len(published),
         "tracks_stitched": plan.links,
+        "tracks_reidentified": plan.reidentified,
         "tracks_dropped_short": plan.dropped,
         "track_frames_median": float(np.median(lengths)),
         "track_frames_p10": float(np.percentile(lengths, 10)),

@@ -22,17 +22,25 @@ motion-sensor prediction and is published).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 from scipy.spatial import cKDTree
 
+from trackctl.vmtrack.appearance import distance
 from trackctl.vmtrack.interfaces import FrameOut
 from trackctl.vmtrack.tracker import GroundTrack
 
-__all__ = ["StitchConfig", "Tracklet", "stitch", "Publication", "plan_publication"]
+__all__ = [
+    "StitchConfig",
+    "Tracklet",
+    "stitch",
+    "reidentify",
+    "Publication",
+    "plan_publication",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,6 +64,15 @@ class StitchConfig:
     clutter_radius_m: float = 0.5
     clutter_hold_s: float = 2.0
     """A track whose detections stay at a clutter spot this long either side is parked there."""
+    reid_max_gap_s: float = 30.0
+    """Longest gap across which a track's colours may re-identify it (a person who left the
+    view or stood hidden and came back); needs the frames in the log."""
+    reid_speed_mps: float = 1.5
+    """Walking speed bounding where a re-identified person can be after the gap."""
+    reid_max_distance: float = 0.3
+    """Most colour difference (Bhattacharyya distance of the signatures) of the same person."""
+    reid_margin: float = 0.05
+    """The chosen match must be this much closer in colour than the next candidate, either way."""
     clutter_min: int = 3
     """Clutter spots (see :func:`_clutter_spots`): a track parked at one is not published
     there. A person standing still makes one or two never-moving tracks, not a recurring spot
@@ -132,6 +149,88 @@ def stitch(tracklets: Sequence[Tracklet], cfg: StitchConfig) -> dict[int, int]:
     return heads
 
 
+@dataclass(frozen=True, slots=True)
+class _Chain:
+    """A stitched chain of tracklets as re-identification sees it: its ends and its colours."""
+
+    head: int
+    first_ns: int
+    last_ns: int
+    first_xy: np.ndarray
+    last_xy: np.ndarray
+    signature: np.ndarray
+
+
+def _chains(
+    tracklets: Sequence[Tracklet], heads: dict[int, int], appearance: Mapping[int, np.ndarray]
+) -> list[_Chain]:
+    """The chains of ``heads`` whose tracks have a colour signature (their mean)."""
+    members: dict[int, list[Tracklet]] = {}
+    for t in tracklets:
+        members.setdefault(heads[t.key], []).append(t)
+    out = []
+    for head, chain in members.items():
+        sigs = [appearance[t.key] for t in chain if t.key in appearance]
+        if not sigs:
+            continue
+        a = min(chain, key=lambda t: t.first_ns)
+        b = max(chain, key=lambda t: t.last_ns)
+        out.append(_Chain(head, a.first_ns, b.last_ns, a.first_xy, b.last_xy, np.mean(sigs, 0)))
+    return out
+
+
+def _reid_costs(chains: Sequence[_Chain], cfg: StitchConfig) -> np.ndarray:
+    """Colour distance of chain j continuing chain i (inf where it cannot: not after it,
+    too long a gap, too far to have walked)."""
+    cost = np.full((len(chains), len(chains)), np.inf)
+    for i, a in enumerate(chains):
+        for j, b in enumerate(chains):
+            gap = (b.first_ns - a.last_ns) / 1e9
+            if not 0 < gap <= cfg.reid_max_gap_s:
+                continue
+            reach = cfg.gate_m + cfg.reid_speed_mps * gap
+            if float(np.linalg.norm(b.first_xy - a.last_xy)) <= reach:
+                cost[i, j] = distance(a.signature, b.signature)
+    return cost
+
+
+def _unambiguous(cost: np.ndarray, i: int, j: int, margin: float) -> bool:
+    """True when ``cost[i, j]`` beats every other candidate of its row and column by
+    ``margin``."""
+    c = cost[i, j]
+    row = np.delete(cost[i], j)
+    col = np.delete(cost[:, j], i)
+    return bool(np.all(row >= c + margin) and np.all(col >= c + margin))
+
+
+def reidentify(
+    tracklets: Sequence[Tracklet],
+    heads: dict[int, int],
+    appearance: Mapping[int, np.ndarray],
+    cfg: StitchConfig,
+) -> dict[int, int]:
+    """Chain heads after joining chains that the motion gate could not (a gap longer than
+    ``max_gap_s``, or a return elsewhere) by their colours. A chain's end continues into
+    another's start when their colours are within ``reid_max_distance``, the start is
+    reachable from the end at ``reid_speed_mps``, and the pair is ``reid_margin`` closer in
+    colour than any other candidate of either chain: the matches are mutual bests, so one to
+    one (a global assignment would instead pair up as many chains as it can, ambiguous pairs
+    included). Without signatures the heads come back unchanged."""
+    chains = _chains(tracklets, heads, appearance)
+    if len(chains) < 2:
+        return heads
+    cost = _reid_costs(chains, cfg)
+    nxt: dict[int, int] = {}
+    for i, j in zip(*np.nonzero(cost <= cfg.reid_max_distance), strict=True):
+        if _unambiguous(cost, i, j, cfg.reid_margin):
+            nxt[chains[i].head] = chains[j].head
+    root = {c.head: c.head for c in chains}
+    for c in sorted(chains, key=lambda c: c.first_ns):
+        if c.head in nxt:
+            root[nxt[c.head]] = root[c.head]
+    return {key: root.get(h, h) for key, h in heads.items()}
+
+
 @dataclass
 class Publication:
     """What the writer publishes for visual-only tracks (the result of the clean-up)."""
@@ -150,6 +249,9 @@ class Publication:
     """Chain head (key of its first track) of every track in the plan."""
     head_of_name: dict[str, int] = field(default_factory=dict)
     """Chain head of every published name."""
+    reidentified: int | None = None
+    """Links (of ``links``) that the tracks' colours made across a gap the motion gate could
+    not bridge; None when no track had a colour signature (no frames in the log)."""
 
 
 def _clutter_spots(
@@ -201,9 +303,11 @@ def _gap_fills(
     heads: dict[int, int],
     dropped: set[int],
     name: dict[int, str],
+    max_fill_s: float,
 ) -> tuple[dict[int, list[tuple[str, np.ndarray, np.ndarray]]], int]:
-    """Positions interpolated across the gaps of every stitched chain, by frame; and the
-    number of links."""
+    """Positions interpolated across the gaps of every stitched chain up to ``max_fill_s``
+    long, by frame (a longer gap, re-identified by colour, was out of view: nothing is
+    published there); and the number of links."""
     times = [fr.t_ns for fr in frames]
     fills: dict[int, list[tuple[str, np.ndarray, np.ndarray]]] = {}
     members: dict[int, list[Tracklet]] = {}
@@ -217,6 +321,8 @@ def _gap_fills(
         for a, b in zip(chain, chain[1:], strict=False):
             links += 1
             span = (b.first_ns - a.last_ns) / 1e9
+            if span > max_fill_s:
+                continue
             v = (b.first_xy - a.last_xy) / span
             lo = int(np.searchsorted(times, a.last_ns, side="right"))
             hi = int(np.searchsorted(times, b.first_ns, side="left"))
@@ -303,14 +409,24 @@ def _short_or_still_chains(
 
 
 def _chain_heads(
-    keys: Iterable[int], tracklets: Sequence[Tracklet], cfg: StitchConfig
-) -> tuple[dict[int, int], set[int]]:
-    """Chain head of every planned track (stitched when enabled; a track left without a
-    tracklet, all its rows at clutter, heads itself); and those clutter tracks."""
+    keys: Iterable[int],
+    tracklets: Sequence[Tracklet],
+    cfg: StitchConfig,
+    appearance: Mapping[int, np.ndarray],
+) -> tuple[dict[int, int], set[int], int | None]:
+    """Chain head of every planned track (stitched and re-identified when enabled; a track
+    left without a tracklet, all its rows at clutter, heads itself); those clutter tracks;
+    and how many chains colour joined to an earlier one (None without colours)."""
     clutter = {key for key in keys if key not in {t.key for t in tracklets}}
-    heads = stitch(tracklets, cfg) if cfg.enabled else {t.key: t.key for t in tracklets}
+    heads = {t.key: t.key for t in tracklets}
+    joined = None
+    if cfg.enabled:
+        moved = stitch(tracklets, cfg)
+        heads = reidentify(tracklets, moved, appearance, cfg)
+        if appearance:
+            joined = len(set(moved.values())) - len(set(heads.values()))
     heads.update({key: key for key in clutter})
-    return heads, clutter
+    return heads, clutter, joined
 
 
 def plan_publication(
@@ -319,9 +435,11 @@ def plan_publication(
     cfg: StitchConfig,
     all_tracks: bool = False,
     static_deaths: np.ndarray | None = None,
+    appearance: Mapping[int, np.ndarray] | None = None,
 ) -> Publication:
-    """Coasting tails, stitched identities and short identities of visual-only tracks (of every
-    track with ``all_tracks``: the offline identity stage names them afterwards)."""
+    """Coasting tails, stitched (and, with the tracks' colour ``appearance``, re-identified)
+    identities and short identities of visual-only tracks (of every track with
+    ``all_tracks``: the offline identity stage names them afterwards)."""
     rows, tracks = _candidate_rows(frames, all_tracks)
     hidden: set[tuple[int, int]] = set()
     spots = _clutter_spots(tracks, cfg, static_deaths)
@@ -331,12 +449,12 @@ def plan_publication(
         kept = _hide_tail_and_parked(key, seq, tracks[key], spot_tree, cfg, hidden)
         if kept:
             tracklets.append(_tracklet(key, kept, tracks[key], positions))
-    heads, clutter = _chain_heads(rows, tracklets, cfg)
+    heads, clutter, joined = _chain_heads(rows, tracklets, cfg, appearance or {})
     name = {key: tracks[heads[key]].vid for key in rows}
     dropped = _short_or_still_chains(tracklets, heads, cfg) | clutter
     for key, seq in rows.items():
         if heads[key] in dropped:
             hidden.update((key, t) for t, _ in seq)
-    fills, links = _gap_fills(frames, tracklets, heads, dropped, name)
+    fills, links = _gap_fills(frames, tracklets, heads, dropped, name, cfg.max_gap_s)
     head_of_name = {name[h]: h for h in set(heads.values()) if h in name}
-    return Publication(name, hidden, fills, len(dropped), links, dict(heads), head_of_name)
+    return Publication(name, hidden, fills, len(dropped), links, dict(heads), head_of_name, joined)
