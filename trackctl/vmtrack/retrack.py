@@ -1091,7 +1091,7 @@ def retrack(
         search = not aligned and mid not in trusted
         if search:
             out.searched.append(mid)
-        got = follow(mid, lag, a0, search, radio)
+        got = _first_path(follow, mid, (lag, a0), search, mid in start, radio)
         if got is not None:
             out[mid] = got
     final = radio
@@ -1102,6 +1102,34 @@ def retrack(
     if cfg.exclusive:
         _exclusive(follow, out, final)
     return out
+
+
+def _first_path(
+    follow: _Follower,
+    mid: str,
+    begin: tuple[float, np.ndarray],
+    search: bool,
+    identified: bool,
+    radio: RadioEvidence | None,
+) -> PhoneTrack | None:
+    """A phone's first-pass path from ``begin`` (clock offset, ``a`` per frame): searched when
+    ``search``, else followed and refitted. A searched phone with an identity (``identified``:
+    ``begin`` is its chains' alignment) is also followed from it, and the cheaper of the two
+    paths is kept. The search's grids
+    can miss the optimum the identity sits on, so a searched path is never kept when the
+    identity's alignment, followed and refitted as a trusted phone's is, costs less: the rule
+    the calibrated pass applies, which a log without RSSI never reaches (PETS footage, a
+    5 Hz phone searched onto somebody 3 m away: 1019 against the identity's 883)."""
+    lag, a0 = begin
+    got = follow(mid, lag, a0, search, radio)
+    if not (search and identified):
+        return got
+    kept = follow(mid, lag, a0, False, radio)
+    if kept is not None and (
+        got is None or follow.cost(mid, kept, radio) < follow.cost(mid, got, radio)
+    ):
+        return kept
+    return got
 
 
 def read_visits(
