@@ -30,6 +30,7 @@ import numpy as np
 from trackctl.logs import topics
 from trackctl.logs.messages import Detections
 from trackctl.logs.reader import LogReader
+from trackctl.vmtrack.frames import decode_image
 from trackctl.vmtrack.tracker import GroundTrack
 
 __all__ = ["AppearanceConfig", "AppearanceBook", "descriptor", "distance", "track_appearance"]
@@ -156,7 +157,7 @@ def track_appearance(
         todo = wanted.get((camera, msg.log_time_ns))
         if not todo:
             continue
-        image = cv2.imdecode(np.frombuffer(bytes(msg.message.data), np.uint8), cv2.IMREAD_COLOR)
+        image = decode_image(bytes(msg.message.data))
         if image is None:
             continue
         for key, box in todo:

@@ -28,7 +28,7 @@ from trackctl.vmtrack.detect import (
     predict_region,
 )
 
-__all__ = ["FrameConfig", "FrameDetector", "image_cameras", "detections_topic"]
+__all__ = ["FrameConfig", "FrameDetector", "image_cameras", "detections_topic", "decode_image"]
 
 IMAGE_SCHEMA = "foxglove.CompressedImage"
 
@@ -108,7 +108,7 @@ def image_cameras(reader: LogReader, present: dict[str, TopicInfo]) -> dict[str,
     return cams
 
 
-def _decode(data: bytes) -> np.ndarray | None:
+def decode_image(data: bytes) -> np.ndarray | None:
     """BGR image of an encoded frame, or None when the bytes do not decode."""
     if not data:
         return None
@@ -152,7 +152,7 @@ class FrameDetector:
                     break
                 if k % step:
                     continue
-                image = _decode(bytes(m.message.data))
+                image = decode_image(bytes(m.message.data))
                 if image is not None:
                     samples.append(image)
             if not samples:
@@ -193,7 +193,7 @@ class FrameDetector:
         counted.
         """
         t0 = time.perf_counter()
-        image = _decode(data)
+        image = decode_image(data)
         t1 = time.perf_counter()
         self.seconds_decode += t1 - t0
         if image is None:

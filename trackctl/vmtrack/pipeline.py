@@ -101,7 +101,8 @@ def run_stages(
     online = OnlineTracker(cfg, identity, inputs.mode, cost or association_cost(inputs.mode, cfg))
     cams = inputs.detector.cams if inputs.detector is not None else inputs.cams
     overlay = TrackOverlay(cams, cfg.frames.detector.person_height_m)
-    book = AppearanceBook() if cfg.appearance.enabled else None
+    # colours come from the frames the detector reads (box-only detections carry none)
+    book = AppearanceBook() if cfg.appearance.enabled and inputs.detector is not None else None
     truth = associate_online(reader, writer, inputs, online, progress, overlay, book)
     if inputs.mode is Mode.VM:
         identity.finish()
