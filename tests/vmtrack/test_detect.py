@@ -18,6 +18,7 @@ from trackctl.vmtrack.detect import (
     detect_people,
     person_height_px,
     predict_region,
+    refine_feet,
 )
 
 
@@ -168,3 +169,26 @@ def test_background_adapts_except_where_people_are_kept_out(scene) -> None:
     # the protected person is still found; the other has become background
     assert len(ground) == 1
     assert np.linalg.norm(ground[0] - PEOPLE[0]) < 0.3
+
+
+def test_feet_are_found_below_a_striding_persons_legs_apart() -> None:
+    """A person walking across the view: a coat down to 60% of the body, then two legs in an
+    inverted V, the feet 32 px apart (0.4 of the body: a stride), wider than the shoulders. The
+    box's bottom goes to the feet, not to where the floor shows between the legs."""
+    bg_img = np.full((200, 200, 3), 128, np.uint8)
+    img = bg_img.copy()
+    top, hem, feet, cx = 40, 88, 120, 100  # an 80 px person: coat 40-88, legs to 120
+    img[top:hem, cx - 12 : cx + 12] = 30
+    for r in range(hem, feet):  # each leg 4 px wide, 0 -> 12 px from the centre line
+        off = round(12 * (r - hem) / (feet - hem))
+        img[r, cx - off - 4 : cx - off] = 30
+        img[r, cx + off : cx + off + 4] = 30
+    bg = BackgroundModel([bg_img])
+    bg.set_frame(img)
+    box = np.array([[cx - 12.0, top, 24.0, hem + 12 - top]])  # the window fits the coat
+    (refined,) = refine_feet(img, bg, box, DetectorConfig())
+    assert abs(refined[1] + refined[3] - feet) <= 2
+    # the central half of the box alone (the former rule) loses the legs as they part
+    narrow = DetectorConfig(feet_span=0.0)
+    (kept,) = refine_feet(img, bg, box, narrow)
+    assert kept[1] + kept[3] < feet - 10

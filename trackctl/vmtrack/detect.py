@@ -64,6 +64,12 @@ class DetectorConfig:
     score favours the torso: legs are thin and often close to the floor's colour)."""
     feet_threshold: int = 18
     """Grey-level difference that counts as foreground when looking for the feet."""
+    feet_span: float = 0.5
+    """Width of the strip searched for the feet, as a share of the box height, centred on the
+    box. A walking stride spreads the feet ~0.75 m apart (0.45 of a 1.7 m body), wider than the
+    shoulders the window fits (``aspect``); a strip as narrow as the box sees the floor between
+    the legs and stops at the crotch or a coat's hem, which puts a far person 1 m or more too
+    far away."""
     shadows: bool = True
     """Cast shadows (darker, same chromaticity) are not foreground."""
     shadow_ratio: tuple[float, float] = (0.45, 0.92)
@@ -329,9 +335,12 @@ def detect_people(
 def refine_feet(
     image: np.ndarray, background: BackgroundModel, boxes: np.ndarray, cfg: DetectorConfig
 ) -> np.ndarray:
-    """Boxes whose bottom is moved to the person's real lowest point: in the central half of the
-    box's width, from 60% of its height down to 40% below it, the lowest row with foreground
-    (at the lower ``feet_threshold``) reached from the body without a gap of more than 3 rows."""
+    """Boxes whose bottom is moved to the person's real lowest point: in a strip centred on the
+    box, ``feet_span`` of its height wide (a stride's feet spread wider than the shoulders), from
+    60% of its height down to 40% below it, the lowest row with foreground (at the lower
+    ``feet_threshold``) reached from the body without a gap of more than 3 rows. A row counts
+    when it holds as many foreground pixels as 15% of half the box's width (a leg, however far
+    from the box's centre line the stride has put it)."""
     if len(boxes) == 0:
         return boxes
     h_img, w_img = image.shape[:2]
@@ -339,12 +348,14 @@ def refine_feet(
     out = boxes.copy()
     for b in out:
         x, y, w, h = b
-        x0, x1 = int(max(0, x + 0.25 * w)), int(min(w_img, x + 0.75 * w + 1))
+        half = max(0.25 * w, 0.5 * cfg.feet_span * h)
+        cx = x + 0.5 * w
+        x0, x1 = int(max(0, cx - half)), int(min(w_img, cx + half + 1))
         y0, y1 = int(max(0, y + 0.6 * h)), int(min(h_img, y + 1.4 * h + 1))
         if x1 - x0 < 2 or y1 - y0 < 4:
             continue
         strip = background.foreground(image, low, Region(x0, y0, x1, y1, h))
-        on = strip.mean(axis=1) > 0.15
+        on = strip.sum(axis=1) > 0.15 * max(1.0, 0.5 * w)
         last, gap = -1, 0
         for r, flag in enumerate(on):
             if flag:
