@@ -34,6 +34,8 @@ class DoorModel(Protocol):
     def door_frames(self) -> int: ...
     @property
     def door_smooth_m(self) -> float: ...
+    @property
+    def return_cost(self) -> float | None: ...
 
 
 MAX_CELLS = 50_000_000
@@ -63,12 +65,16 @@ class SiteGrid:
         self.shape = (int(size[1]), int(size[0]))
         self.visit: Visit | None = None
         """Door costs per cell and the cost per frame out of view (None: always in view)."""
+        self.return_cost: float | None = None
+        """Cost of coming back into view after leaving it (None: one visit); with
+        :attr:`visit` only."""
 
     def with_visits(self, points: Sequence[np.ndarray], cfg: DoorModel) -> SiteGrid:
         """This grid, with the path's one visit to the view set up (``cfg.away_cost``; None:
         the path is in view throughout)."""
         if cfg.away_cost is not None:
             self.visit = (self.doors(points, cfg), cfg.away_cost)
+            self.return_cost = cfg.return_cost
         return self
 
     def emission(self, pts: np.ndarray, sigma: float, cap: float) -> np.ndarray | float:

@@ -88,6 +88,10 @@ class RetrackConfig:
     wall_cost: float = 25.0
     """Cost of coming into view or leaving it: ``door_cost`` at a door, ``wall_cost``
     anywhere else (a door inside the view, a long miss)."""
+    return_cost: float | None = 0.0
+    """Cost of coming back into view after leaving it, on top of the door's and of the misfit
+    to where the phone's walk from the cell left puts the carrier (:class:`_Returns`). None:
+    one visit (docs/vmtrack.md, Parameters)."""
     edge_m: float = 1.0
     door_ratio: float | None = None
     """None (the default): the whole edge of the covered area (within ``edge_m`` of it) is a
@@ -384,30 +388,38 @@ def _viterbi_path(
     u: np.ndarray,
     steps: np.ndarray,
     visit: Visit | None = None,
+    spread: tuple[float, float] | None = None,
 ) -> np.ndarray:
     """The cheapest path's cell (row, col) at every frame; (-1, -1) where it is out of view.
     ``visit``: (door costs per cell, cost per frame out of view): the path is out of view,
-    then in view once, then out of view (:attr:`RetrackConfig.away_cost`); None: in view
-    throughout."""
+    then in view, then out of view (None: in view throughout). With ``spread`` and
+    ``grid.return_cost`` it may come back into view after leaving (:class:`_Returns`: near
+    where the phone's walk from the cell it left puts the carrier; ``spread``: the variance of
+    the cell left, m^2, and of the carrier's random walk about the phone's walk per frame,
+    m^2)."""
     n = len(u)
     acc = np.zeros(grid.shape, np.float32)
     back = np.zeros((n, *grid.shape), np.int8)
     shifts = np.zeros((n, 2), int)
     frac = np.zeros((1, 2))
     restart: dict[int, tuple[int, int]] = {}
-    left = np.full(n, -1, np.int64)  # out of view after the visit from k: the cell left at k-1
+    left = np.full(n, -1, np.int64)  # out of view after a visit from k: the cell left at k-1
     before, after = np.float32(0.0 if visit is not None else _BIG), _BIG
     doors, aways = (np.zeros(grid.shape, np.float32), _BIG) if visit is None else visit
     aways = np.broadcast_to(np.asarray(aways, np.float32), (n,))
+    returns = _Returns(grid, u, spread) if visit is not None and spread else None
     if visit is not None:
         acc += doors  # in view at the first frame: as if just come in
     for k, uk in enumerate(u):
         away = aways[k]
+        back_in = None if returns is None else returns.cost(k, after, doors)
         if visit is not None:
             out_at = acc + doors
             j = int(np.argmin(out_at))
             if out_at.flat[j] < after:
                 after, left[k] = out_at.flat[j], j
+                if returns is not None:
+                    returns.left(k, j)
             after = np.float32(after + away)
         if np.isnan(uk):
             # anywhere: the path restarts; before it, the cheapest cell of the frame before
@@ -429,6 +441,10 @@ def _viterbi_path(
                 new = come_in < acc
                 back[k][new] = -2
                 acc = np.where(new, come_in, acc)
+                if back_in is not None:
+                    new = back_in < acc
+                    back[k][new] = -3
+                    acc = np.where(new, back_in, acc)
         if visit is not None:
             before = np.float32(before + away)
         acc = acc + emissions[k]
@@ -442,6 +458,47 @@ def _viterbi_path(
     return _backtrack(back, shifts, restart, left, (int(y0), int(x0)), state)
 
 
+class _Returns:
+    """Coming back into view in :func:`_viterbi_path`: the carrier left the view at a cell and
+    walked on where no camera saw them, and the phone's walk says where: they come back at a
+    door near there. The cost of coming back at a cell is the out-of-view path's, plus
+    ``return_cost``, the door's cost and the misfit between the cell and where the phone's
+    walk from the cell left puts the carrier: d^2 / 2 (v0 + v * frames away), ``spread`` =
+    (v0, v): the cell left is as uncertain as a detection, and the carrier moves about the
+    phone's walk by the random walk of the path in view. A stranger who walks like the phone
+    while the carrier is away is not where the carrier's walk leads: this is what lets a
+    carrier come back without letting a path ride strangers (the one-visit model's reason).
+    Only the cheapest leave so far is kept (the out-of-view state's); across a restart of the
+    walk (no walk) there is no coming back."""
+
+    def __init__(self, grid: SiteGrid, u: np.ndarray, spread: tuple[float, float]) -> None:
+        self.extra = grid.return_cost
+        self.walk = np.cumsum(np.nan_to_num(u, nan=0.0))
+        self.seg = np.cumsum(np.isnan(u))
+        self.v0, self.v = spread
+        ys, xs = np.indices(grid.shape)
+        self.cells = (grid.lo[0] + xs * grid.cell) + 1j * (grid.lo[1] + ys * grid.cell)
+        self.at: tuple[int, complex] | None = None
+        """The frame of the cheapest leave and the position left (the cell of the frame
+        before it)."""
+
+    def left(self, k: int, flat: int) -> None:
+        """The path's cheapest leave is now at frame ``k``, from cell ``flat``."""
+        self.at = (k, complex(self.cells.flat[flat]))
+
+    def cost(self, k: int, after: float, doors: np.ndarray) -> np.ndarray | None:
+        """Cost of coming back into view at frame ``k`` at each cell (None: cannot)."""
+        if self.extra is None or self.at is None or after >= _BIG:
+            return None
+        j, xy = self.at
+        if self.seg[k] != self.seg[j - 1 if j else 0] or k <= j:
+            return None
+        where = xy + (self.walk[k] - self.walk[j - 1 if j else 0])
+        var = max(self.v0 + self.v * (k - j), 1e-6)
+        d2 = np.abs(self.cells - where) ** 2
+        return (after + self.extra + doors + d2 / (2 * var)).astype(np.float32)
+
+
 def _backtrack(
     back: np.ndarray,
     shifts: np.ndarray,
@@ -451,7 +508,7 @@ def _backtrack(
     state: str,
 ) -> np.ndarray:
     """The cells of :func:`_viterbi_path`'s path, from its last ``cell`` and ``state`` (in,
-    before or after the visit) back through its back-pointers."""
+    before or after a visit) back through its back-pointers."""
     n, shape = len(back), back.shape[1:]
     cells = np.full((n, 2), -1, int)
     y, x = cell
@@ -467,9 +524,9 @@ def _backtrack(
         b = int(back[k, y, x])
         if b == -1:
             y, x = restart[k]
-            state = "before" if y < 0 else state
-        elif b == -2:
-            state = "before"
+            state = {-1: "before", -3: "after"}.get(y, state)
+        elif b in (-2, -3):
+            state = "before" if b == -2 else "after"
         else:
             dy, dx = _OFFS[b]
             y = min(max(y - dy - int(shifts[k, 0]), 0), shape[0] - 1)
@@ -1299,6 +1356,8 @@ class _Follower:
         self.every = _search_every(self.dt, cfg.search_max_hz)
         """The search sees every this many frames (:attr:`RetrackConfig.search_max_hz`)."""
         self.steps = _step_costs(grid.cell, self.dt, cfg)
+        self.spread = (cfg.det_sigma_m**2, cfg.walk_sigma_mps**2 * self.dt)
+        """Variances of where a path left the view and of its walk per frame (:class:`_Returns`)."""
         self.settle_steps = (
             self.steps
             if cfg.settle_walk_sigma_mps is None
@@ -1351,7 +1410,11 @@ class _Follower:
         passes = 0 if self.aligned else cfg.refine_passes
         for p in range(passes + 1):
             u = _displacements(frame_t, track, lag, a)
-            cells = _viterbi_path(grid, phone_em, u, self.steps, visit)
+            # the last pass may come back into view (:class:`_Returns`); the passes the
+            # alignment is refitted from keep one visit: a return is judged by the alignment
+            # of the visit it follows, not fitted to
+            spread = self.spread if p == passes else None
+            cells = _viterbi_path(grid, phone_em, u, self.steps, visit, spread)
             gain = None
             if radio and radio.cfg.enabled and cfg.min_evidence is not None:
                 gain = radio.gain(mid, grid.xy(cells))  # read by the publication rule only
