@@ -471,6 +471,42 @@ def test_one_visit_the_carriers_and_not_a_strangers_who_walked_like_the_phone_be
     assert _share_on(out.xy, carrier, n - come) > 0.9
 
 
+def _comes_back(seed: int) -> tuple[np.ndarray, list[np.ndarray], np.ndarray, np.ndarray]:
+    """A carrier walks about the room among 6 others for ~17 s, leaves by its east wall, walks
+    ~19 s where no camera sees (east, north, back west) and comes back by the same wall 6 m
+    further north, turning about the room, then standing, for the rest of the 90 s. Frame
+    times, detections, the carrier's walk and where they are in view."""
+    frame_t, _, people = _scene(seed, n_people=6, seconds=90)
+    n = len(frame_t)
+    route = [(2, 10), (2, 6), (9, 6), (9, 3), (15.5, 3), (24, 3), (24, 9), (15.5, 9), (5, 9)]
+    route += [(5, 2), (12, 2), (12, 7)]
+    carrier = _polyline(route, n)
+    inside = (carrier[:, 0] > 0) & (carrier[:, 0] < 16)
+    rng = np.random.default_rng(seed + 1)
+    points = []
+    for k in range(n):
+        who = [*people, carrier] if inside[k] else people
+        seen = [p[k] + rng.normal(0, 0.3, 2) for p in who if rng.random() > 0.05]
+        points.append(np.array(seen).reshape(-1, 2))
+    return frame_t, points, carrier, inside
+
+
+def test_a_carrier_who_leaves_and_comes_back_is_found_on_both_visits():
+    # one visit publishes one of the two; coming back where the phone's walk leads (the
+    # carrier left 6 m south of where they come back, and walked there) publishes both
+    frame_t, points, carrier, inside = _comes_back(21)
+    visits = np.split(
+        np.flatnonzero(inside), np.flatnonzero(np.diff(np.flatnonzero(inside)) > 1) + 1
+    )
+    assert len(visits) == 2 and all(len(v) > 15 * FPS for v in visits)
+    phone = {"m": _phone(carrier, frame_t, 70.0)}
+    for cfg, both in ((CFG, True), (dataclasses.replace(CFG, return_cost=None), False)):
+        xy = retrack(frame_t, points, phone, {}, AlignConfig(), cfg)["m"].xy
+        shares = [_share_on({k: xy[k] for k in v if k in xy}, carrier, len(v)) for v in visits]
+        assert (min(shares) > 0.8) is both, (cfg.return_cost, shares)
+        assert max(shares) > 0.8
+
+
 def test_absolute_layer_costs_compare_across_passes() -> None:
     """The search compares the paths found from different clock-offset starts by their whole
     cost: one detection per frame, a path that stays on it costs nothing, one that walks away
