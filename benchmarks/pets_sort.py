@@ -19,6 +19,13 @@ first row is the video run's own tracks (same detector, the tracker also sees th
 detections themselves are scored against the same labels first (recall, precision at 1 m).
 
     TRACKCTL_VTEST=.../vtest.avi python benchmarks/pets_sort.py [--fps 7] [--rate R]
+        [--det PETS09-S2L1/det.txt]
+
+``--det`` (or ``TRACKCTL_PETS_DET``) gives both trackers a det.txt of the sequence instead of
+trackctl's own detections: the public detections of MOTChallenge's PETS09-S2L1 (795 frames, its
+frame k the file's frame k - 1; e.g. ``data/train/PETS09-S2L1/det/det.txt`` of Bewley's SORT
+repository, which SORT's paper ran on; never committed here). It needs every frame (no
+``--rate``). The first row stays the video run's own tracks.
 
 Default timing: every frame of the file restamped at the sequence's true 7 fps (``--fps 7``);
 ``--rate 7 --fps ''`` is ``pets_footage.py``'s (7 of the file's 10 frames a second at the file's
@@ -95,6 +102,23 @@ def write_det(out: Path, det: Path, stamp_fps: float) -> list[int]:
     return frames
 
 
+def det_frames(det: Path) -> list[int]:
+    """The file frame of each det.txt frame of a det.txt of the whole sequence (frame k is
+    the file's k - 1), up to its last frame."""
+    last = max((int(line.split(",", 1)[0]) for line in det.read_text().splitlines()), default=0)
+    return list(range(last))
+
+
+def det_ground(det: Path, cam: PinholeCamera, frames: list[int]) -> dict[int, np.ndarray]:
+    """The boxes' foot points (bottom centres) on the ground, per file frame."""
+    out: dict[int, np.ndarray] = {f: np.empty((0, 2)) for f in frames}
+    for k, boxes in read_det(det, 0.0).items():
+        feet = np.array([[b[0] + b[2] / 2, b[1] + b[3]] for b in boxes]).reshape(-1, 2)
+        g = cam.ground_point(feet)[:, :2] if len(feet) else np.empty((0, 2))
+        out[frames[k - 1]] = g[~np.isnan(g).any(axis=1)]
+    return out
+
+
 def tracks_of(log: Path, frame_of: dict[int, int]) -> GroundTracks:
     """``/vmtrack/tracks`` per file frame; ``frame_of`` maps a message's time (ns) to it."""
     out: GroundTracks = {}
@@ -148,7 +172,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--calib", default=str(CALIB))
     ap.add_argument("--fps", default="7", help="restamp every frame at this rate ('' keeps)")
     ap.add_argument("--rate", default="", help="keep this many frames a second ('': all)")
+    ap.add_argument(
+        "--det",
+        default=os.environ.get("TRACKCTL_PETS_DET", ""),
+        help="a det.txt of the whole sequence for both trackers (default: trackctl's own)",
+    )
     args = ap.parse_args(argv)
+    if args.det and (args.rate or not args.fps):
+        sys.exit("--det needs every frame at the sequence's rate (--fps 7, no --rate)")
     if not Path(args.video).is_file():
         sys.exit(f"{args.video}: no such video; set TRACKCTL_VTEST or pass --video")
     cap = cv2.VideoCapture(args.video)
@@ -162,30 +193,39 @@ def main(argv: list[str] | None = None) -> int:
         work = Path(tmp)
         t0 = time.perf_counter()
         out = video_run(args, work)
-        det = work / "det.txt"
-        frames = write_det(out, det, stamp_fps)
+        if args.det:
+            det = Path(args.det)
+            frames = det_frames(det)
+        else:
+            det = work / "det.txt"
+            frames = write_det(out, det, stamp_fps)
         t1 = time.perf_counter()
         video_stamps = {
             m.log_time_ns: round(m.log_time_ns * stamp_fps / 1e9)
             for m in LogReader(out).messages(["/vmtrack/cam0/detections"])
         }
         ours_video = tracks_of(out, video_stamps)
-        ground = {
-            video_stamps[m.log_time_ns]: np.array(
-                [(d.ground_m.x, d.ground_m.y) for d in m.message.detections if d.ground_m]
-            ).reshape(-1, 2)
-            for m in LogReader(out).messages(["/vmtrack/cam0/detections"])
-        }
+        ground = (
+            det_ground(det, cam, frames)
+            if args.det
+            else {
+                video_stamps[m.log_time_ns]: np.array(
+                    [(d.ground_m.x, d.ground_m.y) for d in m.message.detections if d.ground_m]
+                ).reshape(-1, 2)
+                for m in LogReader(out).messages(["/vmtrack/cam0/detections"])
+            }
+        )
         ours = trackctl_on_det(work, det, Path(args.calib), frames, det_fps)
         t2 = time.perf_counter()
         sort = sort_on_det(det, cam, frames)
         t3 = time.perf_counter()
         n_boxes = len(det.read_text().splitlines())
     people = len({lab.person for lab in labels if not lab.occluded})
+    source = args.det or "trackctl's own detector"
     feet = [FootLabel(lab.frame, lab.u_px, lab.v_px, lab.occluded) for lab in labels]
     dscore = score_detections(feet, ground, cam)
     print(
-        f"PETS09-S2L1 view 001: det.txt of trackctl's own detector, {len(frames)} frames, "
+        f"PETS09-S2L1 view 001: det.txt of {source}, {len(frames)} frames, "
         f"{n_boxes} boxes, recorded at {det_fps:g} fps; scored on the ground at 1 m against "
         f"{len({lab.frame for lab in labels})} labelled frames, {people} people"
     )
