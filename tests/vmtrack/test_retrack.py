@@ -31,6 +31,7 @@ from trackctl.vmtrack.retrack import (
     _layer_costs,
     _publish,
     _refit,
+    _Returns,
     _search,
     _search_every,
     _settle_disputes,
@@ -492,19 +493,45 @@ def _comes_back(seed: int) -> tuple[np.ndarray, list[np.ndarray], np.ndarray, np
 
 
 def test_a_carrier_who_leaves_and_comes_back_is_found_on_both_visits():
-    # one visit publishes one of the two; coming back where the phone's walk leads (the
-    # carrier left 6 m south of where they come back, and walked there) publishes both
+    # one visit (the default) publishes one of the two; coming back where the phone's walk
+    # leads (``return_cost``: the carrier left 6 m south of where they come back, and walked
+    # there, out of the room) publishes both
     frame_t, points, carrier, inside = _comes_back(21)
     visits = np.split(
         np.flatnonzero(inside), np.flatnonzero(np.diff(np.flatnonzero(inside)) > 1) + 1
     )
     assert len(visits) == 2 and all(len(v) > 15 * FPS for v in visits)
     phone = {"m": _phone(carrier, frame_t, 70.0)}
-    for cfg, both in ((CFG, True), (dataclasses.replace(CFG, return_cost=None), False)):
+    for cfg, both in ((dataclasses.replace(CFG, return_cost=0.0), True), (CFG, False)):
         xy = retrack(frame_t, points, phone, {}, AlignConfig(), cfg)["m"].xy
         shares = [_share_on({k: xy[k] for k in v if k in xy}, carrier, len(v)) for v in visits]
         assert (min(shares) > 0.8) is both, (cfg.return_cost, shares)
         assert max(shares) > 0.8
+
+
+def test_a_return_needs_a_walk_that_left_the_covered_area():
+    # detections cover a 10 x 10 m square. A path leaves at (5, 5) (inside it); the phone
+    # walks 1 m east a frame. Coming back is possible only once the walk has taken the
+    # carrier out of the square (a walk that stays in view is a companion, not a carrier
+    # who was away), and is then cheapest where the walk leads.
+    pts = [np.array([[x, y]], float) for x in range(11) for y in range(11)]
+    cfg = dataclasses.replace(CFG, return_cost=0.0)
+    grid = SiteGrid(pts, cfg.cell_m).with_visits(pts, cfg)
+    u = np.full(12, 1.0 + 0j)
+    returns = _Returns(grid, u, (0.1, 0.01))
+    doors = np.zeros(grid.shape, np.float32)
+    j = int(
+        np.ravel_multi_index(
+            tuple(r[0] for r in grid.cells_of(np.array([[5.0, 5.0]]))[0]), grid.shape
+        )
+    )
+    returns.left(2, j)
+    assert returns.cost(4, 0.0, doors) is None  # at x = 8: still in view
+    assert returns.cost(5, 0.0, doors) is None  # x = 9
+    costs = [returns.cost(k, 0.0, doors) for k in (6, 7)]  # x = 10 (the edge), 11: out
+    got = next(c for c in costs if c is not None)
+    y, x = np.unravel_index(int(np.argmin(got)), got.shape)
+    assert grid.lo[1] + y * grid.cell == pytest.approx(5.0, abs=0.3)
 
 
 def test_absolute_layer_costs_compare_across_passes() -> None:

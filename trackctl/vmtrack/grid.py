@@ -68,6 +68,9 @@ class SiteGrid:
         self.return_cost: float | None = None
         """Cost of coming back into view after leaving it (None: one visit); with
         :attr:`visit` only."""
+        self.covered: np.ndarray | None = None
+        """The area the cameras cover (every cell a detection fell in, closed over 1 m gaps and
+        filled); with :attr:`visit` only."""
 
     def with_visits(self, points: Sequence[np.ndarray], cfg: DoorModel) -> SiteGrid:
         """This grid, with the path's one visit to the view set up (``cfg.away_cost``; None:
@@ -75,6 +78,7 @@ class SiteGrid:
         if cfg.away_cost is not None:
             self.visit = (self.doors(points, cfg), cfg.away_cost)
             self.return_cost = cfg.return_cost
+            self.covered = self._areas(self._counts(points), cfg.edge_m)[0]
         return self
 
     def emission(self, pts: np.ndarray, sigma: float, cap: float) -> np.ndarray | float:

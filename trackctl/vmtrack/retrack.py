@@ -88,10 +88,12 @@ class RetrackConfig:
     wall_cost: float = 25.0
     """Cost of coming into view or leaving it: ``door_cost`` at a door, ``wall_cost``
     anywhere else (a door inside the view, a long miss)."""
-    return_cost: float | None = 0.0
-    """Cost of coming back into view after leaving it, on top of the door's and of the misfit
-    to where the phone's walk from the cell left puts the carrier (:class:`_Returns`). None:
-    one visit (docs/vmtrack.md, Parameters)."""
+    return_cost: float | None = None
+    """None (the default): one visit. A number: a path may come back into view after leaving
+    it, at this cost on top of the door's and of the misfit to where the phone's walk from the
+    cell left puts the carrier (:class:`_Returns`); off by default: on the PETS footage with
+    phones it named more carriers' frames but put one phone on another carrier for 9-14 s
+    (docs/vmtrack.md, Parameters)."""
     edge_m: float = 1.0
     door_ratio: float | None = None
     """None (the default): the whole edge of the covered area (within ``edge_m`` of it) is a
@@ -495,8 +497,11 @@ class _Returns:
     phone's walk by the random walk of the path in view. A stranger who walks like the phone
     while the carrier is away is not where the carrier's walk leads: this is what lets a
     carrier come back without letting a path ride strangers (the one-visit model's reason).
-    Only the cheapest leave so far is kept (the out-of-view state's); across a restart of the
-    walk (no walk) there is no coming back."""
+    A carrier who was away went where no camera sees: the walk from the cell left must have
+    taken them out of the covered area at some frame before they come back (a path that left
+    a companion walking beside the carrier and "came back" on the carrier never walked out of
+    view). Only the cheapest leave so far is kept (the out-of-view state's); across a restart
+    of the walk (no walk) there is no coming back."""
 
     def __init__(self, grid: SiteGrid, u: np.ndarray, spread: tuple[float, float]) -> None:
         self.extra = grid.return_cost
@@ -505,13 +510,17 @@ class _Returns:
         self.v0, self.v = spread
         ys, xs = np.indices(grid.shape)
         self.cells = (grid.lo[0] + xs * grid.cell) + 1j * (grid.lo[1] + ys * grid.cell)
+        self.grid = grid
         self.at: tuple[int, complex] | None = None
         """The frame of the cheapest leave and the position left (the cell of the frame
         before it)."""
+        self.out = False
+        """Whether the walk from the leave has been out of the covered area since."""
 
     def left(self, k: int, flat: int) -> None:
         """The path's cheapest leave is now at frame ``k``, from cell ``flat``."""
         self.at = (k, complex(self.cells.flat[flat]))
+        self.out = False
 
     def cost(self, k: int, after: float | np.floating, doors: np.ndarray) -> np.ndarray | None:
         """Cost of coming back into view at frame ``k`` at each cell (None: cannot)."""
@@ -521,9 +530,20 @@ class _Returns:
         if self.seg[k] != self.seg[j - 1 if j else 0] or k <= j:
             return None
         where = xy + (self.walk[k] - self.walk[j - 1 if j else 0])
+        self.out = self.out or not self._covered(where)
+        if not self.out:
+            return None
         var = max(self.v0 + self.v * (k - j), 1e-6)
         d2 = np.abs(self.cells - where) ** 2
         return (after + self.extra + doors + d2 / (2 * var)).astype(np.float32)
+
+    def _covered(self, xy: complex) -> bool:
+        """Whether ``xy`` is in the area the cameras cover (off the grid is not)."""
+        covered = self.grid.covered
+        if covered is None:
+            return False
+        (rows, cols), ok = self.grid.cells_of(np.array([[xy.real, xy.imag]]))
+        return bool(ok[0] and covered[rows[0], cols[0]])
 
 
 def _backtrack(
