@@ -78,7 +78,8 @@ class SiteGrid:
         if cfg.away_cost is not None:
             self.visit = (self.doors(points, cfg), cfg.away_cost)
             self.return_cost = cfg.return_cost
-            self.covered = self._areas(self._counts(points), cfg.edge_m)[0]
+            if cfg.return_cost is not None:  # only coming back reads it
+                self.covered = self._areas(self._counts(points), cfg.edge_m)[0]
         return self
 
     def emission(self, pts: np.ndarray, sigma: float, cap: float) -> np.ndarray | float:

@@ -409,7 +409,11 @@ def _viterbi_path(
     before, after = np.float32(0.0 if visit is not None else _BIG), _BIG
     doors, aways = (np.zeros(grid.shape, np.float32), _BIG) if visit is None else visit
     aways = np.broadcast_to(np.asarray(aways, np.float32), (n,))
-    returns = _Returns(grid, u, spread) if visit is not None and spread else None
+    returns = (
+        _Returns(grid, u, spread)
+        if visit is not None and spread and grid.return_cost is not None
+        else None
+    )
     if visit is not None:
         acc += doors  # in view at the first frame: as if just come in
     for k, uk in enumerate(u):
@@ -504,7 +508,7 @@ class _Returns:
     of the walk (no walk) there is no coming back."""
 
     def __init__(self, grid: SiteGrid, u: np.ndarray, spread: tuple[float, float]) -> None:
-        self.extra = grid.return_cost
+        self.extra = grid.return_cost or 0.0
         self.walk = np.cumsum(np.nan_to_num(u, nan=0.0))
         self.seg = np.cumsum(np.isnan(u))
         self.v0, self.v = spread
@@ -524,7 +528,7 @@ class _Returns:
 
     def cost(self, k: int, after: float | np.floating, doors: np.ndarray) -> np.ndarray | None:
         """Cost of coming back into view at frame ``k`` at each cell (None: cannot)."""
-        if self.extra is None or self.at is None or after >= _BIG:
+        if self.at is None or after >= _BIG:
             return None
         j, xy = self.at
         if self.seg[k] != self.seg[j - 1 if j else 0] or k <= j:
