@@ -409,11 +409,7 @@ def _viterbi_path(
     before, after = np.float32(0.0 if visit is not None else _BIG), _BIG
     doors, aways = (np.zeros(grid.shape, np.float32), _BIG) if visit is None else visit
     aways = np.broadcast_to(np.asarray(aways, np.float32), (n,))
-    returns = (
-        _Returns(grid, u, spread)
-        if visit is not None and spread and grid.return_cost is not None
-        else None
-    )
+    returns = _Returns.of(grid, u, spread) if visit is not None else None
     if visit is not None:
         acc += doors  # in view at the first frame: as if just come in
     for k, uk in enumerate(u):
@@ -520,6 +516,13 @@ class _Returns:
         before it)."""
         self.out = False
         """Whether the walk from the leave has been out of the covered area since."""
+
+    @classmethod
+    def of(
+        cls, grid: SiteGrid, u: np.ndarray, spread: tuple[float, float] | None
+    ) -> _Returns | None:
+        """The returns of a path over ``grid`` (None: the path may not come back, one visit)."""
+        return cls(grid, u, spread) if spread and grid.return_cost is not None else None
 
     def left(self, k: int, flat: int) -> None:
         """The path's cheapest leave is now at frame ``k``, from cell ``flat``."""
