@@ -47,13 +47,15 @@ from pathlib import Path
 
 import numpy as np
 
+from trackctl.geometry.camera import PinholeCamera
+from trackctl.ingest.calibration import read_calibration
 from trackctl.logs import topics
 from trackctl.logs.messages import GroundTruth, GroundTruthEntity, Imu, Vec3
 from trackctl.logs.reader import LogReader
 from trackctl.logs.writer import LogWriter
 from trackctl.sim.phones import PhoneTruth, realistic_imu
 from trackctl.sim.vm import PRESETS, mac_of
-from trackctl.sim.walkers import Trajectory
+from trackctl.sim.walkers import Trajectory, hidden_route, walk_route
 
 ROOT = Path(__file__).resolve().parent.parent
 TRACKCTL = Path(sys.executable).parent / "trackctl"
@@ -63,6 +65,7 @@ PATHS = ROOT / "tests" / "data" / "pets2009_view001_paths.csv"
 DT_S = 0.05  # carriers' trajectory grid (the simulator's walkers use the same)
 SMOOTH_S = 0.5  # moving average over the track: a walker's velocity has no frame-rate steps
 MAX_RATIO = 1.0
+GAP_S = 1.0  # rows farther apart than this: the person is out of view between them
 
 
 def _cpu_run(args: list[str]) -> tuple[float, float, str]:
@@ -80,10 +83,13 @@ def _cpu_run(args: list[str]) -> tuple[float, float, str]:
     return cpu, wall, done.stdout
 
 
-def _carriers(path: Path) -> list[Trajectory]:
+def _carriers(path: Path, camera: PinholeCamera) -> list[Trajectory]:
     """The checked paths of ``path`` (person, t_s, x_m, y_m rows; ``#`` comments), each as a
-    trajectory on the simulator's grid: interpolated over the rows (and across a gap where
-    the person is out of view), smoothed over ``SMOOTH_S``."""
+    trajectory on the simulator's grid: interpolated over the rows, smoothed over ``SMOOTH_S``.
+    A gap of more than ``GAP_S`` between two rows is the person out of view: they walk out
+    where the rows leave off, along the way they were going, round to where the rows resume,
+    out of ``camera``'s view (:func:`~trackctl.sim.walkers.hidden_route`, at least 1 m from
+    it), at their own median speed, standing half way for the time the walk does not need."""
     rows: dict[str, list[tuple[float, float, float]]] = defaultdict(list)
     for line in path.read_text().splitlines():
         if line.startswith("#") or line.startswith("person,") or not line.strip():
@@ -97,10 +103,36 @@ def _carriers(path: Path) -> list[Trajectory]:
         a = np.array(sorted(rows[person]))
         grid = np.arange(a[0, 0], a[-1, 0] + 1e-9, DT_S)
         xy = np.column_stack([np.interp(grid, a[:, 0], a[:, j]) for j in (1, 2)])
+        for k in np.flatnonzero(np.diff(a[:, 0]) > GAP_S):
+            span = (grid >= a[k, 0]) & (grid <= a[k + 1, 0])
+            xy[span] = _out_of_view(a, k, camera, int(span.sum()))
         pad = np.pad(xy, ((taps // 2, taps // 2), (0, 0)), mode="edge")
         xy = np.column_stack([np.convolve(pad[:, j], kernel, mode="valid") for j in (0, 1)])
         out.append(Trajectory(person, float(a[0, 0]), DT_S, xy))
     return out
+
+
+def _out_of_view(a: np.ndarray, k: int, camera: PinholeCamera, n: int) -> np.ndarray:
+    """``n`` positions, evenly in time, of the walk out of view between rows ``k`` and
+    ``k + 1`` of ``a`` (t_s, x, y): :func:`_carriers`."""
+
+    def heading(i: int, j: int) -> np.ndarray:
+        return a[j, 1:] - a[i, 1:]
+
+    before = int(np.searchsorted(a[:, 0], a[k, 0] - 1.0))
+    after = int(np.searchsorted(a[:, 0], a[k + 1, 0] + 1.0)) - 1
+    route = hidden_route(
+        a[k, 1:],
+        a[k + 1, 1:],
+        lambda p: ~camera.visible(np.column_stack([p, np.zeros(len(p))])),
+        away=(heading(before, k), heading(k + 1, max(after, k + 1))),
+    )
+    dt = np.diff(a[:, 0])
+    step = np.linalg.norm(np.diff(a[:, 1:], axis=0), axis=1) / np.maximum(dt, 1e-9)
+    speed = float(np.median(step[(dt <= GAP_S) & (step > 0.3)]))
+    duration = float(a[k + 1, 0] - a[k, 0])
+    walk = walk_route(route, duration, speed, duration / max(n - 1, 1))
+    return walk[:n]
 
 
 def _phones(
@@ -248,7 +280,7 @@ def main() -> int:
             ["record", str(rec), "--video", f"cam0={video}", "--calib", f"cam0={args.calib}",
              "--rate", args.rate, "--quiet"]
         )  # fmt: skip
-        carriers = _carriers(args.paths)
+        carriers = _carriers(args.paths, PinholeCamera(read_calibration(args.calib, "cam0")))
         reader = LogReader(rec)
         duration_s = (reader.end_ns or 0) / 1e9
         frames = reader.topics()[topics.image("cam0")]

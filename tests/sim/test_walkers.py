@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from trackctl.errors import InputError
-from trackctl.sim.walkers import load_trajectories_csv, random_waypoint, random_waypoint_crowd
+from trackctl.sim.walkers import (
+    hidden_route,
+    load_trajectories_csv,
+    random_waypoint,
+    random_waypoint_crowd,
+    walk_route,
+)
 
 SIZE = (20.0, 15.0)
 
@@ -121,3 +130,47 @@ def test_a_csv_keeps_its_ids_and_counts_time_from_its_first_row(tmp_path: Path) 
     assert np.allclose(got["7"].at(1.0), [1.0, 0.0]) and np.allclose(
         got["alice"].at(2.0), [1.0, 2.0]
     )
+
+
+def _outside_disc(radius_m: float):
+    return lambda xy: np.hypot(xy[:, 0], xy[:, 1]) > radius_m
+
+
+def test_a_hidden_route_goes_round_the_seen_area_at_its_margin() -> None:
+    """Out at one side of a seen disc (radius 5 m), back in at the other: the walk leaves
+    along its way out, keeps 1 m (less a grid cell) from the disc, and is about as short as
+    the way round (2 x 1 m straight + half a circle of radius 6 m)."""
+    route = hidden_route(
+        np.array([5.0, 0.0]),
+        np.array([-5.0, 0.0]),
+        _outside_disc(5.0),
+        away=(np.array([1.0, 0.0]), np.array([1.0, 0.0])),
+    )
+    assert np.allclose(route[0], [5.0, 0.0]) and np.allclose(route[-1], [-5.0, 0.0])
+    inner = route[1:-1]
+    assert np.hypot(inner[:, 0], inner[:, 1]).min() >= 6.0 - 0.25
+    assert route[1][0] > 5.0 and abs(route[1][1]) < 1e-9  # straight out along +x
+    length = float(np.linalg.norm(np.diff(route, axis=0), axis=1).sum())
+    assert 2 + math.pi * 6 - 1.5 <= length <= 2 + math.pi * 6 + 1.5
+
+
+def test_a_hidden_route_that_cannot_exist_raises() -> None:
+    with pytest.raises(ValueError):
+        hidden_route(np.array([5.0, 0.0]), np.array([-5.0, 0.0]), _outside_disc(1e6), pad_m=5.0)
+
+
+@given(
+    duration=st.floats(5.0, 60.0),
+    speed=st.floats(0.5, 2.0),
+    far=st.floats(1.0, 40.0),
+)
+def test_a_walked_route_is_at_most_the_walking_speed_and_ends_at_both_ends(
+    duration: float, speed: float, far: float
+) -> None:
+    """Along a route the walk keeps its speed, standing the spare time; a route too long for
+    the time is walked faster, never skipped."""
+    route = np.array([[0.0, 0.0], [far, 0.0], [far, far]])
+    xy = walk_route(route, duration, speed, 0.05)
+    assert np.allclose(xy[0], route[0]) and np.allclose(xy[-1], route[-1], atol=1e-6)
+    v = np.linalg.norm(np.diff(xy, axis=0), axis=1) / (duration / (len(xy) - 1))
+    assert v.max() <= max(speed, 2 * far / duration) * 1.001 + 1e-9

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from scipy import ndimage, sparse
+from scipy.sparse import csgraph
 
 from trackctl.errors import InputError
 
@@ -17,6 +20,8 @@ __all__ = [
     "random_waypoint_crowd",
     "load_trajectories_csv",
     "longest_walkers",
+    "hidden_route",
+    "walk_route",
 ]
 
 
@@ -280,3 +285,101 @@ def _person_id(pid: object) -> str:
     if isinstance(pid, int | float) and float(pid).is_integer():
         return str(int(pid))
     return str(pid)
+
+
+def hidden_route(
+    a: np.ndarray,
+    b: np.ndarray,
+    hidden: Callable[[np.ndarray], np.ndarray],
+    *,
+    away: tuple[np.ndarray, np.ndarray] | None = None,
+    margin_m: float = 1.0,
+    cell_m: float = 0.25,
+    pad_m: float = 20.0,
+) -> np.ndarray:
+    """The shortest walk (a polyline, (n, 2) metres, from ``a`` to ``b``) that stays where
+    nobody sees it: ``hidden`` maps ground points (k, 2) to a mask of those no camera sees, and
+    the walk keeps ``margin_m`` from every seen point, except where it leaves ``a`` and comes in
+    at ``b`` (a person who walks out of view at ``a`` and back in at ``b``).
+
+    ``away`` = unit directions (out at ``a``, in at ``b``): the walk goes straight out along
+    the first until it is ``margin_m`` into hiding, and comes in along the second the same way;
+    None: straight to the nearest hidden spot. Shortest on a ``cell_m`` grid over the box of
+    both ends grown by ``pad_m`` (scipy's Dijkstra, 8 neighbours). Raises ``ValueError`` when no
+    hidden walk joins them inside that box."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    lo = np.minimum(a, b) - pad_m
+    nx, ny = (np.ceil((np.maximum(a, b) + pad_m - lo) / cell_m).astype(int) + 1).tolist()
+    gx, gy = np.meshgrid(
+        lo[0] + cell_m * np.arange(nx), lo[1] + cell_m * np.arange(ny), indexing="ij"
+    )
+    centres = np.column_stack([gx.ravel(), gy.ravel()])
+    seen = ~np.asarray(hidden(centres), bool).reshape(nx, ny)
+    free = ndimage.distance_transform_edt(~seen) * cell_m >= margin_m
+    ends = []
+    for p, u in ((a, None if away is None else away[0]), (b, None if away is None else -away[1])):
+        ends.append(_into_hiding(p, u, free, lo, cell_m))
+    if not free.any():
+        raise ValueError("no hidden ground near the route's ends")
+    idx = np.arange(nx * ny).reshape(nx, ny)
+    rows, cols, wts = [], [], []
+    for dx, dy in ((1, 0), (0, 1), (1, 1), (1, -1)):
+        i0, i1, j0, j1 = max(0, -dx), nx - max(0, dx), max(0, -dy), ny - max(0, dy)
+        src, dst = idx[i0:i1, j0:j1], idx[i0 + dx : i1 + dx, j0 + dy : j1 + dy]
+        ok = free.ravel()[src.ravel()] & free.ravel()[dst.ravel()]
+        rows.append(src.ravel()[ok])
+        cols.append(dst.ravel()[ok])
+        wts.append(np.full(int(ok.sum()), cell_m * math.hypot(dx, dy)))
+    graph = sparse.coo_matrix(
+        (np.concatenate(wts), (np.concatenate(rows), np.concatenate(cols))), shape=(nx * ny,) * 2
+    ).tocsr()
+    start, goal = (int(idx[c]) for c, _ in ends)
+    dist, pred = csgraph.dijkstra(graph, directed=False, indices=start, return_predecessors=True)
+    if not np.isfinite(dist[goal]):
+        raise ValueError("no hidden walk joins the route's ends")
+    chain = [goal]
+    while chain[-1] != start:
+        chain.append(int(pred[chain[-1]]))
+    mid = centres[chain[::-1]]
+    return np.vstack([a, ends[0][1], mid, ends[1][1][::-1], b])
+
+
+def _into_hiding(
+    p: np.ndarray, u: np.ndarray | None, free: np.ndarray, lo: np.ndarray, cell_m: float
+) -> tuple[tuple[int, int], np.ndarray]:
+    """The first free cell (index) from ``p`` straight along ``u`` (or the nearest one) and
+    the points walked to reach it ((k, 2), ``p`` excluded)."""
+    nx, ny = free.shape
+    if u is not None:
+        u = u / max(float(np.linalg.norm(u)), 1e-12)
+        for s in np.arange(cell_m, cell_m * (nx + ny), cell_m / 2):
+            q = p + s * u
+            i, j = np.round((q - lo) / cell_m).astype(int).tolist()
+            if not (0 <= i < nx and 0 <= j < ny):
+                break
+            if free[i, j]:
+                return (i, j), np.array([q])
+    fi, fj = np.nonzero(free)
+    if len(fi) == 0:
+        raise ValueError("no hidden ground near the route's ends")
+    c = np.column_stack([fi, fj]) * cell_m + lo
+    k = int(np.argmin(np.linalg.norm(c - p, axis=1)))
+    return (int(fi[k]), int(fj[k])), c[k : k + 1]
+
+
+def walk_route(route: np.ndarray, duration_s: float, speed_mps: float, dt_s: float) -> np.ndarray:
+    """Positions ((n, 2), every ``dt_s`` over ``duration_s``, both ends included) of a walk
+    along the polyline ``route`` at ``speed_mps``, standing still half way for the time the
+    walk does not need; faster when the route is too long for the time."""
+    seg = np.linalg.norm(np.diff(route, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    total = float(arc[-1])
+    n = max(2, int(round(duration_s / dt_s)) + 1)
+    t = np.linspace(0.0, duration_s, n)
+    walk_s = min(duration_s, total / max(speed_mps, 1e-9))
+    v = total / walk_s if walk_s > 0 else 0.0
+    rest = duration_s - walk_s
+    half = walk_s / 2
+    s = np.where(t <= half, v * t, np.where(t <= half + rest, v * half, v * (t - rest)))
+    keep = np.concatenate([[True], seg > 0])
+    return np.column_stack([np.interp(s, arc[keep], route[keep, j]) for j in (0, 1)])
