@@ -5,7 +5,8 @@ Records OpenCV's vtest.avi (PETS 2009 S2L1 view 001) with its published calibrat
 --rate 7``) and hands a simulated phone to each of the five people whose ground paths are in
 ``tests/data/pets2009_view001_paths.csv`` (``--paths``: tracks of a v-af run, each checked
 against the identity labels and by eye, see the file): the phone follows that path (resampled
-to 20 Hz and smoothed over 0.5 s), with the realistic preset's phone model
+to 20 Hz and smoothed over 0.5 s; between two visits the person walks round the outside of
+the camera's view: ``_carriers``), with the realistic preset's phone model
 (:func:`trackctl.sim.phones.realistic_imu`: carry, heading offsets, gait, always on, own
 clocks, IMU rates; seeded as ``trackctl simulate vm`` seeds it). The merged log is every record
 of the recording plus the phones' ``/phone/<MID>/imu``, the ``phones`` / ``phone_truth``

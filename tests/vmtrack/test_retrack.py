@@ -29,6 +29,7 @@ from trackctl.vmtrack.retrack import (
     _Follower,
     _held,
     _layer_costs,
+    _one_carrier,
     _publish,
     _refit,
     _Returns,
@@ -493,8 +494,8 @@ def _comes_back(seed: int) -> tuple[np.ndarray, list[np.ndarray], np.ndarray, np
 
 
 def test_a_carrier_who_leaves_and_comes_back_is_found_on_both_visits():
-    # one visit (the default) publishes one of the two; coming back where the phone's walk
-    # leads (``return_cost``: the carrier left 6 m south of where they come back, and walked
+    # one visit (``return_cost`` None) publishes one of the two; coming back where the phone's
+    # walk leads (the default: the carrier left 6 m south of where they come back, and walked
     # there, out of the room) publishes both
     frame_t, points, carrier, inside = _comes_back(21)
     visits = np.split(
@@ -502,7 +503,8 @@ def test_a_carrier_who_leaves_and_comes_back_is_found_on_both_visits():
     )
     assert len(visits) == 2 and all(len(v) > 15 * FPS for v in visits)
     phone = {"m": _phone(carrier, frame_t, 70.0)}
-    for cfg, both in ((dataclasses.replace(CFG, return_cost=0.0), True), (CFG, False)):
+    assert CFG.return_cost is not None
+    for cfg, both in ((CFG, True), (dataclasses.replace(CFG, return_cost=None), False)):
         xy = retrack(frame_t, points, phone, {}, AlignConfig(), cfg)["m"].xy
         shares = [_share_on({k: xy[k] for k in v if k in xy}, carrier, len(v)) for v in visits]
         assert (min(shares) > 0.8) is both, (cfg.return_cost, shares)
@@ -934,3 +936,62 @@ def test_an_alignment_found_on_every_kth_frame_is_held_between() -> None:
     assert _held(a, 2, 6).tolist() == [1, 1, 2, 2, 3, 3]
     assert _held(a, 2, 5).tolist() == [1, 1, 2, 2, 3]
     assert _held(a, 1, 3) is a
+
+
+def _side_by_side(offsets: list[tuple[float, complex]]):
+    """A walk east at 1.3 m/s seen at 7 Hz, the path's detections at ``offset`` from it (the
+    path on one of two people walking side by side 2.6 m apart) for each ``(seconds, offset)``
+    in turn, with 0.1 m of noise."""
+    rng = np.random.default_rng(3)
+    offs = np.concatenate([np.full(int(round(sec * 7)), off) for sec, off in offsets])
+    n = len(offs)
+    t = np.arange(n) / 7
+    walk = 1.3 * t + 0j
+    det = walk + offs + rng.normal(0, 0.1, n) + 1j * rng.normal(0, 0.1, n)
+    hits = {k: np.array([det[k].real, det[k].imag]) for k in range(n)}
+    return t, walk, hits
+
+
+def _by_length(t):
+    return lambda r: float(t[r[-1]] - t[r[0]])
+
+
+def test_a_path_that_goes_from_a_companion_to_the_carrier_keeps_the_carrier_only():
+    """Two people walk side by side 2.6 m apart; the phone's walk fits both. The path was on
+    the companion for 8 s, then on the carrier for 12 s, all seen: a jump the carrier's random
+    walk about the phone cannot make. Only the piece with the most evidence is published."""
+    t, walk, hits = _side_by_side([(8.0, 2.6j), (12.0, 0j)])
+    kept = [np.arange(len(t))]
+    out, dropped = _one_carrier(kept, hits, walk, t, CFG, _by_length(t))
+    assert len(out) == 1 and t[out[0][0]] >= 7.5 and t[out[0][-1]] == t[-1]
+    assert 7.0 <= dropped <= 8.5
+
+
+def test_a_path_that_leaves_the_carrier_and_comes_back_keeps_both_visits():
+    """On the carrier, on a companion 2.6 m aside for 6 s, back on the carrier: the walk ties
+    the first and last pieces together (one person): both are kept, the middle is not."""
+    t, walk, hits = _side_by_side([(10.0, 0j), (6.0, 2.6j), (10.0, 0j)])
+    out, dropped = _one_carrier([np.arange(len(t))], hits, walk, t, CFG, _by_length(t))
+    assert len(out) == 2
+    assert all(np.abs(np.array([complex(*hits[k]) for k in r]) - walk[r]).mean() < 0.5 for r in out)
+    assert 5.0 <= dropped <= 7.0
+
+
+def test_a_path_that_drifts_slowly_about_the_walk_is_one_carrier():
+    """A yaw error of 10 deg at 1.3 m/s drifts the detections 0.23 m/s from the walk: no jump,
+    nothing dropped."""
+    t, walk, hits = _side_by_side([(20.0, 0j)])
+    drift = 0.23 * t * 1j
+    hits = {k: v + np.array([0.0, drift[k].imag]) for k, v in hits.items()}
+    out, dropped = _one_carrier([np.arange(len(t))], hits, walk, t, CFG, _by_length(t))
+    assert len(out) == 1 and len(out[0]) == len(t) and dropped == 0.0
+
+
+def test_a_phone_whose_walk_jumps_under_a_steady_carrier_keeps_its_carrier():
+    """The phone's walk leaps 2.3 m ahead in a second (a dead-reckoning error: a carrier half
+    hidden, a burst of steps) while the carrier's detections go on steadily: the offset
+    breaks, the detections do not, and it is one carrier, not a change of person."""
+    t, walk, hits = _side_by_side([(20.0, 0j)])
+    walk = walk + np.clip((t - 10.0) / 1.0, 0.0, 1.0) * 2.3
+    out, dropped = _one_carrier([np.arange(len(t))], hits, walk, t, CFG, _by_length(t))
+    assert len(out) == 1 and len(out[0]) == len(t) and dropped == 0.0

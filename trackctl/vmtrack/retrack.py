@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -88,12 +88,10 @@ class RetrackConfig:
     wall_cost: float = 25.0
     """Cost of coming into view or leaving it: ``door_cost`` at a door, ``wall_cost``
     anywhere else (a door inside the view, a long miss)."""
-    return_cost: float | None = None
-    """None (the default): one visit. A number: a path may come back into view after leaving
-    it, at this cost on top of the door's and of the misfit to where the phone's walk from the
-    cell left puts the carrier (:class:`_Returns`); off by default: on the PETS footage with
-    phones it named more carriers' frames but put one phone on another carrier for 9-14 s
-    (docs/vmtrack.md, Parameters)."""
+    return_cost: float | None = 0.0
+    """A path may come back into view after leaving it, at this cost on top of the door's and
+    of the misfit to where the phone's walk from the cell left puts the carrier
+    (:class:`_Returns`). None: one visit (docs/vmtrack.md, Parameters)."""
     edge_m: float = 1.0
     door_ratio: float | None = None
     """None (the default): the whole edge of the covered area (within ``edge_m`` of it) is a
@@ -131,6 +129,15 @@ class RetrackConfig:
     published: a path that passes a stranger picks up a few detections on the way."""
     smooth_s: float = 1.5
     """Gaussian time constant of the offset between the phone's walk and its detections."""
+    jump_m: float | None = 1.5
+    jump_window_s: float = 3.0
+    """Where the lines fitted to the detections' offsets from the phone's walk over the
+    ``jump_window_s`` before a frame and the one after disagree there by more than ``jump_m``
+    (a steady drift, the walk's yaw or step-length error, fits one line; 1.5 m: 5 sd of the two
+    lines' ends under 0.35 m detection noise at 7 Hz), the path went from one
+    person to another: of the pieces such jumps cut a stretch into, only those the walk ties
+    together with the best evidence are published (:func:`_one_carrier`). None: no check
+    (docs/vmtrack.md, Parameters)."""
     yaw_step_deg: float = 15.0
     search_scales: tuple[float, ...] = (0.8, 0.9, 1.0, 1.1, 1.2)
     """Step-length scales searched (against the nominal 0.7 m step: 0.55-0.85 m steps)."""
@@ -995,10 +1002,16 @@ def _publish(
     t = frame_t / 1e9
     kept = _stretches(np.array(sorted(hits)), t, seg, cfg)
     withheld = 0.0
+    if cfg.jump_m is not None:
+        track = _walk_track(frame_t, walk)
+        kept, withheld = _one_carrier(
+            kept, hits, walk, t, cfg, lambda r: _evidence(frame_t, r, hits, track, cfg, radio_gain)
+        )
     if cfg.min_evidence is not None:
-        kept, withheld = _with_evidence(
+        kept, unproven = _with_evidence(
             kept, frame_t, hits, walk, cfg, radio_gain, cfg.min_evidence
         )
+        withheld += unproven
     if not kept:
         return {}, set(), hits, withheld
     seen = np.concatenate(kept)
@@ -1034,6 +1047,103 @@ def _stretches(
     return [r for r in np.split(ks, cut) if t[r[-1]] - t[r[0]] >= cfg.min_stretch_s]
 
 
+def _offsets(r: np.ndarray, hits: dict[int, np.ndarray], walk: np.ndarray) -> np.ndarray:
+    """The detections' offsets from the phone's walk at the frames ``r`` (complex)."""
+    return np.array([complex(*hits[k]) for k in r]) - walk[r]
+
+
+def _breaks(z: np.ndarray, t: np.ndarray, window_s: float) -> np.ndarray:
+    """At each frame, how far apart the lines fitted (least squares) to the complex series
+    ``z`` (at times ``t``) over the ``window_s`` before the frame and over the ``window_s``
+    from it are there (0 where either side holds fewer than 4 frames)."""
+    i = np.arange(len(z))
+    lo = np.searchsorted(t, t - window_s, side="left")
+    hi = np.searchsorted(t, t + window_s, side="right")
+    tc = t - t[0]
+    sums = [np.concatenate([[0], np.cumsum(v)]) for v in (np.ones(len(t)), tc, tc**2, z, tc * z)]
+
+    def line_at(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        n, st, stt, sz, stz = (c[b] - c[a] for c in sums)
+        den = n * stt - st**2
+        flat = np.abs(den) <= 1e-12
+        slope = np.where(flat, 0.0, (n * stz - st * sz) / np.where(flat, 1.0, den))
+        return (sz - slope * st) / np.maximum(n, 1) + slope * tc
+
+    d = np.zeros(len(z))
+    ok = (i - lo >= 4) & (hi - i >= 4)
+    d[ok] = np.abs(line_at(lo, i) - line_at(i, hi))[ok]
+    return d
+
+
+def _jumps(
+    off: np.ndarray, det: np.ndarray, t: np.ndarray, window_s: float, jump_m: float
+) -> list[int]:
+    """Where (indices) the path went from one person to another: both the detections' offsets
+    ``off`` from the phone's walk and the detections ``det`` themselves break by more than
+    ``jump_m`` (:func:`_breaks`; a steady drift, the walk's yaw or step-length error, fits one
+    line; the walk breaking alone is the phone's own error, the detections alone a person
+    moving as the phone says); the middle of each run of such frames."""
+    d = np.minimum(_breaks(off, t, window_s), _breaks(det, t, window_s))
+    edges = np.flatnonzero(np.diff(np.r_[0, (d > jump_m).astype(np.int8), 0]))
+    return [int(a + np.argmax(d[a:b])) for a, b in zip(edges[0::2], edges[1::2], strict=True)]
+
+
+def _one_carrier(
+    kept: list[np.ndarray],
+    hits: dict[int, np.ndarray],
+    walk: np.ndarray,
+    t: np.ndarray,
+    cfg: RetrackConfig,
+    evidence: Callable[[np.ndarray], float],
+) -> tuple[list[np.ndarray], float]:
+    """The stretches without the pieces that are somebody else, and their seconds.
+
+    A carrier moves about their phone's walk slowly (the random walk); a path that goes from
+    one person to another while both are seen jumps by their distance (two people walking
+    side by side move alike, and a phone's walk fits both). Each stretch is cut where its
+    detections' offset from the walk jumps (:func:`_jumps`); pieces the walk ties together
+    (one's end offset within ``jump_m`` of the next one's start: the path left somebody and
+    came back to them) are one person, and of a stretch's people only the one with the most
+    evidence (``evidence`` of each piece, summed) is kept; pieces shorter than
+    ``min_stretch_s`` go too."""
+    out: list[np.ndarray] = []
+    dropped = 0.0
+    assert cfg.jump_m is not None
+    for r in kept:
+        off = _offsets(r, hits, walk)
+        cuts = _jumps(off, off + walk[r], t[r], cfg.jump_window_s, cfg.jump_m)
+        if not cuts:
+            out.append(r)
+            continue
+        pieces = np.split(np.arange(len(r)), cuts)
+        people: list[list[np.ndarray]] = []
+        for p in pieces:
+            start = off[p][t[r[p]] <= t[r[p[0]]] + cfg.jump_window_s].mean()
+            ends = [
+                off[g[-1]][t[r[g[-1]]] >= t[r[g[-1][-1]]] - cfg.jump_window_s].mean()
+                for g in people
+            ]
+            near = [abs(e - start) for e in ends]
+            if near and min(near) <= cfg.jump_m:
+                people[int(np.argmin(near))].append(p)
+            else:
+                people.append([p])
+        best = max(people, key=lambda g: sum(evidence(r[p]) for p in g))
+        for g in people:
+            for p in g:
+                long = t[r[p[-1]]] - t[r[p[0]]] >= cfg.min_stretch_s
+                if g is best and long:
+                    out.append(r[p])
+                else:
+                    dropped += float(t[r[p[-1]]] - t[r[p[0]]])
+    return out, dropped
+
+
+def _walk_track(frame_t: np.ndarray, walk: np.ndarray) -> np.ndarray:
+    """The phone's aligned walk as (t_ns, x, y) rows, one per frame."""
+    return np.column_stack([frame_t.astype(float), walk.real, walk.imag])
+
+
 def _with_evidence(
     kept: list[np.ndarray],
     frame_t: np.ndarray,
@@ -1046,7 +1156,7 @@ def _with_evidence(
     """The stretches with at least ``least`` evidence (:func:`_evidence`), and the seconds of
     those without."""
     t = frame_t / 1e9
-    track = np.column_stack([frame_t.astype(float), walk.real, walk.imag])
+    track = _walk_track(frame_t, walk)
     judged = [(r, _evidence(frame_t, r, hits, track, cfg, radio_gain) >= least) for r in kept]
     withheld = float(sum(t[r[-1]] - t[r[0]] for r, ok in judged if not ok))
     return [r for r, ok in judged if ok], withheld
