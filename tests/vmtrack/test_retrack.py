@@ -38,6 +38,7 @@ from trackctl.vmtrack.retrack import (
     _settle_disputes,
     _shared,
     _step_costs,
+    _untwinned,
     _viterbi_path,
     _whole_cells,
     _yaw_changes_cost,
@@ -995,3 +996,39 @@ def test_a_phone_whose_walk_jumps_under_a_steady_carrier_keeps_its_carrier():
     walk = walk + np.clip((t - 10.0) / 1.0, 0.0, 1.0) * 2.3
     out, dropped = _one_carrier([np.arange(len(t))], hits, walk, t, CFG, _by_length(t))
     assert len(out) == 1 and len(out[0]) == len(t) and dropped == 0.0
+
+
+def _twins(apart_m: float, turns: bool = True):
+    """Two walkers 7 Hz, 20 s, side by side ``apart_m`` apart, turning together (or the second
+    walking a straight line), and a stranger crossing; the path's stretch on the first."""
+    n = 140
+    t = np.arange(n) / 7
+    heading = np.where((t // 5) % 2 == 1, 0.6, 0.0)
+    walk = np.concatenate([[0], np.cumsum(1.3 / 7 * np.exp(1j * heading[1:]))])
+    one = walk + 2 + 5j
+    two = one + apart_m * 1j if turns else 2 + (5 + apart_m) * 1j + 1.3 * t
+    stranger = 20 - 1.2 * t + 2j
+    rng = np.random.default_rng(5)
+    noisy = [z + rng.normal(0, 0.1, n) + 1j * rng.normal(0, 0.1, n) for z in (one, two, stranger)]
+    points = [np.array([[z[k].real, z[k].imag] for z in noisy]) for k in range(n)]
+    hits = {k: points[k][0] for k in range(n)}
+    return t, walk, hits, points
+
+
+@pytest.mark.parametrize(
+    "apart_m, turns, kept", [(2.6, True, False), (0.7, True, True), (2.6, False, True)]
+)
+def test_a_stretch_a_twin_walks_beside_is_published_only_when_tied(apart_m, turns, kept):
+    """Two people turning together 2.6 m apart: motion cannot say which carries the phone,
+    and a stretch on one that nothing ties to the rest of the path is withheld. A companion
+    within the gate is a group (published at its middle elsewhere), and a walker who goes
+    straight while the stretch turns is no twin: both kept. A second stretch the walk ties to
+    the first keeps it."""
+    t, walk, hits, points = _twins(apart_m, turns)
+    seg = np.zeros(len(t), int)
+    out, dropped = _untwinned([np.arange(len(t))], points, hits, walk, t, seg, CFG)
+    assert (len(out) == 1) is kept and (dropped == 0.0) is kept
+    if not kept:
+        a, b = np.arange(0, 60), np.arange(80, len(t))
+        out, dropped = _untwinned([a, b], points, hits, walk, t, seg, CFG)
+        assert len(out) == 2 and dropped == 0.0

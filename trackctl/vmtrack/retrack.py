@@ -124,6 +124,11 @@ class RetrackConfig:
     """Gaps up to ``unseen_s`` between two stretches are published on the phone's walk when
     it lands within ``unseen_m`` (+ 15 % of the walk) of the next stretch, the misfit spread
     over the gap (docs/vmtrack.md, Parameters)."""
+    twin_share: float | None = 0.6
+    """A stretch another walker moves with at a steady offset over the gate in this share of
+    its frames (most of them: real detections miss and merge), which the phone's walk ties to
+    no other published stretch, is not published (:func:`_untwinned`; only without RSSI,
+    which tells them apart by distance). None: no check (docs/vmtrack.md, Parameters)."""
     min_stretch_s: float = 5.0
     """A stretch (seen frames and the gaps filled between them) shorter than this is not
     published: a path that passes a stranger picks up a few detections on the way."""
@@ -1012,6 +1017,9 @@ def _publish(
             kept, frame_t, hits, walk, cfg, radio_gain, cfg.min_evidence
         )
         withheld += unproven
+    if cfg.twin_share is not None and radio_gain is None:
+        kept, twinned = _untwinned(kept, points, hits, walk, t, seg, cfg)
+        withheld += twinned
     if not kept:
         return {}, set(), hits, withheld
     seen = np.concatenate(kept)
@@ -1136,6 +1144,80 @@ def _one_carrier(
                     out.append(r[p])
                 else:
                     dropped += float(t[r[p[-1]]] - t[r[p[0]]])
+    return out, dropped
+
+
+def _twin(
+    r: np.ndarray,
+    points: Sequence[np.ndarray],
+    hits: dict[int, np.ndarray],
+    t: np.ndarray,
+    cfg: RetrackConfig,
+) -> int:
+    """The most frames of the stretch ``r`` at which one other walker is seen at a steady
+    offset from its detections, over the gate: followed from each detection of the stretch's
+    middle frame, both ways, the offset an average over ~1 s (a walker 1 m/s off the
+    stretch's motion falls behind by 1 m and is lost), each frame's detection within two
+    detection sigmas of it."""
+    mid = len(r) // 2
+    best = 0
+    for p in points[r[mid]]:
+        c0 = p - hits[r[mid]]
+        if np.hypot(*c0) <= cfg.gate_m:
+            continue
+        matched = 0
+        for order in (r[mid:], r[mid - 1 :: -1] if mid else r[:0]):
+            c, last = c0, t[r[mid]]
+            for k in order:
+                j = _nearest(points[k], hits[k] + c, 2 * cfg.det_sigma_m)
+                if j is None or np.hypot(*(points[k][j] - hits[k])) <= cfg.gate_m:
+                    continue
+                w = 1.0 - math.exp(-abs(t[k] - last))
+                c, last, matched = c + w * (points[k][j] - hits[k] - c), t[k], matched + 1
+        best = max(best, matched)
+    return best
+
+
+def _untwinned(
+    kept: list[np.ndarray],
+    points: Sequence[np.ndarray],
+    hits: dict[int, np.ndarray],
+    walk: np.ndarray,
+    t: np.ndarray,
+    seg: np.ndarray,
+    cfg: RetrackConfig,
+) -> tuple[list[np.ndarray], float]:
+    """The stretches without those another walker moves with (:func:`_twin` in at least
+    ``twin_share`` of their frames) and that the phone's walk ties to no other stretch kept,
+    and the seconds of those dropped.
+
+    Two people walking the same way a few metres apart (farther than the gate: not a group)
+    move alike, and motion cannot say which of them carries the phone: the path may sit on
+    either. Where the walk ties such a stretch to another (the gap between them walked on the
+    phone lands within ``unseen_m`` + 15 % of the walk of it, as publication bridges them),
+    the carrier is the one the rest of the path leads to; alone, it is a guess."""
+    assert cfg.twin_share is not None
+    twinned = [_twin(r, points, hits, t, cfg) >= cfg.twin_share * len(r) for r in kept]
+    if not any(twinned):
+        return kept, 0.0
+    tied = [False] * len(kept)
+    for j in range(len(kept) - 1):
+        a, b = kept[j], kept[j + 1]
+        end = _offsets(a[t[a] >= t[a[-1]] - cfg.smooth_s], hits, walk).mean()
+        start = _offsets(b[t[b] <= t[b[0]] + cfg.smooth_s], hits, walk).mean()
+        walked = abs(walk[b[0]] - walk[a[-1]])
+        if (
+            t[b[0]] - t[a[-1]] <= cfg.unseen_s
+            and seg[a[-1]] == seg[b[0]]
+            and abs(start - end) <= cfg.unseen_m + 0.15 * walked
+        ):
+            tied[j] = tied[j + 1] = True
+    out = [r for r, tw, ti in zip(kept, twinned, tied, strict=True) if ti or not tw]
+    dropped = sum(
+        float(t[r[-1]] - t[r[0]])
+        for r, tw, ti in zip(kept, twinned, tied, strict=True)
+        if tw and not ti
+    )
     return out, dropped
 
 
