@@ -1197,27 +1197,21 @@ def _untwinned(
     phone lands within ``unseen_m`` + 15 % of the walk of it, as publication bridges them),
     the carrier is the one the rest of the path leads to; alone, it is a guess."""
     assert cfg.twin_share is not None
-    twinned = [_twin(r, points, hits, t, cfg) >= cfg.twin_share * len(r) for r in kept]
-    if not any(twinned):
-        return kept, 0.0
     tied = [False] * len(kept)
     for j in range(len(kept) - 1):
         a, b = kept[j], kept[j + 1]
         end = _offsets(a[t[a] >= t[a[-1]] - cfg.smooth_s], hits, walk).mean()
         start = _offsets(b[t[b] <= t[b[0]] + cfg.smooth_s], hits, walk).mean()
-        walked = abs(walk[b[0]] - walk[a[-1]])
-        if (
-            t[b[0]] - t[a[-1]] <= cfg.unseen_s
-            and seg[a[-1]] == seg[b[0]]
-            and abs(start - end) <= cfg.unseen_m + 0.15 * walked
-        ):
+        if _bridged(int(a[-1]), int(b[0]), float(abs(start - end)), walk, t, seg, cfg):
             tied[j] = tied[j + 1] = True
-    out = [r for r, tw, ti in zip(kept, twinned, tied, strict=True) if ti or not tw]
-    dropped = sum(
-        float(t[r[-1]] - t[r[0]])
-        for r, tw, ti in zip(kept, twinned, tied, strict=True)
-        if tw and not ti
-    )
+    # a tied stretch is kept whatever walks beside it: the twin search (a loop over frames)
+    # runs only on the others
+    alone = [
+        not ti and _twin(r, points, hits, t, cfg) >= cfg.twin_share * len(r)
+        for r, ti in zip(kept, tied, strict=True)
+    ]
+    out = [r for r, drop in zip(kept, alone, strict=True) if not drop]
+    dropped = sum(float(t[r[-1]] - t[r[0]]) for r, drop in zip(kept, alone, strict=True) if drop)
     return out, dropped
 
 
@@ -1279,14 +1273,29 @@ def _published_frames(
     for j in range(len(kept) - 1):
         a_, b_ = int(kept[j][-1]), int(kept[j + 1][0])
         drift = abs(smooth[pos[j + 1]] - smooth[pos[j + 1] - 1])
-        walked = abs(walk[b_] - walk[a_])
-        if (
-            t[b_] - t[a_] <= cfg.unseen_s
-            and seg[a_] == seg[b_]
-            and drift <= cfg.unseen_m + 0.15 * walked
-        ):
+        if _bridged(a_, b_, float(drift), walk, t, seg, cfg):
             frames.append(np.arange(a_ + 1, b_))
     return frames
+
+
+def _bridged(
+    a: int,
+    b: int,
+    drift: float,
+    walk: np.ndarray,
+    t: np.ndarray,
+    seg: np.ndarray,
+    cfg: RetrackConfig,
+) -> bool:
+    """Whether the phone's walk bridges the gap from frame ``a`` (a stretch's last) to ``b``
+    (the next one's first), the offsets from the walk at the two ends ``drift`` apart: at most
+    ``unseen_s`` long, in one stretch of walk, landing within ``unseen_m`` (+ 15 % of the walk)
+    of where the next stretch starts."""
+    return bool(
+        t[b] - t[a] <= cfg.unseen_s
+        and seg[a] == seg[b]
+        and drift <= cfg.unseen_m + 0.15 * abs(walk[b] - walk[a])
+    )
 
 
 def _evidence(
