@@ -1032,3 +1032,24 @@ def test_a_stretch_a_twin_walks_beside_is_published_only_when_tied(apart_m, turn
         a, b = np.arange(0, 60), np.arange(80, len(t))
         out, dropped = _untwinned([a, b], points, hits, walk, t, seg, CFG)
         assert len(out) == 2 and dropped == 0.0
+
+
+def test_the_refit_far_from_the_detections_is_their_whole_fit_not_the_nearest_edge():
+    """Where no refit window holds enough of the path's detections (before a visit, after
+    it, across a long absence), the alignment is the one fitted to all of them (of its
+    carry), not the nearest window's: that window holds only the visit's first seconds, and a
+    carrier standing there says nothing of the step or yaw (on PETS footage a carrier came
+    back standing; her phone read 70 deg off before it, and her first visit was never found)."""
+    frame_t, _, people = _scene(5, n_people=1, seconds=120.0)
+    walk = people[0]
+    n = len(frame_t)
+    track = dead_reckoned(_phone(walk, frame_t, 30.0))
+    visit = np.arange(n // 2, n)
+    hits = {int(k): walk[k] for k in visit}
+    rng = np.random.default_rng(0)
+    for k in visit[: int(6 * FPS)]:  # the visit's first 6 s: somebody standing
+        hits[int(k)] = walk[visit[0]] + rng.normal(0, 0.2, 2)
+    fit = _refit(frame_t, hits, track, AlignConfig(), CFG)
+    assert fit is not None
+    before = fit[1][: n // 4]  # no window reaches a detection from here
+    assert np.all(np.abs(before - np.exp(1j * np.radians(30.0))) < 0.1), before[:3]

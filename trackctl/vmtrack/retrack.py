@@ -960,10 +960,27 @@ def _refit(
             continue
         resid = float((r * nw)[use].sum() / nw[use].sum())
         if best is None or resid < best[0]:
-            good = np.flatnonzero(use)
-            fill = good[np.clip(np.searchsorted(good, idx), 0, len(good) - 1)]
-            best = (resid, float(lag), np.where(use, a, a[fill]))
+            whole = _whole_fit(cum, seg, first, acfg, cfg.min_align_frames)
+            best = (resid, float(lag), np.where(use, a, whole))
     return None if best is None else (best[1], best[2])
+
+
+def _whole_fit(
+    cum: list[np.ndarray], seg: np.ndarray, first: np.ndarray, acfg: AlignConfig, least: int
+) -> np.ndarray:
+    """Per frame, the alignment fitted to all the detections of its carry (``seg``: the carry
+    of each frame, ``first``: each carry's first frame; ``cum``: the refit's cumulative sums),
+    or to all of the path's where its carry holds fewer than ``least``. It stands where no
+    refit window holds enough detections (before a visit, after it, across a long absence):
+    the nearest window's fit there rests on the visit's first or last few frames, and a
+    carrier standing there says nothing of the step or the yaw (PETS footage, seed 6: P05 came
+    back standing, her phone read 70 deg off over her first visit, which was never found)."""
+    n = len(seg)
+    ends = np.r_[first[1:], n]
+    sw, pw, tw, nw = (c[ends[seg]] - c[first[seg]] for c in cum)
+    per_carry, _ = best_fit(sw, pw, tw, nw, acfg)
+    whole, _ = best_fit(cum[0][-1:], cum[1][-1:], cum[2][-1:], cum[3][-1:], acfg)
+    return np.where(nw >= least, per_carry, whole[0])
 
 
 def _nearest(points: np.ndarray, xy: Sequence[float] | np.ndarray, within_m: float) -> int | None:
@@ -1665,18 +1682,20 @@ class _Follower:
         passes = 0 if self.aligned else cfg.refine_passes
         for p in range(passes + 1):
             u = _displacements(frame_t, track, lag, a)
-            # the last pass may come back into view (:class:`_Returns`); the passes the
-            # alignment is refitted from keep one visit: a return is judged by the alignment
-            # of the visit it follows, not fitted to
-            spread = self.spread if p == passes else None
-            cells = _viterbi_path(grid, phone_em, u, self.steps, visit, spread)
+            # every pass may come back into view (:class:`_Returns`): a start that fits one
+            # visit of two (an identity's alignment off over the other) would otherwise be
+            # refitted to the visit it fits, and the other lost
+            cells = _viterbi_path(grid, phone_em, u, self.steps, visit, self.spread)
             gain = None
             if radio and radio.cfg.enabled and cfg.min_evidence is not None:
                 gain = radio.gain(mid, grid.xy(cells))  # read by the publication rule only
             xy, seen, hits, withheld = _publish(frame_t, points, grid, cells, u, cfg, gain)
             if p == passes:
                 break
-            fit = _refit(frame_t, hits, track, self.acfg, cfg, self.phones[mid].carry_changes)
+            # refitted from what is published as the carrier (a stretch withheld is somebody
+            # else, or says nothing): all the path's detections only while nothing is
+            on = {k: hits[k] for k in seen} if len(seen) >= cfg.min_align_frames else hits
+            fit = _refit(frame_t, on, track, self.acfg, cfg, self.phones[mid].carry_changes)
             if fit is None:
                 break
             lag, a = fit
@@ -1727,6 +1746,8 @@ class _Follower:
     def settle(self, mid: str, found: PhoneTrack, radio: RadioEvidence | None) -> PhoneTrack:
         """The cheapest of ``found`` and the other alignments of its last search, each
         refined, weighed under ``settle_walk_sigma_mps`` (``found`` when that is None; an
+        alternative whose path costs more than ``ambiguity_margin`` more than ``found``'s under
+        the walk paths are found under is not weighed; an
         alternative whose path sees the carrier nowhere is not weighed when ``found``'s
         does: it says where the carrier is not, not where they are), without
         the frames where another costs at most ``ambiguity_margin`` more and puts the carrier
@@ -1740,8 +1761,15 @@ class _Follower:
             return found
         adopt = cfg.settle_walk_sigma_mps is not None
         weighed = [(self.cost(mid, found, radio, self.settle_steps), found)]
+        loose = self.cost(mid, found, radio)
         for lag, a in alternatives:
             other = self(mid, lag, a, False, radio)
+            # a contender is as cheap, or nearly, under the walk paths are found under: the
+            # tight walk alone prefers a short visit to a long one of a phone that strays
+            # (PETS footage, seed 9: P10's bag, on him 49 s at 771, against 19 s on
+            # somebody else at 946; under the tight walk 960 against 955)
+            if other is not None and self.cost(mid, other, radio) - loose > cfg.ambiguity_margin:
+                continue
             # an alignment whose path sees the carrier nowhere says where they are not, not
             # where they are: out of view all log is cheap under the tight walk wherever the
             # dead reckoning strays more than it (a phone in a bag on real footage: a path on
