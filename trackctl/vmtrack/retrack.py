@@ -175,10 +175,12 @@ class RetrackConfig:
     ambiguity_candidates: int = 8
     ambiguity_margin: float | None = 10.0
     """A phone's path is weighed against up to ``ambiguity_candidates`` other refined
-    alignments: where one whose path costs at most this more (or less) puts the carrier more
-    than ``gate_m`` away, the frame is not published (:meth:`_Follower.settle`), unless the
-    middle of them all is within ``gate_m`` of each (a group: published there). None: no
-    alternatives weighed (docs/vmtrack.md, Parameters)."""
+    alignments, those whose path costs at most this more under ``walk_sigma_mps`` (the walk
+    paths are found under): where one whose path costs at most this more (or less) under
+    ``settle_walk_sigma_mps`` puts the carrier more than ``gate_m`` away, the frame is not
+    published (:meth:`_Follower.settle`), unless the middle of them all is within ``gate_m``
+    of each (a group: published there). None: no alternatives weighed (docs/vmtrack.md,
+    Parameters)."""
     settle_walk_sigma_mps: float | None = 0.1
     """The random walk, m per sqrt(s), under which a phone's refined alignments are weighed
     against each other (:meth:`_Follower.settle`); the cheapest becomes the phone's path. None:
