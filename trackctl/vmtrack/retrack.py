@@ -175,12 +175,12 @@ class RetrackConfig:
     ambiguity_candidates: int = 8
     ambiguity_margin: float | None = 10.0
     """A phone's path is weighed against up to ``ambiguity_candidates`` other refined
-    alignments, those whose path costs at most this more under ``walk_sigma_mps`` (the walk
-    paths are found under): where one whose path costs at most this more (or less) under
-    ``settle_walk_sigma_mps`` puts the carrier more than ``gate_m`` away, the frame is not
-    published (:meth:`_Follower.settle`), unless the middle of them all is within ``gate_m``
-    of each (a group: published there). None: no alternatives weighed (docs/vmtrack.md,
-    Parameters)."""
+    alignments (those within this of the path's cost under ``walk_sigma_mps``, or under
+    both walks summed: :meth:`_Follower._weighed`): where one whose path costs at most this
+    more (or less) under ``settle_walk_sigma_mps`` puts the carrier more than ``gate_m``
+    away, the frame is not published (:meth:`_Follower.settle`), unless
+    the middle of them all is within ``gate_m`` of each (a group: published there). None: no
+    alternatives weighed (docs/vmtrack.md, Parameters)."""
     settle_walk_sigma_mps: float | None = 0.1
     """The random walk, m per sqrt(s), under which a phone's refined alignments are weighed
     against each other (:meth:`_Follower.settle`); the cheapest becomes the phone's path. None:
@@ -1745,13 +1745,46 @@ class _Follower:
         costs = _layer_costs(self.grid, phone_em, u[:, None], steps, visit=visit, absolute=True)
         return float(costs[-1, 0])
 
+    def _weighed(
+        self, mid: str, found: PhoneTrack, radio: RadioEvidence | None, margin: float
+    ) -> list[tuple[float, PhoneTrack]]:
+        """``found`` and the other alignments of its last search, each refined, with their
+        paths' costs under ``settle_walk_sigma_mps`` (``found`` first). An alternative that
+        costs more than ``margin`` more than ``found`` there can neither become the path nor
+        dispute a frame; one that could is left out when it costs more than ``margin`` more
+        under the walk paths are found under, and under both walks summed too."""
+        tight = self.cost(mid, found, radio, self.settle_steps)
+        weighed = [(tight, found)]
+        loose: float | None = None
+        for lag, a in self.alternatives.get(mid, []):
+            other = self(mid, lag, a, False, radio)
+            # an alignment whose path sees the carrier nowhere says where they are not, not
+            # where they are: out of view all log is cheap under the tight walk wherever the
+            # dead reckoning strays more than it (a phone in a bag on real footage: a path on
+            # its carrier in 375 frames, 1020 against 970 for none), and the path that found
+            # them has already beaten it under the walk paths are found under
+            if other is None or not (other.seen or not found.seen):
+                continue
+            cost = self.cost(mid, other, radio, self.settle_steps)
+            if cost - tight <= margin:
+                # a contender is as cheap, or nearly, under the walk paths are found under,
+                # or cheaper under both walks together: the tight walk alone prefers a short
+                # visit to a long one of a phone that strays (PETS footage, seed 9: P10's bag,
+                # on him 49 s at 771, 19 s on somebody else at 946 under the paths' walk;
+                # under the tight walk 960 against 955), where an alignment on a carrier whose
+                # search path rides strangers costs a little more under the paths' walk and
+                # much less under the tight one (`students001` seed 2: 6-10 more, 24-30 less)
+                loose = self.cost(mid, found, radio) if loose is None else loose
+                worse = self.cost(mid, other, radio) - loose
+                if worse > margin and cost - tight + worse > margin:
+                    continue
+            weighed.append((cost, other))
+        return weighed
+
     def settle(self, mid: str, found: PhoneTrack, radio: RadioEvidence | None) -> PhoneTrack:
         """The cheapest of ``found`` and the other alignments of its last search, each
-        refined, weighed under ``settle_walk_sigma_mps`` (``found`` when that is None; an
-        alternative whose path costs more than ``ambiguity_margin`` more than ``found``'s under
-        the walk paths are found under is not weighed; an
-        alternative whose path sees the carrier nowhere is not weighed when ``found``'s
-        does: it says where the carrier is not, not where they are), without
+        refined, weighed under ``settle_walk_sigma_mps`` (``found`` when that is None; which
+        alternatives are weighed: :meth:`_weighed`), without
         the frames where another costs at most ``ambiguity_margin`` more and puts the carrier
         more than ``gate_m`` away (``ambiguous_s`` counts them), unless the middle of all those
         places is within ``gate_m`` of each: the frame is then published there
@@ -1762,23 +1795,7 @@ class _Follower:
         if cfg.ambiguity_margin is None or not alternatives:
             return found
         adopt = cfg.settle_walk_sigma_mps is not None
-        weighed = [(self.cost(mid, found, radio, self.settle_steps), found)]
-        loose = self.cost(mid, found, radio)
-        for lag, a in alternatives:
-            other = self(mid, lag, a, False, radio)
-            # a contender is as cheap, or nearly, under the walk paths are found under: the
-            # tight walk alone prefers a short visit to a long one of a phone that strays
-            # (PETS footage, seed 9: P10's bag, on him 49 s at 771, against 19 s on
-            # somebody else at 946; under the tight walk 960 against 955)
-            if other is not None and self.cost(mid, other, radio) - loose > cfg.ambiguity_margin:
-                continue
-            # an alignment whose path sees the carrier nowhere says where they are not, not
-            # where they are: out of view all log is cheap under the tight walk wherever the
-            # dead reckoning strays more than it (a phone in a bag on real footage: a path on
-            # its carrier in 375 frames, 1020 against 970 for none), and the path that found
-            # them has already beaten it under the walk paths are found under
-            if other is not None and (other.seen or not found.seen):
-                weighed.append((self.cost(mid, other, radio, self.settle_steps), other))
+        weighed = self._weighed(mid, found, radio, cfg.ambiguity_margin)
         # the first of equals: the search's own path
         best, found = min(weighed, key=lambda w: w[0]) if adopt else weighed[0]
         others = [o.xy for c, o in weighed if o is not found and c - best <= cfg.ambiguity_margin]
