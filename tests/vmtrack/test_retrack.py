@@ -22,6 +22,7 @@ from trackctl.vmtrack.motion import PhoneMotion
 from trackctl.vmtrack.radio import RadioEvidence
 from trackctl.vmtrack.retrack import (
     _OFFS,
+    PhoneTrack,
     RetrackConfig,
     Retracked,
     _displacements,
@@ -1053,3 +1054,55 @@ def test_the_refit_far_from_the_detections_is_their_whole_fit_not_the_nearest_ed
     assert fit is not None
     before = fit[1][: n // 4]  # no window reaches a detection from here
     assert np.all(np.abs(before - np.exp(1j * np.radians(30.0))) < 0.1), before[:3]
+
+
+class _Costed(_Follower):
+    """A follower whose alignments' paths are given, with their costs under the tight walk
+    the alternatives are weighed under and under the walk paths are found under:
+    ``{lag: (path, tight, loose)}``."""
+
+    def __init__(self, table: dict[float, tuple[PhoneTrack, float, float]]) -> None:
+        self.table, self.cfg, self.dt = table, CFG, 1.0
+        self.steps, self.settle_steps = np.zeros(1), np.ones(1)
+        self.alternatives = {"m": [(lag, np.ones(1, complex)) for lag in table if lag]}
+
+    def __call__(self, mid, lag, a, search, radio):
+        return self.table[lag][0]
+
+    def cost(self, mid, found, radio, steps=None):
+        _, tight, loose = next(row for row in self.table.values() if row[0] is found)
+        return tight if steps is self.settle_steps else loose
+
+
+def _path(frames: range, y: float) -> PhoneTrack:
+    xy = {k: (0.1 * k, y) for k in frames}
+    return PhoneTrack(xy, set(xy), np.zeros((100, 2)), 0.0, np.ones(100, complex))
+
+
+@pytest.mark.parametrize(
+    "found_costs, other_costs, outcome",
+    [
+        # a bag's phone: on its carrier all log; 19 s on a stranger is a little cheaper under
+        # the tight walk (a long visit of a straying dead reckoning pays for it there) and
+        # far dearer under the paths' walk (PETS footage with phones, seed 9)
+        ((960.0, 771.0), (955.0, 946.0), "kept"),
+        # the search's path rides strangers; the alignment on the carrier costs a little more
+        # under the paths' walk and much less under the tight one (`students001` seed 2)
+        ((1000.0, 990.0), (970.0, 1005.0), "adopted"),
+        # a twin: as cheap, or nearly, under both
+        ((960.0, 771.0), (965.0, 776.0), "disputed"),
+    ],
+)
+def test_an_alternative_is_weighed_when_near_under_the_paths_walk_or_both_walks(
+    found_costs, other_costs, outcome
+):
+    found, other = _path(range(100), 0.0), _path(range(20, 40), 5.0)
+    follow = _Costed({0.0: (found, *found_costs), 1.0: (other, *other_costs)})
+    settled = follow.settle("m", found, None)
+    if outcome == "kept":
+        assert settled is found
+    elif outcome == "adopted":
+        assert settled.xy.keys() <= other.xy.keys() and settled.lag_s == other.lag_s
+    else:
+        assert settled.xy.keys() == found.xy.keys() - other.xy.keys()
+        assert settled.ambiguous_s == len(other.xy)
