@@ -30,6 +30,7 @@ from trackctl.vmtrack.retrack import (
     _Follower,
     _held,
     _layer_costs,
+    _off_others,
     _one_carrier,
     _publish,
     _refit,
@@ -1106,3 +1107,74 @@ def test_an_alternative_is_weighed_when_near_under_the_paths_walk_or_both_walks(
     else:
         assert settled.xy.keys() == found.xy.keys() - other.xy.keys()
         assert settled.ambiguous_s == len(other.xy)
+
+
+@pytest.mark.parametrize("same_alignment", [True, False])
+def test_a_stretch_withheld_is_filled_from_a_path_of_the_same_alignment_nearly_as_cheap(
+    same_alignment,
+):
+    """Two Viterbi paths of one alignment (refined from two of the search's alternatives)
+    whose costs differ by a few units part where the carrier walks beside somebody: the
+    cheaper rides the other walker and withholds that stretch, the other publishes it on the
+    carrier (PETS footage: P06's first 12 s beside P05). Settled, the phone publishes it; from
+    another alignment's path it does not (that is not the same account of the phone)."""
+    found = _path(range(30, 100), 0.0)
+    found.withheld_s = 25.0
+    other = _path(range(5, 100), 0.0)
+    if not same_alignment:
+        other = dataclasses.replace(other, a=np.full(100, 1.3 * np.exp(0.7j)))
+    follow = _Costed({0.0: (found, 960.0, 771.0), 1.0: (other, 962.0, 775.0)})
+    settled = follow.settle("m", found, None)
+    if same_alignment:
+        assert settled.xy == other.xy and settled.seen == other.seen
+        assert settled.withheld_s == 0.0
+    else:
+        assert settled.xy == found.xy and settled.seen == found.seen
+
+
+class _Holding:
+    """A follower for :func:`_off_others`: phone ``b``'s path is ``moved`` when followed with
+    any of frame 10's detections taken from it, and ``same`` otherwise."""
+
+    def __init__(self, points, moved: PhoneTrack, same: PhoneTrack) -> None:
+        self.points, self.moved, self.same = points, moved, same
+        self.cfg, self.dt, self.taken = CFG, 1.0, {}
+        self.calls: list[dict] = []
+
+    def __call__(self, mid, lag, a, search, radio):
+        self.calls.append(dict(self.taken.get(mid, {})))
+        return self.moved if 10 in self.taken.get(mid, {}) else self.same
+
+    def settle(self, mid, found, radio):
+        return found
+
+
+@pytest.mark.parametrize("keeps_its_own", [True, False])
+def test_a_path_riding_another_carrier_where_it_withholds_is_followed_without_them(keeps_its_own):
+    """Phone b's path withholds frames 0-29, on the detections phone a's carrier is seen on
+    (the walker beside b's carrier): followed again without those detections it publishes
+    them on its own carrier, and keeps what it published; a path that moves off what it
+    published is not kept."""
+    points = [np.array([[0.1 * k, 0.0], [0.1 * k, 3.0]]) for k in range(100)]
+    a = PhoneTrack(
+        {k: (0.1 * k, 0.0) for k in range(100)},
+        set(range(100)),
+        np.zeros((100, 2)),
+        0.0,
+        np.ones(100, complex),
+    )
+    b = _path(range(30, 100), 3.0)
+    b.riding = {k: points[k][0] for k in range(30)}
+    b.withheld_s = 30.0
+    moved = _path(range(0, 100) if keeps_its_own else range(0, 60), 3.0)
+    follow = _Holding(points, moved, b)
+    out = Retracked()
+    out["a"], out["b"] = a, b
+    _off_others(follow, out, None)
+    # followed once, without a's detections at b's riding frames (b's own are left)
+    taken = follow.calls[-1]
+    assert sorted(taken) == list(range(30))
+    assert all(len(taken[k]) == 1 and taken[k][0][1] == 3.0 for k in taken)
+    assert out["a"] is a
+    assert out["b"] is (moved if keeps_its_own else b)
+    assert bool(follow.taken.get("b")) == keeps_its_own

@@ -234,6 +234,8 @@ class PhoneTrack:
     grouped_s: float = 0.0
     """Seconds published at the middle of the places where alignments nearly as cheap put the
     carrier, all within ``gate_m`` of it (a group walking together)."""
+    riding: dict[int, np.ndarray] = field(default_factory=dict)
+    """Frame index -> the detection the path is on where it publishes nothing (withheld)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -1432,6 +1434,7 @@ def retrack(
         out[mid] = follow.settle(mid, found, final)
     if cfg.exclusive:
         _exclusive(follow, out, final)
+        _off_others(follow, out, final)
     return out
 
 
@@ -1543,6 +1546,60 @@ def _exclusive(follow: _Follower, out: Retracked, radio: RadioEvidence | None) -
             del out[move]
         else:
             out[move] = follow.settle(move, moved, radio)
+
+
+def _on_others(points: Sequence[np.ndarray], out: Retracked, mid: str, gate_m: float) -> list[int]:
+    """The frames where phone ``mid``'s path, publishing nothing, is on the detection another
+    phone's carrier is published on (seen)."""
+    riding = out[mid].riding
+    ks = []
+    for other, tr in out.items():
+        if other == mid:
+            continue
+        for k in tr.seen & riding.keys():
+            j = _nearest(points[k], tr.xy[k], gate_m) if k in tr.xy else None
+            if j is not None and np.allclose(points[k][j], riding[k]):
+                ks.append(k)
+    return sorted(set(ks))
+
+
+def _off_others(follow: _Follower, out: Retracked, radio: RadioEvidence | None) -> None:
+    """One person, one phone, where one of them withholds (in place): a path on another
+    carrier's detections for ``min_stretch_s`` or more where it publishes nothing (it rode the
+    walker beside its carrier, and publication cut that stretch as somebody else,
+    :func:`_one_carrier`) is followed again without them, and kept when it then publishes
+    more and still publishes what it did (PETS footage, seed 1: P06's phone on P05 beside
+    her for 9 s, P06 unnamed there). A path moved elsewhere is not kept: the frames were the
+    other carrier's, not a clue to where this one is."""
+    cfg = follow.cfg
+    min_frames = max(int(round(cfg.min_stretch_s / follow.dt)), 1)
+    for mid in sorted(out):
+        ks = _on_others(follow.points, out, mid, cfg.gate_m)
+        if len(ks) < min_frames:
+            continue
+        tr, held = out[mid], follow.taken.get(mid, {})
+        taken = dict(held)
+        for k in ks:
+            left = taken.get(k, follow.points[k])
+            taken[k] = left[~np.all(np.isclose(left, tr.riding[k]), axis=1)]
+        follow.taken[mid] = taken
+        moved = follow(mid, tr.lag_s, tr.a, False, radio)
+        if moved is not None:
+            moved = follow.settle(mid, moved, radio)
+        if (
+            moved is None
+            or len(moved.seen) <= len(tr.seen)
+            or _lost(tr, moved, cfg.gate_m) > 0.05
+        ):
+            follow.taken[mid] = held
+            continue
+        out[mid] = moved
+
+
+def _lost(a: PhoneTrack, b: PhoneTrack, within_m: float) -> float:
+    """The share of ``a``'s seen frames that ``b`` does not publish within ``within_m``."""
+    lost = sum(k not in b.xy or np.hypot(*np.subtract(a.xy[k], b.xy[k])) > within_m for k in a.seen)
+    return lost / max(len(a.seen), 1)
 
 
 def _calibrated_pass(
@@ -1702,7 +1759,8 @@ class _Follower:
                 break
             lag, a = fit
         velocity = np.column_stack([u.real, u.imag]) / self.dt
-        return PhoneTrack(xy, seen, velocity, lag, a, withheld)
+        riding = {k: h for k, h in hits.items() if k not in seen}
+        return PhoneTrack(xy, seen, velocity, lag, a, withheld, riding=riding)
 
     def _search(
         self, mid: str, lag: float, points: Sequence[np.ndarray], radio: RadioEvidence | None
@@ -1798,8 +1856,9 @@ class _Follower:
         weighed = self._weighed(mid, found, radio, cfg.ambiguity_margin)
         # the first of equals: the search's own path
         best, found = min(weighed, key=lambda w: w[0]) if adopt else weighed[0]
-        others = [o.xy for c, o in weighed if o is not found and c - best <= cfg.ambiguity_margin]
-        xy, grouped, disputed = _settle_disputes(found.xy, others, cfg.gate_m)
+        near = [o for c, o in weighed if o is not found and c - best <= cfg.ambiguity_margin]
+        found = _filled(found, [o for o in near if _alike(o, found, ALIKE)], self.dt)
+        xy, grouped, disputed = _settle_disputes(found.xy, [o.xy for o in near], cfg.gate_m)
         if not disputed and not grouped:
             return found
         # the middle of a group is on no one's detections: not seen (one person, one phone
@@ -1811,6 +1870,40 @@ class _Follower:
             ambiguous_s=found.ambiguous_s + len(disputed) * self.dt,
             grouped_s=found.grouped_s + len(grouped) * self.dt,
         )
+
+
+ALIKE = 0.15
+"""Two alignments of a phone are one (:func:`_alike`) where they differ by at most this share
+of the alignment (scale 15 %, or yaw 8.6 deg), with the same clock offset."""
+
+
+def _alike(a: PhoneTrack, b: PhoneTrack, share: float) -> bool:
+    """``a`` and ``b`` are one alignment refined twice: the same lag, and ``a`` within
+    ``share`` of ``b`` (:data:`ALIKE`) over the median frame where both are known."""
+    if abs(a.lag_s - b.lag_s) > 1e-6:
+        return False
+    rel = np.abs(a.a - b.a) / np.maximum(np.abs(b.a), 1e-9)
+    rel = rel[np.isfinite(rel)]
+    return bool(len(rel)) and float(np.median(rel)) <= share
+
+
+def _filled(found: PhoneTrack, alike: Sequence[PhoneTrack], dt: float) -> PhoneTrack:
+    """``found`` with the frames it does not publish that paths of its own alignment
+    (:func:`_alike`, nearly as cheap) publish: two Viterbi paths of one alignment whose costs
+    differ by a few units part where the carrier walks beside somebody, and the one that rides
+    the other person withholds that stretch (:func:`_one_carrier`) where the other publishes
+    it on the carrier (PETS footage: P06's first 12 s beside P05). Where those paths disagree
+    with each other the frame is disputed as any other (:func:`_settle_disputes`)."""
+    extra = {k: p for o in alike for k, p in o.xy.items() if k not in found.xy}
+    if not extra:
+        return found
+    seen = {k for o in alike for k in o.seen if k in extra}
+    return replace(
+        found,
+        xy={**found.xy, **extra},
+        seen=found.seen | seen,
+        withheld_s=max(0.0, found.withheld_s - len(extra) * dt),
+    )
 
 
 def _settle_disputes(
