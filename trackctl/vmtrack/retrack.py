@@ -1586,11 +1586,7 @@ def _off_others(follow: _Follower, out: Retracked, radio: RadioEvidence | None) 
         moved = follow(mid, tr.lag_s, tr.a, False, radio)
         if moved is not None:
             moved = follow.settle(mid, moved, radio)
-        if (
-            moved is None
-            or len(moved.seen) <= len(tr.seen)
-            or _lost(tr, moved, cfg.gate_m) > 0.05
-        ):
+        if moved is None or len(moved.seen) <= len(tr.seen) or _lost(tr, moved, cfg.gate_m) > 0.05:
             follow.taken[mid] = held
             continue
         out[mid] = moved
@@ -1857,7 +1853,8 @@ class _Follower:
         # the first of equals: the search's own path
         best, found = min(weighed, key=lambda w: w[0]) if adopt else weighed[0]
         near = [o for c, o in weighed if o is not found and c - best <= cfg.ambiguity_margin]
-        found = _filled(found, [o for o in near if _alike(o, found, ALIKE)], self.dt)
+        alike = [o for o in near if _alike(o, found, ALIKE)]
+        found = _filled(found, alike, self.dt, cfg.min_stretch_s)
         xy, grouped, disputed = _settle_disputes(found.xy, [o.xy for o in near], cfg.gate_m)
         if not disputed and not grouped:
             return found
@@ -1887,22 +1884,28 @@ def _alike(a: PhoneTrack, b: PhoneTrack, share: float) -> bool:
     return bool(len(rel)) and float(np.median(rel)) <= share
 
 
-def _filled(found: PhoneTrack, alike: Sequence[PhoneTrack], dt: float) -> PhoneTrack:
-    """``found`` with the frames it does not publish that paths of its own alignment
-    (:func:`_alike`, nearly as cheap) publish: two Viterbi paths of one alignment whose costs
-    differ by a few units part where the carrier walks beside somebody, and the one that rides
-    the other person withholds that stretch (:func:`_one_carrier`) where the other publishes
-    it on the carrier (PETS footage: P06's first 12 s beside P05). Where those paths disagree
-    with each other the frame is disputed as any other (:func:`_settle_disputes`)."""
+def _filled(found: PhoneTrack, alike: Sequence[PhoneTrack], dt: float, min_s: float) -> PhoneTrack:
+    """``found`` with the runs of frames it does not publish that paths of its own alignment
+    (:func:`_alike`, nearly as cheap) publish, each run at least ``min_s`` long (publication's
+    ``min_stretch_s``): two Viterbi paths of one alignment whose costs differ by a few units
+    part where the carrier walks beside somebody, or out of view, and the one that rides
+    somebody else there withholds the stretch (:func:`_one_carrier`), or does not bridge the
+    gap, where the other publishes it (PETS footage: P06's first 12 s beside P05; P05's 15 s
+    out of view). Where those paths disagree with each other the frame is disputed as any
+    other (:func:`_settle_disputes`)."""
     extra = {k: p for o in alike for k, p in o.xy.items() if k not in found.xy}
-    if not extra:
+    ks = np.array(sorted(extra), dtype=np.int64)
+    runs = np.split(ks, np.flatnonzero(np.diff(ks) > 1) + 1) if len(ks) else []
+    keep = [r for r in runs if (len(r) - 1) * dt >= min_s]
+    if not keep:
         return found
-    seen = {k for o in alike for k in o.seen if k in extra}
+    add = {int(k): extra[int(k)] for r in keep for k in r}
+    seen = {k for o in alike for k in o.seen if k in add}
     return replace(
         found,
-        xy={**found.xy, **extra},
+        xy={**found.xy, **add},
         seen=found.seen | seen,
-        withheld_s=max(0.0, found.withheld_s - len(extra) * dt),
+        withheld_s=max(0.0, found.withheld_s - len(add) * dt),
     )
 
 
