@@ -40,6 +40,7 @@ from trackctl.vmtrack.retrack import (
     _settle_disputes,
     _shared,
     _step_costs,
+    _turned_gaps,
     _untwinned,
     _viterbi_path,
     _whole_cells,
@@ -1178,3 +1179,27 @@ def test_a_path_riding_another_carrier_where_it_withholds_is_followed_without_th
     assert out["a"] is a
     assert out["b"] is (moved if keeps_its_own else b)
     assert bool(follow.taken.get("b")) == keeps_its_own
+
+
+def test_a_gap_out_of_view_is_filled_by_the_walk_turned_onto_both_ends():
+    """Out of view a carrier walks a detour (10 s east, 10 s north); their phone's walk reads
+    it 20 deg turned and 10 % long. Filled as a line of offsets between the ends, the middle
+    of the detour is metres off; the walk turned and scaled to meet both ends is on it. A
+    walk that comes back where it left (no direction to turn by) keeps the line."""
+    t = np.arange(0, 30.0, 0.5)
+    true = np.where(t < 10, 1.2 * t, 12.0) + 1j * np.where(t < 10, 0.0, 1.2 * (t - 10))
+    true = np.where(t > 20, 12.0 + 12j + 1.2 * (t - 20), true)
+    walk = true * 1.1 * np.exp(1j * np.radians(20.0))
+    every = np.arange(len(t))
+    seen = np.r_[np.arange(0, 3), np.arange(len(t) - 3, len(t))]  # seen before and after only
+    off = true[seen] - walk[seen]
+    line = walk + np.interp(every, seen, off.real) + 1j * np.interp(every, seen, off.imag)
+    assert np.abs(line - true).max() > 2.0
+    turned = _turned_gaps(every, line, seen, walk, t)
+    np.testing.assert_allclose(turned[seen], line[seen])
+    assert np.abs(turned - true).max() < 0.05
+    back = np.where(t < 15, 1.2 * t, 1.2 * (30 - t)) + 0j  # out and back: ends 0.6 m apart
+    walk_back = back * np.exp(1j * np.radians(20.0))
+    off = back[seen] - walk_back[seen]
+    line = walk_back + np.interp(every, seen, off.real) + 1j * np.interp(every, seen, off.imag)
+    np.testing.assert_array_equal(_turned_gaps(every, line, seen, walk_back, t), line)
