@@ -104,7 +104,9 @@ class PhoneMotion:
         acc = np.asarray(self._acc, float)
         quat = np.asarray(self._quat, float)
         known = np.isfinite(quat).all(axis=1)
-        vert = self._vertical_without_orientation(ts, acc)
+        rate = _rate(ts)
+        # the projection on the mean specific force only where some sample has no orientation
+        vert = np.empty(len(t)) if known.all() else self._vertical_without_orientation(acc, rate)
         heading = np.full(len(t), math.nan)
         # "up" in the device frame: the orientation's world z, else the mean specific force
         up = acc / np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), 1e-9)
@@ -119,7 +121,7 @@ class PhoneMotion:
             gz = np.asarray(self._gyro_z)
             integrated = np.concatenate(([0.0], np.cumsum(np.diff(ts) * gz[1:])))
             heading = np.where(np.isnan(heading), integrated, heading)
-        speed = self._speeds(ts, vert)
+        speed = self._speeds(ts, vert, rate)
         self.t_ns = t
         self.heading = heading
         self.speed = speed
@@ -171,19 +173,19 @@ class PhoneMotion:
         rows = np.arange(len(ts))
         return np.arctan2(rot[rows, 1, axis], rot[rows, 0, axis]), axis
 
-    def _vertical_without_orientation(self, ts: np.ndarray, acc: np.ndarray) -> np.ndarray:
+    def _vertical_without_orientation(self, acc: np.ndarray, rate: float) -> np.ndarray:
         """Specific force along "up" (minus g), up being its own centred mean direction: the
         norm would add the walk's forward and sideways swings, whose second harmonic outgrows
         the step in a back pocket (a quarter of the Oxford back-pocket walk's 3 s windows peak
         there on the norm, 1 % on this projection)."""
-        n = max(1, int(round(self.config.gravity_window_s * _rate(ts))))
+        n = max(1, int(round(self.config.gravity_window_s * rate)))
         mean = pd.DataFrame(acc).rolling(n, center=True, min_periods=1).mean().to_numpy()
         up = mean / np.maximum(np.linalg.norm(mean, axis=1, keepdims=True), 1e-9)
         return np.einsum("nj,nj->n", up, acc) - G
 
-    def _speeds(self, ts: np.ndarray, vert: np.ndarray) -> np.ndarray:
+    def _speeds(self, ts: np.ndarray, vert: np.ndarray, rate: float) -> np.ndarray:
         cfg = self.config
-        freqs = np.arange(cfg.cadence_hz[0], min(cfg.cadence_hz[1], 0.49 * _rate(ts)), 0.05)
+        freqs = np.arange(cfg.cadence_hz[0], min(cfg.cadence_hz[1], 0.49 * rate), 0.05)
         half = cfg.window_s / 2
         grid = np.arange(ts[0], ts[-1] + cfg.hop_s, cfg.hop_s)
         lo_idx = np.searchsorted(ts, grid - half, side="left")
@@ -204,7 +206,7 @@ class PhoneMotion:
         out = np.interp(ts, grid, on_grid)
         # the cadence window (3 s) smears short stops; a quiet short window means standing still
         if len(ts) > 2:
-            n = max(3, int(round(cfg.still_window_s * _rate(ts))))
+            n = max(3, int(round(cfg.still_window_s * rate)))
             local = pd.Series(vert).rolling(n, center=True, min_periods=3).std().to_numpy()
             out[np.nan_to_num(local, nan=np.inf) < cfg.still_std_mps2] = 0.0
         return out
