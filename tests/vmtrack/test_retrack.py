@@ -29,6 +29,7 @@ from trackctl.vmtrack.retrack import (
     _exclusive,
     _Follower,
     _held,
+    _lag_checked,
     _layer_costs,
     _off_others,
     _one_carrier,
@@ -269,6 +270,27 @@ def test_the_path_follows_the_phone_through_a_crowd():
     err = np.hypot(*(grid.xy(cells) - carrier).T)
     assert np.median(err) < 0.3
     assert np.mean(err < 1.0) > 0.97
+
+
+@pytest.mark.parametrize(("true_lag", "start"), [(1.5, 0.0), (-1.0, 0.5), (0.5, 0.5)])
+def test_a_trusted_phones_clock_offset_is_walked_downhill_to_its_carriers(true_lag, start):
+    frame_t, points, people = _scene(3)
+    n = len(frame_t)
+    phone = _phone(people[3], frame_t, 30.0, lag_s=true_lag)
+    a = np.full(n, np.exp(1j * math.radians(30.0)))
+    # without refits the check alone moves the path's clock offset
+    cfg = dataclasses.replace(CFG, refine_passes=0)
+    grid = SiteGrid(points, cfg.cell_m).with_visits(points, cfg)
+    follow = _Follower(frame_t, points, {"m": phone}, grid, AlignConfig(), cfg, False)
+    got = follow("m", start, a, False, None)
+    checked = _lag_checked(follow, "m", got, None)
+    assert checked.lag_s == true_lag
+    if start == true_lag:
+        assert checked is got
+        return
+    assert follow.cost("m", checked, None) < follow.cost("m", got, None)
+    assert _share_on(checked.xy, people[3], n) > _share_on(got.xy, people[3], n)
+    assert _share_on(checked.xy, people[3], n) >= 0.9
 
 
 @pytest.mark.parametrize(
