@@ -491,15 +491,15 @@ def _leave(
 def _come_in(
     acc: np.ndarray, back_k: np.ndarray, come_in: np.ndarray, back_in: np.ndarray | None
 ) -> np.ndarray:
-    """``acc`` where coming into view (``come_in``: back-pointer -2) or back into it
-    (``back_in``, :class:`_Returns`: -3) is cheaper than having been in view."""
+    """``acc`` (in place) where coming into view (``come_in``: back-pointer -2) or back into
+    it (``back_in``, :class:`_Returns`: -3) is cheaper than having been in view."""
     new = come_in < acc
     back_k[new] = -2
-    acc = np.where(new, come_in, acc)
+    np.copyto(acc, come_in, where=new)
     if back_in is not None:
         new = back_in < acc
         back_k[new] = -3
-        acc = np.where(new, back_in, acc)
+        np.copyto(acc, back_in, where=new)
     return acc
 
 
@@ -524,8 +524,10 @@ class _Returns:
         self.walk = np.cumsum(np.nan_to_num(u, nan=0.0))
         self.seg = np.cumsum(np.isnan(u))
         self.v0, self.v = spread
-        ys, xs = np.indices(grid.shape)
-        self.cells = (grid.lo[0] + xs * grid.cell) + 1j * (grid.lo[1] + ys * grid.cell)
+        # the cells' centres per column (x) and per row (y): a squared distance to the grid is
+        # their two squared differences summed, one vector each, not a complex grid per frame
+        self.col_x = grid.lo[0] + np.arange(grid.shape[1]) * grid.cell
+        self.row_y = grid.lo[1] + np.arange(grid.shape[0]) * grid.cell
         self.grid = grid
         self.at: tuple[int, complex] | None = None
         """The frame of the cheapest leave and the position left (the cell of the frame
@@ -542,7 +544,8 @@ class _Returns:
 
     def left(self, k: int, flat: int) -> None:
         """The path's cheapest leave is now at frame ``k``, from cell ``flat``."""
-        self.at = (k, complex(self.cells.flat[flat]))
+        row, col = divmod(flat, len(self.col_x))
+        self.at = (k, complex(self.col_x[col], self.row_y[row]))
         self.out = False
 
     def cost(self, k: int, after: float | np.floating, doors: np.ndarray) -> np.ndarray | None:
@@ -557,7 +560,7 @@ class _Returns:
         if not self.out:
             return None
         var = max(self.v0 + self.v * (k - j), 1e-6)
-        d2 = np.abs(self.cells - where) ** 2
+        d2 = ((self.row_y - where.imag) ** 2)[:, None] + ((self.col_x - where.real) ** 2)[None, :]
         return (after + self.extra + doors + d2 / (2 * var)).astype(np.float32)
 
     def _covered(self, xy: complex) -> bool:
