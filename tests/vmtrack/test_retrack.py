@@ -25,6 +25,7 @@ from trackctl.vmtrack.retrack import (
     PhoneTrack,
     RetrackConfig,
     Retracked,
+    _come_in,
     _displacements,
     _exclusive,
     _Follower,
@@ -227,6 +228,59 @@ def test_predecessors_are_argmin_over_the_shifted_copies_bit_for_bit(rows, cols,
     kernels.predecessors(acc, 0, 0, steps, back, best)
     assert np.array_equal(back, want_back)
     assert np.array_equal(best, np.min(np.stack(stack), axis=0))
+
+
+@settings(max_examples=examples(30), deadline=None)
+@given(st.integers(1, 7), st.integers(1, 7), st.integers(0, 2**32 - 1), st.booleans())
+def test_coming_into_view_is_the_numpy_formulation_bit_for_bit(rows, cols, seed, returns):
+    rng = np.random.default_rng(seed)
+    acc = (rng.random((rows, cols)) * 20).astype(np.float32)
+    doors = rng.choice(np.float32([0.0, 1.5, 3.25, 1e9]), (rows, cols))
+    before = np.float32(rng.random() * 10)
+    back_in = (rng.random((rows, cols)) * 20).astype(np.float32)
+    back_in[rng.random(back_in.shape) < 0.3] = np.float32(7.0)
+    acc[rng.random(acc.shape) < 0.3] = np.float32(7.0)  # ties: having been in view wins
+    want, want_back = acc.copy(), np.zeros((rows, cols), np.int8)
+    come = before + doors  # the numpy formulation the kernel replaced
+    new = come < want
+    want_back[new] = -2
+    want = np.where(new, come, want)
+    if returns:
+        new = back_in < want
+        want_back[new] = -3
+        want = np.where(new, back_in, want)
+    back = np.zeros((rows, cols), np.int8)
+    got = _come_in(acc.copy(), back, (before, doors), back_in if returns else None)
+    assert np.array_equal(got, want) and got.dtype == np.float32
+    assert np.array_equal(back, want_back)
+
+
+@settings(max_examples=examples(30), deadline=None)
+@given(
+    st.integers(1, 7),
+    st.integers(1, 7),
+    st.integers(0, 2**32 - 1),
+    st.floats(-20, 20),
+    st.floats(-20, 20),
+    st.floats(1e-6, 50),
+)
+def test_a_returns_cost_is_the_numpy_formulation_bit_for_bit(rows, cols, seed, wx, wy, var):
+    rng = np.random.default_rng(seed)
+    doors = (rng.random((rows, cols)) * 5).astype(np.float32)
+    row_y = -3.0 + np.arange(rows) * 0.3
+    col_x = 1.7 + np.arange(cols) * 0.3
+    after, extra = np.float32(rng.random() * 100), float(rng.random() * 4)
+    cells = col_x[None, :] + 1j * row_y[:, None]
+    # the numpy formulation the kernel replaced
+    want = (after + extra + doors + np.abs(cells - complex(wx, wy)) ** 2 / (2 * var)).astype(
+        np.float32
+    )
+    out = np.empty((rows, cols), np.float32)
+    kernels.return_costs(np.float32(after + extra), doors, row_y, col_x, wx, wy, 2 * var, out)
+    assert np.allclose(out, want, rtol=1e-6, atol=0)
+    d2 = ((row_y - wy) ** 2)[:, None] + ((col_x - wx) ** 2)[None, :]
+    exact = (after + extra + doors + d2 / (2 * var)).astype(np.float32)
+    assert np.array_equal(out, exact)
 
 
 @settings(max_examples=examples(50), deadline=None)

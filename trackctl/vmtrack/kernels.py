@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["BIG", "OFFSETS", "advance", "layer_frame", "predecessors"]
+__all__ = ["BIG", "OFFSETS", "advance", "come_in", "layer_frame", "predecessors", "return_costs"]
 
 BIG = np.float32(1e9)
 """Unreachable: the cost of cells off the grid."""
@@ -241,3 +241,53 @@ def predecessors(
                 if v < row[x]:
                     row[x] = v
                     arg[x] = i
+
+
+@njit(cache=True, nogil=True)
+def come_in(
+    acc: np.ndarray,
+    back: np.ndarray,
+    before: np.float32,
+    doors: np.ndarray,
+    back_in: np.ndarray,
+    returns: bool,
+) -> None:
+    """For one path's frame (rows, columns), in place: where coming into view (``before`` +
+    ``doors``, float32) is cheaper than ``acc``, ``acc`` takes it and ``back`` is -2; then,
+    with ``returns``, where coming back into view (``back_in``) is cheaper still, ``acc``
+    takes that and ``back`` is -3."""
+    h, w = acc.shape
+    for y in range(h):
+        for x in range(w):
+            c = before + doors[y, x]
+            if c < acc[y, x]:
+                acc[y, x] = c
+                back[y, x] = -2
+            if returns and back_in[y, x] < acc[y, x]:
+                acc[y, x] = back_in[y, x]
+                back[y, x] = -3
+
+
+@njit(cache=True, nogil=True)
+def return_costs(
+    base: np.float32,
+    doors: np.ndarray,
+    row_y: np.ndarray,
+    col_x: np.ndarray,
+    wx: float,
+    wy: float,
+    two_var: float,
+    out: np.ndarray,
+) -> None:
+    """Each cell's cost of coming back into view, float32 into ``out``: ``base`` + the door's
+    cost (float32), plus the squared distance from the cell's centre (``row_y``, ``col_x``)
+    to (``wx``, ``wy``) over ``two_var`` (float64), as numpy adds a float32 grid to a float64
+    one."""
+    h, w = out.shape
+    for y in range(h):
+        dy = row_y[y] - wy
+        dy2 = dy * dy
+        for x in range(w):
+            dx = col_x[x] - wx
+            d2 = dy2 + dx * dx
+            out[y, x] = np.float32(np.float64(base + doors[y, x]) + d2 / two_var)

@@ -443,7 +443,7 @@ def _viterbi_path(
             kernels.predecessors(acc, sy, sx, steps, back[k], moved)
             acc = moved
             if visit is not None:
-                acc = _come_in(acc, back[k], before + doors, back_in)
+                acc = _come_in(acc, back[k], (np.float32(before), doors), back_in)
         if visit is not None:
             before = np.float32(before + away)
         acc = acc + emissions[k]
@@ -489,17 +489,18 @@ def _leave(
 
 
 def _come_in(
-    acc: np.ndarray, back_k: np.ndarray, come_in: np.ndarray, back_in: np.ndarray | None
+    acc: np.ndarray,
+    back_k: np.ndarray,
+    come_in: tuple[np.float32, np.ndarray],
+    back_in: np.ndarray | None,
 ) -> np.ndarray:
-    """``acc`` (in place) where coming into view (``come_in``: back-pointer -2) or back into
-    it (``back_in``, :class:`_Returns`: -3) is cheaper than having been in view."""
-    new = come_in < acc
-    back_k[new] = -2
-    np.copyto(acc, come_in, where=new)
-    if back_in is not None:
-        new = back_in < acc
-        back_k[new] = -3
-        np.copyto(acc, back_in, where=new)
+    """``acc`` (in place) where coming into view (``come_in``: the out-of-view cost before and
+    the doors' costs, summed in float32; back-pointer -2) or back into it (``back_in``,
+    :class:`_Returns`: -3) is cheaper than having been in view (compiled:
+    :func:`kernels.come_in`)."""
+    returns = back_in is not None
+    doors = np.broadcast_to(come_in[1], acc.shape)
+    kernels.come_in(acc, back_k, come_in[0], doors, back_in if returns else acc, returns)
     return acc
 
 
@@ -560,8 +561,15 @@ class _Returns:
         if not self.out:
             return None
         var = max(self.v0 + self.v * (k - j), 1e-6)
-        d2 = ((self.row_y - where.imag) ** 2)[:, None] + ((self.col_x - where.real) ** 2)[None, :]
-        return (after + self.extra + doors + d2 / (2 * var)).astype(np.float32)
+        # compiled (kernels.return_costs): the float32 door costs plus the float64 misfit,
+        # as numpy's (after + extra + doors + d2 / (2 var)).astype(float32) computed them
+        base = np.float32(after + self.extra)
+        out = np.empty(self.grid.shape, np.float32)
+        doors = np.broadcast_to(doors, out.shape)
+        kernels.return_costs(
+            base, doors, self.row_y, self.col_x, where.real, where.imag, 2 * var, out
+        )
+        return out
 
     def _covered(self, xy: complex) -> bool:
         """Whether ``xy`` is in the area the cameras cover (off the grid is not)."""
