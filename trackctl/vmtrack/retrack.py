@@ -500,7 +500,7 @@ def _come_in(
     :func:`kernels.come_in`)."""
     returns = back_in is not None
     doors = np.broadcast_to(come_in[1], acc.shape)
-    kernels.come_in(acc, back_k, come_in[0], doors, back_in if returns else acc, returns)
+    kernels.come_in(acc, back_k, come_in[0], doors, acc if back_in is None else back_in, returns)
     return acc
 
 
