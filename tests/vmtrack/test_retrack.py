@@ -250,7 +250,7 @@ def test_coming_into_view_is_the_numpy_formulation_bit_for_bit(rows, cols, seed,
         want_back[new] = -3
         want = np.where(new, back_in, want)
     back = np.zeros((rows, cols), np.int8)
-    got = _come_in(acc.copy(), back, (before, doors), back_in if returns else None)
+    got = _come_in(acc.copy(), back, before, doors, back_in if returns else None)
     assert np.array_equal(got, want) and got.dtype == np.float32
     assert np.array_equal(back, want_back)
 

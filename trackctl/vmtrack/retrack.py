@@ -443,7 +443,7 @@ def _viterbi_path(
             kernels.predecessors(acc, sy, sx, steps, back[k], moved)
             acc = moved
             if visit is not None:
-                acc = _come_in(acc, back[k], (np.float32(before), doors), back_in)
+                acc = _come_in(acc, back[k], np.float32(before), doors, back_in)
         if visit is not None:
             before = np.float32(before + away)
         acc = acc + emissions[k]
@@ -491,16 +491,17 @@ def _leave(
 def _come_in(
     acc: np.ndarray,
     back_k: np.ndarray,
-    come_in: tuple[np.float32, np.ndarray],
+    before: np.float32,
+    doors: np.ndarray,
     back_in: np.ndarray | None,
 ) -> np.ndarray:
-    """``acc`` (in place) where coming into view (``come_in``: the out-of-view cost before and
-    the doors' costs, summed in float32; back-pointer -2) or back into it (``back_in``,
+    """``acc`` (in place) where coming into view (``before``, the out-of-view cost, plus the
+    ``doors``' costs, summed in float32; back-pointer -2) or back into it (``back_in``,
     :class:`_Returns`: -3) is cheaper than having been in view (compiled:
     :func:`kernels.come_in`)."""
+    doors = np.broadcast_to(doors, acc.shape)
     returns = back_in is not None
-    doors = np.broadcast_to(come_in[1], acc.shape)
-    kernels.come_in(acc, back_k, come_in[0], doors, acc if back_in is None else back_in, returns)
+    kernels.come_in(acc, back_k, before, doors, acc if back_in is None else back_in, returns)
     return acc
 
 
