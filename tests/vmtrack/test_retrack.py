@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Iterable
 
 import numpy as np
 import pytest
@@ -704,17 +705,17 @@ def test_a_straight_walk_is_published_on_the_evidence_of_the_phones_rssi():
     cells = np.round((carrier - grid.lo) / grid.cell).astype(int)[:, ::-1]
     cells[~inside] = -1
     u = np.r_[0, np.diff(carrier[:, 0])] + 0j
-    xy, _, _, withheld = _publish(frame_t, points, grid, cells, u, CFG)
+    xy, _, _, withheld, _ = _publish(frame_t, points, grid, cells, u, CFG)
     assert not xy and withheld > 10.0
     radio = RadioEvidence(frame_t, _scans(frame_t, carrier, inside, 23), (-36.0, 2.5), CFG.radio)
     gain = radio.gain("m", grid.xy(cells))
     assert gain.sum() > CFG.min_evidence
-    xy, _, _, withheld = _publish(frame_t, points, grid, cells, u, CFG, gain)
+    xy, _, _, withheld, _ = _publish(frame_t, points, grid, cells, u, CFG, gain)
     assert withheld == 0.0 and _share_on(xy, carrier, int(inside.sum())) > 0.95
     # an AP that would have heard a phone there and did not: somebody else's walk
     deaf = RadioEvidence(frame_t, _scans(frame_t, carrier, ~inside, 23), (-36.0, 2.5), CFG.radio)
     against = deaf.gain("m", grid.xy(cells))
-    xy, _, _, _ = _publish(frame_t, points, grid, cells, u, CFG, against)
+    xy, _, _, _, _ = _publish(frame_t, points, grid, cells, u, CFG, against)
     assert against.sum() < 0 and not xy
 
 
@@ -1106,11 +1107,11 @@ def test_a_stretch_a_twin_walks_beside_is_published_only_when_tied(apart_m, turn
     t, walk, hits, points = _twins(apart_m, turns)
     seg = np.zeros(len(t), int)
     out, dropped = _untwinned([np.arange(len(t))], points, hits, walk, t, seg, CFG)
-    assert (len(out) == 1) is kept and (dropped == 0.0) is kept
+    assert (len(out) == 1) is kept and (not dropped) is kept
     if not kept:
         a, b = np.arange(0, 60), np.arange(80, len(t))
         out, dropped = _untwinned([a, b], points, hits, walk, t, seg, CFG)
-        assert len(out) == 2 and dropped == 0.0
+        assert len(out) == 2 and not dropped
 
 
 def test_the_refit_far_from_the_detections_is_their_whole_fit_not_the_nearest_edge():
@@ -1152,7 +1153,7 @@ class _Costed(_Follower):
         return tight if steps is self.settle_steps else loose
 
 
-def _path(frames: range, y: float) -> PhoneTrack:
+def _path(frames: Iterable[int], y: float) -> PhoneTrack:
     xy = {k: (0.1 * k, y) for k in frames}
     return PhoneTrack(xy, set(xy), np.zeros((100, 2)), 0.0, np.ones(100, complex))
 
@@ -1255,6 +1256,53 @@ def test_a_path_riding_another_carrier_where_it_withholds_is_followed_without_th
     assert out["a"] is a
     assert out["b"] is (moved if keeps_its_own else b)
     assert bool(follow.taken.get("b")) == keeps_its_own
+
+
+@pytest.mark.parametrize("bridges", [True, False])
+def test_a_path_riding_a_stranger_where_it_withholds_is_followed_without_them(bridges):
+    """Phone b's path withholds frames 0-39 on a walker no phone's carrier is published on
+    (the one beside another carrier): followed again without the detections it withholds, it
+    sees its own carrier there. It is kept only when it publishes no fewer frames: a path
+    that sees more but no longer bridges a gap out of view (frames 60-79) is not."""
+    points = [np.array([[0.1 * k, 0.0], [0.1 * k, 3.0]]) for k in range(100)]
+    b = _path(range(40, 100), 3.0)
+    b.riding = {k: points[k][0] for k in range(40)}
+    b.withheld_s = 40.0
+    moved = _path(range(0, 100), 3.0)
+    if not bridges:
+        # b publishes frames 60-79 unseen (its walk across a gap out of view); moved sees
+        # five frames more (35-39) and does not bridge the gap
+        b.seen -= set(range(60, 80))
+        moved = _path([*range(35, 60), *range(80, 100)], 3.0)
+    follow = _Holding(points, moved, b)
+    out = Retracked()
+    out["b"] = b
+    _off_others(follow, out, None)
+    taken = follow.calls[-1]
+    assert sorted(taken) == list(range(40))
+    assert all(len(taken[k]) == 1 and taken[k][0][1] == 3.0 for k in taken)
+    assert out["b"] is (moved if bridges else b)
+
+
+def test_a_stretch_withheld_as_a_twin_is_named_for_the_refit():
+    """Publication withholds a stretch a twin walks beside (either may carry the phone), and
+    names its frames: they move as the carrier does, so the refit of the alignment may use
+    them where nothing else is published."""
+    t, walk, hits, points = _twins(2.6)
+    n = len(t)
+    frame_t = (t * 1e9).astype(np.int64)
+    one = np.array([hits[k] for k in range(n)])
+    grid = SiteGrid(points, CFG.cell_m)
+    cells = np.round((one - grid.lo) / grid.cell).astype(int)[:, ::-1]
+    u = np.r_[0j, np.diff(walk)]
+    published = _publish(frame_t, points, grid, cells, u, CFG)
+    assert not published.xy and published.withheld > 15.0
+    assert len(published.twinned) > 0.9 * n
+    assert set(published.twinned) <= set(published.hits)
+    # the same stretch without its twin is published, and names nothing
+    alone = [p[[0, 2]] for p in points]
+    published = _publish(frame_t, alone, grid, cells, u, CFG)
+    assert len(published.seen) > 0.9 * n and not published.twinned
 
 
 def test_a_gap_out_of_view_is_filled_by_the_walk_turned_onto_both_ends():

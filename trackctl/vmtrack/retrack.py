@@ -48,6 +48,7 @@ import math
 import warnings
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -1008,6 +1009,22 @@ def _nearest(points: np.ndarray, xy: Sequence[float] | np.ndarray, within_m: flo
     return j if d[j] < within_m else None
 
 
+class _Published(NamedTuple):
+    """What :func:`_publish` makes of one path."""
+
+    xy: dict[int, tuple[float, float]]
+    """Positions to publish (frame index -> xy)."""
+    seen: set[int]
+    """The frames published on a detection."""
+    hits: dict[int, np.ndarray]
+    """The detections on the path (frame index -> xy)."""
+    withheld: float
+    """Seconds of stretches withheld for want of evidence."""
+    twinned: list[int]
+    """The frames of the stretches withheld because a twin walks beside them
+    (:func:`_untwinned`): on the carrier or on somebody who moves like them."""
+
+
 def _publish(
     frame_t: np.ndarray,
     points: Sequence[np.ndarray],
@@ -1016,9 +1033,9 @@ def _publish(
     u: np.ndarray,
     cfg: RetrackConfig,
     radio_gain: np.ndarray | None = None,
-) -> tuple[dict[int, tuple[float, float]], set[int], dict[int, np.ndarray], float]:
-    """Positions to publish (frame index -> xy), the seen frames, the detections on the
-    path (frame index -> xy), and the seconds of stretches withheld for want of evidence.
+) -> _Published:
+    """Positions to publish, the seen frames, the detections on the path, the seconds of
+    stretches withheld for want of evidence and the frames of those withheld as twins.
 
     Seen frames less than ``fill_s`` apart form a stretch; a stretch shorter than
     ``min_stretch_s`` is dropped, and so is one whose detections share less than
@@ -1034,7 +1051,7 @@ def _publish(
     seen frames, linear between them."""
     hits = _path_hits(points, grid.xy(cells), u, cfg.gate_m)
     if not hits:
-        return {}, set(), hits, 0.0
+        return _Published({}, set(), hits, 0.0, [])
     walk = np.cumsum(np.nan_to_num(u, nan=0.0))
     seg = np.cumsum(np.isnan(u))  # the walk restarts where the phone has none
     t = frame_t / 1e9
@@ -1050,18 +1067,20 @@ def _publish(
             kept, frame_t, hits, walk, cfg, radio_gain, cfg.min_evidence
         )
         withheld += unproven
+    twins: list[np.ndarray] = []
     if cfg.twin_share is not None and radio_gain is None:
-        kept, twinned = _untwinned(kept, points, hits, walk, t, seg, cfg)
-        withheld += twinned
+        kept, twins = _untwinned(kept, points, hits, walk, t, seg, cfg)
+        withheld += sum(float(t[r[-1]] - t[r[0]]) for r in twins)
+    twinned = [int(k) for r in twins for k in r]
     if not kept:
-        return {}, set(), hits, withheld
+        return _Published({}, set(), hits, withheld, twinned)
     seen = np.concatenate(kept)
     smooth = _smoothed_offsets(seen, hits, walk, t, seg, cfg.smooth_s)
     every = np.unique(np.concatenate(_published_frames(kept, smooth, walk, t, seg, cfg)))
     offsets = np.interp(every, seen, smooth.real) + 1j * np.interp(every, seen, smooth.imag)
     xy = _turned_gaps(every, walk[every] + offsets, np.sort(seen), walk, t)
     out = {int(k): (float(p.real), float(p.imag)) for k, p in zip(every, xy, strict=True)}
-    return out, set(int(k) for k in seen), hits, withheld
+    return _Published(out, set(int(k) for k in seen), hits, withheld, twinned)
 
 
 TURN_GAP_S = 2.0
@@ -1261,10 +1280,10 @@ def _untwinned(
     t: np.ndarray,
     seg: np.ndarray,
     cfg: RetrackConfig,
-) -> tuple[list[np.ndarray], float]:
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """The stretches without those another walker moves with (:func:`_twin` in at least
     ``twin_share`` of their frames) and that the phone's walk ties to no other stretch kept,
-    and the seconds of those dropped.
+    and those dropped.
 
     Two people walking the same way a few metres apart (farther than the gate: not a group)
     move alike, and motion cannot say which of them carries the phone: the path may sit on
@@ -1286,8 +1305,7 @@ def _untwinned(
         for r, ti in zip(kept, tied, strict=True)
     ]
     out = [r for r, drop in zip(kept, alone, strict=True) if not drop]
-    dropped = sum(float(t[r[-1]] - t[r[0]]) for r, drop in zip(kept, alone, strict=True) if drop)
-    return out, dropped
+    return out, [r for r, drop in zip(kept, alone, strict=True) if drop]
 
 
 def _walk_track(frame_t: np.ndarray, walk: np.ndarray) -> np.ndarray:
@@ -1659,14 +1677,22 @@ def _off_others(follow: _Follower, out: Retracked, radio: RadioEvidence | None) 
     """One person, one phone, where one of them withholds (in place): a path on another
     carrier's detections for ``min_stretch_s`` or more where it publishes nothing (it rode the
     walker beside its carrier, and publication cut that stretch as somebody else,
-    :func:`_one_carrier`) is followed again without them, and kept when it then publishes
-    more and still publishes what it did (PETS footage, seed 1: P06's phone on P05 beside
-    her for 9 s, P06 unnamed there). A path moved elsewhere is not kept: the frames were the
-    other carrier's, not a clue to where this one is."""
+    :func:`_one_carrier`) is followed again without them, and kept when it then sees its
+    carrier more, publishes no fewer frames, and still publishes what it did (PETS footage,
+    seed 1: P06's phone on P05 beside her for 9 s, P06 unnamed there; a path that sees its
+    carrier in a few frames more but no longer bridges a gap out of view publishes less). A
+    path moved elsewhere is not kept: the frames were the
+    other carrier's, not a clue to where this one is. A path that withholds ``min_stretch_s``
+    or more on detections no other carrier is published on (the walker beside the other
+    carrier: PETS footage, `h` seed 5, P06's phone on P04 and P05, who walk together, for
+    14 s) is followed again without all the detections it withholds, on the same terms:
+    publication judged them somebody else's, or could not tell."""
     cfg = follow.cfg
     min_frames = max(int(round(cfg.min_stretch_s / follow.dt)), 1)
     for mid in sorted(out):
         ks = _on_others(follow.points, out, mid, cfg.gate_m)
+        if len(ks) < min_frames:
+            ks = sorted(out[mid].riding)
         if len(ks) < min_frames:
             continue
         tr, held = out[mid], follow.taken.get(mid, {})
@@ -1678,7 +1704,12 @@ def _off_others(follow: _Follower, out: Retracked, radio: RadioEvidence | None) 
         moved = follow(mid, tr.lag_s, tr.a, False, radio)
         if moved is not None:
             moved = follow.settle(mid, moved, radio)
-        if moved is None or len(moved.seen) <= len(tr.seen) or _lost(tr, moved, cfg.gate_m) > 0.05:
+        if (
+            moved is None
+            or len(moved.seen) <= len(tr.seen)
+            or len(moved.xy) < len(tr.xy)
+            or _lost(tr, moved, cfg.gate_m) > 0.05
+        ):
             follow.taken[mid] = held
             continue
         out[mid] = moved
@@ -1836,12 +1867,21 @@ class _Follower:
             gain = None
             if radio and radio.cfg.enabled and cfg.min_evidence is not None:
                 gain = radio.gain(mid, grid.xy(cells))  # read by the publication rule only
-            xy, seen, hits, withheld = _publish(frame_t, points, grid, cells, u, cfg, gain)
+            xy, seen, hits, withheld, twinned = _publish(frame_t, points, grid, cells, u, cfg, gain)
             if p == passes:
                 break
             # refitted from what is published as the carrier (a stretch withheld is somebody
-            # else, or says nothing): all the path's detections only while nothing is
-            on = {k: hits[k] for k in seen} if len(seen) >= cfg.min_align_frames else hits
+            # else, or says nothing), and from the stretches withheld as twins: whichever of
+            # the two walkers carries the phone, they move alike, and the yaw and step that
+            # fit one fit the carrier (without them the refit of a stretch nothing else is
+            # published in is the rest's: PETS footage, `w` seed 2: P06's first 16 s beside P05,
+            # ridden on her and withheld, were then out of view, the phone's yaw 95 deg off
+            # there after a carry change): all the path's detections only while nothing is
+            on = (
+                {k: hits[k] for k in (*seen, *twinned)}
+                if len(seen) >= cfg.min_align_frames
+                else hits
+            )
             fit = _refit(frame_t, on, track, self.acfg, cfg, self.phones[mid].carry_changes)
             if fit is None:
                 break
