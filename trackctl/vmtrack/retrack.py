@@ -1679,14 +1679,15 @@ def _off_others(follow: _Follower, out: Retracked, radio: RadioEvidence | None) 
     walker beside its carrier, and publication cut that stretch as somebody else,
     :func:`_one_carrier`) is followed again without them, and kept when it then sees its
     carrier more, publishes no fewer frames, and still publishes what it did (PETS footage,
-    seed 1: P06's phone on P05 beside her for 9 s, P06 unnamed there; a path that sees its
-    carrier in a few frames more but no longer bridges a gap out of view publishes less). A
-    path moved elsewhere is not kept: the frames were the
-    other carrier's, not a clue to where this one is. A path that withholds ``min_stretch_s``
-    or more on detections no other carrier is published on (the walker beside the other
-    carrier: PETS footage, `h` seed 5, P06's phone on P04 and P05, who walk together, for
-    14 s) is followed again without all the detections it withholds, on the same terms:
-    publication judged them somebody else's, or could not tell."""
+    seed 1: P06's phone on P05 beside her for 9 s, P06 unnamed there). A path moved elsewhere
+    is not kept: the frames were the other carrier's, not a clue to where this one is; nor is
+    one that sees its carrier in a few frames more but no longer bridges a gap out of view.
+
+    A path that withholds ``min_stretch_s`` or more where fewer frames than that are on
+    another carrier's published detections is followed again without all the detections it
+    withholds, on the same terms: publication judged them somebody else's, or could not tell
+    (PETS footage, `h` seed 5: P06's phone on P04 and P05, who walk together, for 96 frames,
+    24 of them on P05 where her phone's path is published)."""
     cfg = follow.cfg
     min_frames = max(int(round(cfg.min_stretch_s / follow.dt)), 1)
     for mid in sorted(out):
