@@ -26,6 +26,7 @@ from trackctl.vmtrack.retrack import (
     PhoneTrack,
     RetrackConfig,
     Retracked,
+    _bridged,
     _come_in,
     _displacements,
     _exclusive,
@@ -1141,7 +1142,7 @@ class _Costed(_Follower):
     ``{lag: (path, tight, loose)}``."""
 
     def __init__(self, table: dict[float, tuple[PhoneTrack, float, float]]) -> None:
-        self.table, self.cfg, self.dt = table, CFG, 1.0
+        self.table, self.cfg, self.acfg, self.dt = table, CFG, AlignConfig(), 1.0
         self.steps, self.settle_steps = np.zeros(1), np.ones(1)
         self.alternatives = {"m": [(lag, np.ones(1, complex)) for lag in table if lag]}
 
@@ -1187,23 +1188,35 @@ def test_an_alternative_is_weighed_when_near_under_the_paths_walk_or_both_walks(
         assert settled.ambiguous_s == len(other.xy)
 
 
-@pytest.mark.parametrize("same_alignment", [True, False])
+@pytest.mark.parametrize(
+    "lag_s, yaw, fills",
+    [
+        (0.0, 0.0, True),
+        # neighbours on the refit's clock-offset grid (0.25 s): the true offset lies between
+        # them (PETS footage, `w` seed 0: P10's bag, 0.57 s; 0.25 s costs 1031.1 and stops at
+        # 62 s, 0.5 s costs 1031.5 and follows him to 71 s)
+        (0.25, 0.0, True),
+        (0.5, 0.0, False),
+        (0.0, 0.7, False),
+    ],
+)
 def test_a_stretch_withheld_is_filled_from_a_path_of_the_same_alignment_nearly_as_cheap(
-    same_alignment,
+    lag_s, yaw, fills
 ):
     """Two Viterbi paths of one alignment (refined from two of the search's alternatives)
     whose costs differ by a few units part where the carrier walks beside somebody: the
     cheaper rides the other walker and withholds that stretch, the other publishes it on the
     carrier (PETS footage: P06's first 12 s beside P05). Settled, the phone publishes it; from
-    another alignment's path it does not (that is not the same account of the phone)."""
+    another alignment's path it does not (that is not the same account of the phone): another
+    yaw, or a clock offset more than one step of the refit's grid away."""
     found = _path(range(30, 100), 0.0)
     found.withheld_s = 25.0
-    other = _path(range(5, 100), 0.0)
-    if not same_alignment:
-        other = dataclasses.replace(other, a=np.full(100, 1.3 * np.exp(0.7j)))
+    other = dataclasses.replace(
+        _path(range(5, 100), 0.0), lag_s=lag_s, a=np.full(100, np.exp(1j * yaw))
+    )
     follow = _Costed({0.0: (found, 960.0, 771.0), 1.0: (other, 962.0, 775.0)})
     settled = follow.settle("m", found, None)
-    if same_alignment:
+    if fills:
         assert settled.xy == other.xy and settled.seen == other.seen
         assert settled.withheld_s == 0.0
     else:
@@ -1303,6 +1316,27 @@ def test_a_stretch_withheld_as_a_twin_is_named_for_the_refit():
     alone = [p[[0, 2]] for p in points]
     published = _publish(frame_t, alone, grid, cells, u, CFG)
     assert len(published.seen) > 0.9 * n and not published.twinned
+
+
+@pytest.mark.parametrize("detour, bridged", [(True, True), (False, False)])
+def test_a_gap_is_bridged_within_the_drift_of_the_distance_walked(detour, bridged):
+    """Dead reckoning drifts with the distance walked: a 7 s detour out of view of 9.2 m
+    that ends 6.6 m from where it left (PETS footage with phones, P06 on `w` seed 0) may land
+    2.3 m off the stretch after it (1 m + 15 % of 9.2 m); a straight 6.6 m walk may not."""
+    t = np.arange(0, 7.0, 0.25)
+    s = np.linspace(0.0, 1.0, len(t))
+    if detour:  # out along a semicircle's chord and round: 9.2 m walked, 6.6 m apart
+        walk = 3.3 - 3.3 * np.exp(1j * np.pi * s)
+        walk = walk.real + 1j * 2.72 * walk.imag / 3.3
+    else:
+        walk = 6.6 * s + 0j
+    length = float(np.abs(np.diff(walk)).sum())
+    assert abs(abs(walk[-1] - walk[0]) - 6.6) < 0.05
+    assert (length > 9.0) == detour
+    seg = np.zeros(len(t), int)
+    assert _bridged(0, len(t) - 1, 2.3, walk, t, seg, CFG) == bridged
+    # and never beyond what the distance walked allows
+    assert not _bridged(0, len(t) - 1, CFG.unseen_m + 0.16 * length, walk, t, seg, CFG)
 
 
 def test_a_gap_out_of_view_is_filled_by_the_walk_turned_onto_both_ends():

@@ -123,8 +123,8 @@ class RetrackConfig:
     unseen_s: float = 20.0
     unseen_m: float = 1.0
     """Gaps up to ``unseen_s`` between two stretches are published on the phone's walk when
-    it lands within ``unseen_m`` (+ 15 % of the walk) of the next stretch, the misfit spread
-    over the gap (docs/vmtrack.md, Parameters)."""
+    it lands within ``unseen_m`` (+ 15 % of the distance walked) of the next stretch, the
+    misfit spread over the gap (docs/vmtrack.md, Parameters)."""
     twin_share: float | None = 0.6
     """A stretch another walker moves with at a steady offset over the gate in this share of
     its frames (most of them: real detections miss and merge), which the phone's walk ties to
@@ -1045,8 +1045,8 @@ def _publish(
     over the stretch: a straight walk past an AP that hears the phone then, and not a
     stranger's while the carrier is away); two stretches at most
     ``unseen_s`` apart are joined when
-    the phone's walk across the gap lands within ``unseen_m`` (+ 15 % of the walk) of where
-    the next one starts (the carrier walked where no camera saw them). A published position
+    the phone's walk across the gap lands within ``unseen_m`` (+ 15 % of the distance walked)
+    of where the next one starts (the carrier walked where no camera saw them). A published position
     is the phone's walk plus the detections' offset from it: smoothed over ``smooth_s`` at
     seen frames, linear between them."""
     hits = _path_hits(points, grid.xy(cells), u, cfg.gate_m)
@@ -1288,8 +1288,8 @@ def _untwinned(
     Two people walking the same way a few metres apart (farther than the gate: not a group)
     move alike, and motion cannot say which of them carries the phone: the path may sit on
     either. Where the walk ties such a stretch to another (the gap between them walked on the
-    phone lands within ``unseen_m`` + 15 % of the walk of it, as publication bridges them),
-    the carrier is the one the rest of the path leads to; alone, it is a guess."""
+    phone lands within ``unseen_m`` + 15 % of the distance walked of it, as publication
+    bridges them), the carrier is the one the rest of the path leads to; alone, it is a guess."""
     assert cfg.twin_share is not None
     tied = [False] * len(kept)
     for j in range(len(kept) - 1):
@@ -1359,8 +1359,8 @@ def _published_frames(
     cfg: RetrackConfig,
 ) -> list[np.ndarray]:
     """The frames of each stretch, and of each gap between two the phone's walk bridges: at most
-    ``unseen_s`` long, in one stretch of walk, landing within ``unseen_m`` (+ 15 % of the walk)
-    of where the next stretch starts."""
+    ``unseen_s`` long, in one stretch of walk, landing within ``unseen_m`` (+ 15 % of the
+    distance walked) of where the next stretch starts."""
     frames = [np.arange(r[0], r[-1] + 1) for r in kept]
     pos = np.cumsum([0] + [len(r) for r in kept])
     for j in range(len(kept) - 1):
@@ -1382,12 +1382,17 @@ def _bridged(
 ) -> bool:
     """Whether the phone's walk bridges the gap from frame ``a`` (a stretch's last) to ``b``
     (the next one's first), the offsets from the walk at the two ends ``drift`` apart: at most
-    ``unseen_s`` long, in one stretch of walk, landing within ``unseen_m`` (+ 15 % of the walk)
-    of where the next stretch starts."""
+    ``unseen_s`` long, in one stretch of walk, landing within ``unseen_m`` (+ 15 % of the
+    distance walked) of where the next stretch starts.
+
+    Dead reckoning drifts with the distance walked (each step's length and heading err), not
+    with how far the walk ends from where it began: a detour out of view that comes back near
+    where it left (PETS footage with phones: P06's 7 s away, 9.2 m walked, 6.6 m from its
+    start) drifts as its 9.2 m do."""
     return bool(
         t[b] - t[a] <= cfg.unseen_s
         and seg[a] == seg[b]
-        and drift <= cfg.unseen_m + 0.15 * abs(walk[b] - walk[a])
+        and drift <= cfg.unseen_m + 0.15 * float(np.abs(np.diff(walk[a : b + 1])).sum())
     )
 
 
@@ -1986,7 +1991,7 @@ class _Follower:
         # the first of equals: the search's own path
         best, found = min(weighed, key=lambda w: w[0]) if adopt else weighed[0]
         near = [o for c, o in weighed if o is not found and c - best <= cfg.ambiguity_margin]
-        alike = [o for o in near if _alike(o, found, ALIKE)]
+        alike = [o for o in near if _alike(o, found, ALIKE, self.acfg.lag_step_s)]
         found = _filled(found, alike, self.dt, cfg.min_stretch_s)
         xy, grouped, disputed = _settle_disputes(found.xy, [o.xy for o in near], cfg.gate_m)
         if not disputed and not grouped:
@@ -2004,13 +2009,17 @@ class _Follower:
 
 ALIKE = 0.15
 """Two alignments of a phone are one (:func:`_alike`) where they differ by at most this share
-of the alignment (scale 15 %, or yaw 8.6 deg), with the same clock offset."""
+of the alignment (scale 15 %, or yaw 8.6 deg), with clock offsets at most one step of the
+refit's grid apart."""
 
 
-def _alike(a: PhoneTrack, b: PhoneTrack, share: float) -> bool:
-    """``a`` and ``b`` are one alignment refined twice: the same lag, and ``a`` within
-    ``share`` of ``b`` (:data:`ALIKE`) over the median frame where both are known."""
-    if abs(a.lag_s - b.lag_s) > 1e-6:
+def _alike(a: PhoneTrack, b: PhoneTrack, share: float, lag_step_s: float) -> bool:
+    """``a`` and ``b`` are one alignment refined twice: clock offsets at most ``lag_step_s``
+    apart (neighbours on the refit's grid, :attr:`AlignConfig.lag_step_s`: the true offset lies
+    between them, and the refit cannot tell them apart by more than a few units of cost), and
+    ``a`` within ``share`` of ``b`` (:data:`ALIKE`) over the median frame where both are
+    known."""
+    if abs(a.lag_s - b.lag_s) > lag_step_s + 1e-6:
         return False
     rel = np.abs(a.a - b.a) / np.maximum(np.abs(b.a), 1e-9)
     rel = rel[np.isfinite(rel)]
