@@ -1111,7 +1111,7 @@ def _turned_gaps(
         if t[b] - t[a] < TURN_GAP_S or not all(k in pos for k in (a, b, b - 1)):
             continue
         d = walk[b] - walk[a]
-        length = float(np.abs(np.diff(walk[a : b + 1])).sum())
+        length = _walked(walk, a, b)
         if length < 2.0 or abs(d) < 0.5 * length:
             continue
         c = (xy[pos[b]] - xy[pos[a]]) / d
@@ -1392,8 +1392,13 @@ def _bridged(
     return bool(
         t[b] - t[a] <= cfg.unseen_s
         and seg[a] == seg[b]
-        and drift <= cfg.unseen_m + 0.15 * float(np.abs(np.diff(walk[a : b + 1])).sum())
+        and drift <= cfg.unseen_m + 0.15 * _walked(walk, a, b)
     )
+
+
+def _walked(walk: np.ndarray, a: int, b: int) -> float:
+    """The distance the walk (complex positions per frame) covers from frame ``a`` to ``b``."""
+    return float(np.abs(np.diff(walk[a : b + 1])).sum())
 
 
 def _evidence(
