@@ -44,6 +44,7 @@ from trackctl.vmtrack.retrack import (
     _settle_disputes,
     _shared,
     _step_costs,
+    _through_gaps,
     _turned_gaps,
     _untwinned,
     _viterbi_path,
@@ -1361,3 +1362,54 @@ def test_a_gap_out_of_view_is_filled_by_the_walk_turned_onto_both_ends():
     off = back[seen] - walk_back[seen]
     line = walk_back + np.interp(every, seen, off.real) + 1j * np.interp(every, seen, off.imag)
     np.testing.assert_array_equal(_turned_gaps(every, line, seen, walk_back, t), line)
+
+
+def _gap_scene(stranger: tuple[int, int] | None, unseen: tuple[int, int] = (60, 76)):
+    """A carrier (seed 1's first walker, 60 s) whose phone's heading is 35 deg off for 5 s
+    from frame 60 (a yaw settling after a carry change); with ``stranger`` (first frame, last
+    frame + 1), the carrier is undetected over ``unseen`` (frames 60-75) and a stranger walks
+    1.2 m beside them over those frames. Returns the follower (alignment known: no refit), the
+    phone's path, the carrier and the frames of the path's gap."""
+    frame_t, points, people = _scene(1, n_people=6, seconds=60.0)
+    carrier, n = people[0], len(frame_t)
+    yaw = np.zeros(n)
+    yaw[60:75] = 35.0
+    phone = _phone(carrier, frame_t, yaw)
+    points = [p.copy() for p in points]
+    if stranger:
+        for k in range(*unseen):
+            points[k] = points[k][np.hypot(*(points[k] - carrier[k]).T) > 0.9]
+        for k in range(*stranger):
+            points[k] = np.vstack([points[k], carrier[k] + (0.0, 1.2)])
+    cfg = dataclasses.replace(CFG, min_evidence=None)
+    grid = SiteGrid(points, cfg.cell_m).with_visits(points, cfg)
+    follow = _Follower(frame_t, points, {"m": phone}, grid, AlignConfig(), cfg, True)
+    found = follow("m", 0.0, np.ones(n, complex), False, None)
+    assert found is not None
+    gap = [k for k in range(55, 80) if k in found.xy and k not in found.seen]
+    return follow, found, carrier, gap
+
+
+def test_a_gap_the_phones_walk_strays_in_is_published_on_the_carriers_detections():
+    follow, found, carrier, gap = _gap_scene(None)
+    # the path leaves the carrier where the walk strays, and the gap is published on the walk
+    assert gap and max(math.dist(found.xy[k], carrier[k]) for k in gap) > 1.0
+    out = _through_gaps(follow, "m", found, {})
+    assert max(math.dist(out.xy[k], carrier[k]) for k in gap) < 0.7
+    assert out.seen == found.seen
+    assert {k: p for k, p in out.xy.items() if k not in gap} == {
+        k: p for k, p in found.xy.items() if k not in gap
+    }
+    # a detection another phone's carrier is seen on is not taken
+    held = {k: [tuple(carrier[k])] for k in gap}
+    assert _through_gaps(follow, "m", found, held).xy == found.xy
+
+
+@pytest.mark.parametrize("stranger", [(66, 73), (58, 78)], ids=["met-in-the-gap", "beside"])
+def test_a_stranger_in_a_gap_the_carrier_is_unseen_in_is_not_taken(stranger):
+    # met in the gap: the stranger's detections join neither end of it; beside: they do, but
+    # the stranger was detected beside the carrier at its ends, and continues their own
+    follow, found, carrier, gap = _gap_scene(stranger)
+    assert gap
+    out = _through_gaps(follow, "m", found, {})
+    assert all(out.xy[k] == found.xy[k] for k in gap)

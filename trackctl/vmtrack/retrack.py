@@ -125,6 +125,12 @@ class RetrackConfig:
     """Gaps up to ``unseen_s`` between two stretches are published on the phone's walk when
     it lands within ``unseen_m`` (+ 15 % of the distance walked) of the next stretch, the
     misfit spread over the gap (docs/vmtrack.md, Parameters)."""
+    gap_walk_sigma_mps: float | None = 0.5
+    """The random walk, m per sqrt(s), of the carrier about the phone's walk within a published
+    gap (a fill or a bridge between two seen frames): the gap is tracked again over the
+    detections, pinned to the carrier at both ends, and published on the detections that path
+    is on (:func:`_through_gaps`). None: a gap is published on the phone's walk alone
+    (docs/vmtrack.md, Parameters)."""
     twin_share: float | None = 0.6
     """A stretch another walker moves with at a steady offset over the gate in this share of
     its frames (most of them: real detections miss and merge), which the phone's walk ties to
@@ -1517,7 +1523,173 @@ def retrack(
     if cfg.exclusive:
         _exclusive(follow, out, final)
         _off_others(follow, out, final)
+    _all_through_gaps(follow, out)
     return out
+
+
+def _held_by_others(out: Retracked, mid: str) -> dict[int, list[tuple[float, float]]]:
+    """Per frame, where the other phones' carriers are seen (their detections)."""
+    held: dict[int, list[tuple[float, float]]] = {}
+    for other, found in out.items():
+        if other != mid:
+            for k in found.seen:
+                held.setdefault(k, []).append(found.xy[k])
+    return held
+
+
+def _gaps(found: PhoneTrack) -> list[tuple[int, int]]:
+    """The (last seen frame, next seen frame) around each run of at least two published
+    frames that are not seen (fills and bridges)."""
+    ks = np.array(sorted(k for k in found.xy if k not in found.seen), dtype=np.int64)
+    if not len(ks):
+        return []
+    runs = np.split(ks, np.flatnonzero(np.diff(ks) > 1) + 1)
+    return [
+        (int(r[0]) - 1, int(r[-1]) + 1)
+        for r in runs
+        if len(r) >= 2 and int(r[0]) - 1 in found.seen and int(r[-1]) + 1 in found.seen
+    ]
+
+
+def _all_through_gaps(follow: _Follower, out: Retracked) -> None:
+    """Each phone's published gaps tracked again (:func:`_through_gaps`), in place; nothing
+    when :attr:`RetrackConfig.gap_walk_sigma_mps` is None."""
+    if follow.cfg.gap_walk_sigma_mps is None:
+        return
+    for mid, found in out.items():
+        out[mid] = _through_gaps(follow, mid, found, _held_by_others(out, mid))
+
+
+def _through_gaps(
+    follow: _Follower, mid: str, found: PhoneTrack, held: dict[int, list[tuple[float, float]]]
+) -> PhoneTrack:
+    """``found`` with each published gap between two seen frames tracked again over the
+    detections (those no other phone's carrier is seen on, ``held``): a Viterbi path from the
+    carrier's position before the gap to theirs after it, moving with the phone's walk and a
+    random walk of ``gap_walk_sigma_mps``; where that path is on a detection (``gate_m``) that
+    joins an end of the gap (:func:`_linked`), the gap is published there (the offsets from
+    the walk smoothed as on seen frames, linear between).
+
+    The whole log's path walks ``walk_sigma_mps`` about the phone's walk: tight, so that it
+    does not ride strangers. But a phone's walk errs by a drift over a few seconds (a heading
+    lagging a turn, a yaw settling after a carry change), not by a diffusion, and where the
+    carrier's detections stray from it by more than the tight walk reaches, the path leaves
+    them and the gap is published on the walk, 1-2 m off (PETS footage with phones, `h` seed 2:
+    P06 after a carry change, detected 0.2-0.7 m from her truth for 6 s, published 1.3-1.9 m
+    off). Within a gap, both ends are the carrier's; a looser walk pinned to them reaches the
+    carrier's detections, and cannot wander farther than the gap's length allows."""
+    gaps = _gaps(found)
+    if not gaps or follow.cfg.gap_walk_sigma_mps is None:
+        return found
+    u = _displacements(follow.frame_t, follow.walks[mid], found.lag_s, found.a)
+    walk = np.cumsum(np.nan_to_num(u, nan=0.0))
+    t = follow.frame_t / 1e9
+    xy = dict(found.xy)
+    for a, b in gaps:
+        ks = np.arange(a, b + 1)
+        if np.isnan(u[ks[1:]]).any():
+            continue
+        on = _gap_on(follow, ks, u, xy, held)
+        if not on:
+            continue
+        on[a], on[b] = xy[a], xy[b]
+        at = np.array(sorted(on), dtype=np.int64)
+        hits = {k: np.asarray(on[k], float) for k in at}
+        smooth = _smoothed_offsets(at, hits, walk, t, np.zeros(len(walk), int), follow.cfg.smooth_s)
+        smooth[0], smooth[-1] = complex(*on[a]) - walk[a], complex(*on[b]) - walk[b]
+        off = np.interp(ks, at, smooth.real) + 1j * np.interp(ks, at, smooth.imag)
+        # what the path did not reach is walked as publication walks a gap (turned, over 2 s)
+        placed = _turned_gaps(ks, walk[ks] + off, at, walk, t)
+        for k, p in zip(ks[1:-1], placed[1:-1], strict=True):
+            xy[int(k)] = (float(p.real), float(p.imag))
+    return replace(found, xy=xy)
+
+
+def _gap_on(
+    follow: _Follower,
+    ks: np.ndarray,
+    u: np.ndarray,
+    xy: dict[int, tuple[float, float]],
+    held: dict[int, list[tuple[float, float]]],
+) -> dict[int, tuple[float, float]]:
+    """The detections the second path of the gap ``ks`` (its ends seen frames, ``xy`` the
+    carrier's positions there) is on, where they join an end (:func:`_through_gaps`)."""
+    cfg, grid = follow.cfg, follow.grid
+    assert cfg.gap_walk_sigma_mps is not None
+    steps = _step_costs(grid.cell, follow.dt, cfg, cfg.gap_walk_sigma_mps)
+    a, b = int(ks[0]), int(ks[-1])
+    points = [_free(follow.points[int(k)], held.get(int(k), []), cfg.gate_m) for k in ks]
+    emissions = [grid.emission(p, cfg.det_sigma_m, cfg.miss_cost) for p in points]
+    # pinned to the carrier at both ends
+    emissions[0] = grid.emission(np.array([xy[a]]), cfg.det_sigma_m, float(_BIG))
+    emissions[-1] = grid.emission(np.array([xy[b]]), cfg.det_sigma_m, float(_BIG))
+    us = u[ks].copy()
+    us[0] = 0j
+    path = grid.xy(_viterbi_path(grid, emissions, us, steps))
+    on: dict[int, tuple[float, float]] = {}
+    for i in range(1, len(ks) - 1):
+        j = _nearest(points[i], path[i], cfg.gate_m)
+        if j is not None:
+            on[int(ks[i])] = (float(points[i][j][0]), float(points[i][j][1]))
+    ends = ((xy[a], follow.points[a]), (xy[b], follow.points[b]))
+    frames = dict(zip((int(k) for k in ks), points, strict=True))
+    return {k: on[k] for k in _linked(on, ks, follow.frame_t / 1e9, ends, frames)}
+
+
+GAP_LINK_S = 1.0
+"""A gap's path is published on the detections it is on (:func:`_through_gaps`) only where
+they join one of the gap's ends without a miss longer than this: where the carrier leaves the
+view in the gap, a stranger the path finds later is not theirs."""
+
+
+def _linked(
+    on: dict[int, tuple[float, float]],
+    ks: np.ndarray,
+    t: np.ndarray,
+    ends: tuple[tuple[tuple[float, float], np.ndarray], ...],
+    frames: dict[int, np.ndarray],
+) -> list[int]:
+    """The frames of ``on`` (detections within the gap ``ks``) reached from either end through
+    frames of ``on`` at most :data:`GAP_LINK_S` apart, each continuing the one before it, and
+    the first the carrier's detection at the end (:func:`_continues`; ``ends``: the carrier's
+    position and the frame's detections at the first and at the last frame; ``frames``: the
+    detections of each frame of the gap): a walker beside the carrier, detected with them,
+    whom the path moves onto where the carrier is missed, is not the carrier."""
+    out: set[int] = set()
+    for order, (anchor, there) in zip((ks, ks[::-1]), ends, strict=True):
+        last = float(t[order[0]])
+        for k in order[1:-1]:
+            if abs(t[k] - last) > GAP_LINK_S:
+                break
+            if int(k) not in on:
+                continue
+            if not _continues(anchor, there, on[int(k)], frames[int(k)]):
+                break
+            out.add(int(k))
+            last, anchor, there = float(t[k]), on[int(k)], frames[int(k)]
+    return sorted(out)
+
+
+def _continues(
+    anchor: tuple[float, float], there: np.ndarray, nxt: tuple[float, float], here: np.ndarray
+) -> bool:
+    """Whether detection ``nxt`` (one of ``here``) continues the carrier's at ``anchor``: the
+    detection of the anchor's frame (``there``) nearest the anchor and ``nxt`` are each the
+    other's nearest in its frame (mutual nearest neighbours, the association's test)."""
+    if not len(there) or not len(here):
+        return True
+    mine = there[int(np.argmin(np.hypot(*(there - np.asarray(anchor)).T)))]
+    back = there[int(np.argmin(np.hypot(*(there - np.asarray(nxt)).T)))]
+    ahead = here[int(np.argmin(np.hypot(*(here - mine).T)))]
+    return bool(np.array_equal(back, mine) and np.allclose(ahead, nxt))
+
+
+def _free(points: np.ndarray, held: list[tuple[float, float]], gate_m: float) -> np.ndarray:
+    """``points`` without those within ``gate_m`` of a position in ``held``."""
+    if not held or not len(points):
+        return points
+    d = np.hypot(*(points[:, None, :] - np.asarray(held)[None, :, :]).transpose(2, 0, 1))
+    return points[(d > gate_m).all(axis=1)]
 
 
 def _first_path(
