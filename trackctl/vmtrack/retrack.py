@@ -1676,12 +1676,11 @@ def _continues(
     """Whether detection ``nxt`` (one of ``here``) continues the carrier's at ``anchor``: the
     detection of the anchor's frame (``there``) nearest the anchor and ``nxt`` are each the
     other's nearest in its frame (mutual nearest neighbours, the association's test)."""
-    if not len(there) or not len(here):
+    mine, back = _nearest(there, anchor, math.inf), _nearest(there, nxt, math.inf)
+    if mine is None or back is None or not len(here):
         return True
-    mine = there[int(np.argmin(np.hypot(*(there - np.asarray(anchor)).T)))]
-    back = there[int(np.argmin(np.hypot(*(there - np.asarray(nxt)).T)))]
-    ahead = here[int(np.argmin(np.hypot(*(here - mine).T)))]
-    return bool(np.array_equal(back, mine) and np.allclose(ahead, nxt))
+    ahead = _nearest(here, there[mine], math.inf)
+    return back == mine and ahead is not None and bool(np.allclose(here[ahead], nxt))
 
 
 def _free(points: np.ndarray, held: list[tuple[float, float]], gate_m: float) -> np.ndarray:
