@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -15,18 +16,23 @@ S = 1_000_000_000
 
 
 def _walk(
-    attitudes: list[tuple[float, Rotation]], hz: float = 50.0, cadence: float = 1.8
+    attitudes: list[tuple[float, Rotation]],
+    hz: float = 50.0,
+    cadence: float = 1.8,
+    level: Callable[[float], tuple[float, float]] | None = None,
 ) -> PhoneMotion:
     """A phone walked at ``cadence`` steps/s for each (seconds, device-to-world rotation) in
     turn, heading east; the world specific force (gravity + step bounce, and the one-leg stride
-    at half the step rate) seen in the device frame."""
+    at half the step rate, with ``level(t)``'s horizontal acceleration of the body) seen in the
+    device frame."""
     phone = PhoneMotion("m1")
     t0 = 0.0
     for secs, rot in attitudes:
         for k in range(int(secs * hz)):
             t = t0 + k / hz
             ph = 2 * math.pi * cadence * t
-            world = np.array([0.0, 0.0, G + 2.0 * math.sin(ph) + 0.8 * math.sin(ph / 2)])
+            ax, ay = level(t) if level is not None else (0.0, 0.0)
+            world = np.array([ax, ay, G + 2.0 * math.sin(ph) + 0.8 * math.sin(ph / 2)])
             a = rot.inv().apply(world)
             x, y, z, w = rot.as_quat()
             phone.add(
@@ -111,3 +117,41 @@ def test_without_an_orientation_the_step_is_read_on_the_vertical_not_the_norm() 
         phone.add(Imu(t_ns=int(round(t * S)), frame_id="phone/m1", accel_mps2=Vec3(*map(float, a))))
     phone.finish()
     assert np.median(phone.speed) / phone.config.step_length_m == pytest.approx(cadence, abs=0.05)
+
+
+def _turned(deg: float) -> Rotation:
+    """The pocket attitude turned by ``deg`` about the world's vertical."""
+    return Rotation.from_euler("z", deg, degrees=True) * POCKET
+
+
+def test_a_phone_put_back_in_its_pocket_the_other_way_round_changes_carry() -> None:
+    # the same attitude before and after ("up" unchanged): only the heading tells, turning by
+    # 160 deg from one sample to the next, which no walker's body does
+    for hz in (5.0, 50.0):
+        phone = _walk([(30.0, POCKET), (30.0, _turned(160.0))], hz=hz)
+        changes = phone.carry_changes / S
+        assert len(changes) == 1
+        assert abs(changes[0] - 30.0) < 0.5
+
+
+def test_a_walker_who_turns_back_at_once_does_not_change_carry() -> None:
+    # a path reversed at once (as simulated paths reverse; no walker does), the phone turning
+    # with it: the body's velocity swings from +1.26 to -1.26 m/s east, which the accelerometer
+    # feels (-12.6 m/s^2 for 0.2 s), so the heading's turn is the walk's, not the phone's
+    def back(t: float) -> tuple[float, float]:
+        return (-12.6, 0.0) if 30.0 <= t < 30.2 else (0.0, 0.0)
+
+    for hz in (5.0, 50.0):
+        phone = _walk([(30.0, POCKET), (30.0, _turned(180.0))], hz=hz, level=back)
+        assert len(phone.carry_changes) == 0
+        # without the body's swing, the same turn is the phone's
+        alone = _walk([(30.0, POCKET), (30.0, _turned(180.0))], hz=hz)
+        assert len(alone.carry_changes) == 1
+
+
+def test_a_walker_turning_round_does_not_change_carry() -> None:
+    # an about-turn while walking: 180 deg over 1.5 s (120 deg/s), the phone kept in its pocket
+    turn = [(0.1, _turned(12.0 * (i + 1))) for i in range(15)]
+    for hz in (5.0, 50.0):
+        phone = _walk([(30.0, POCKET), *turn, (30.0, _turned(180.0))], hz=hz)
+        assert len(phone.carry_changes) == 0

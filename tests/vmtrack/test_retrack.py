@@ -44,6 +44,7 @@ from trackctl.vmtrack.retrack import (
     _settle_disputes,
     _shared,
     _step_costs,
+    _through_ends,
     _through_gaps,
     _turned_gaps,
     _untwinned,
@@ -1413,3 +1414,49 @@ def test_a_stranger_in_a_gap_the_carrier_is_unseen_in_is_not_taken(stranger):
     assert gap
     out = _through_gaps(follow, "m", found, {})
     assert all(out.xy[k] == found.xy[k] for k in gap)
+
+
+def _silent_scene(hide_from: int | None = None):
+    """Seed 1's first walker (60 s at 3 fps, 180 frames) with a phone whose samples span frames
+    30-149 only (its clock off by seconds: the camera's log runs on without it); with
+    ``hide_from``, the carrier is undetected from that frame on. Returns the follower, the
+    phone's path and the carrier."""
+    frame_t, points, people = _scene(1, n_people=6, seconds=60.0)
+    carrier = people[0]
+    points = [p.copy() for p in points]
+    if hide_from is not None:
+        for k in range(hide_from, len(points)):
+            points[k] = points[k][np.hypot(*(points[k] - carrier[k]).T) > 0.9]
+    phone = _phone(carrier[30:150], frame_t[30:150], 0.0)
+    cfg = dataclasses.replace(CFG, min_evidence=None)
+    grid = SiteGrid(points, cfg.cell_m).with_visits(points, cfg)
+    follow = _Follower(frame_t, points, {"m": phone}, grid, AlignConfig(), cfg, True)
+    found = follow("m", 0.0, np.ones(len(frame_t), complex), False, None)
+    assert found is not None
+    return follow, found, carrier
+
+
+def test_a_carrier_seen_to_where_the_phone_falls_silent_is_carried_on_their_detections():
+    follow, found, carrier = _silent_scene()
+    assert not any(k < 30 or k >= 150 for k in found.xy)
+    out = _through_ends(follow, "m", found, {})
+    added = sorted(set(out.xy) - set(found.xy))
+    # both ends, each frame on a detection of the carrier (the scene's noise is 0.3 m), for 5 s
+    # and more: the chains stop where another walker comes within 1 m of the carrier (frames
+    # 3-4 and 166-167 of this scene), where the detections alone cannot tell the two apart
+    assert sum(k < 30 for k in added) >= 15 and sum(k >= 150 for k in added) >= 15
+    assert all(math.dist(out.xy[k], carrier[k]) < 1.2 for k in added)
+    assert set(added) <= out.seen
+    assert {k: out.xy[k] for k in found.xy} == found.xy
+    # a detection another phone's carrier is seen on is not taken
+    held = {k: [tuple(carrier[k])] for k in range(150, 180)}
+    assert not any(k >= 150 for k in _through_ends(follow, "m", found, held).xy)
+
+
+def test_a_carrier_unseen_before_the_phone_falls_silent_is_not_carried_on():
+    # the carrier is undetected from 5 s before the phone's last sample: whoever is seen after
+    # it is not known to be them
+    follow, found, carrier = _silent_scene(hide_from=135)
+    assert max(found.seen) < 135
+    out = _through_ends(follow, "m", found, {})
+    assert not any(k >= 150 for k in out.xy)

@@ -56,6 +56,23 @@ class MotionConfig:
     "up" direction, in the device's own frame, turns by more than this between the
     ``attitude_window_s`` before and after: its heading offset from the walk is new there."""
     attitude_window_s: float = 2.0
+    flip_deg: float = 120.0
+    """The phone was turned in its carry (put back in a pocket the other way round) where its
+    heading turns by more than this within ``flip_window_s`` (400 deg/s held over the
+    window) while it walks on: faster than a walker turns (an about-turn while walking takes
+    a second or more), and unseen by ``attitude_change_deg`` when the phone goes back in the
+    same attitude (a yaw the alignment fitted before it is wrong after it: PETS footage with
+    phones, `n` seed 2, a front-pocket phone turned by 138 deg and 161 deg, lost its carrier
+    for 51 s)."""
+    flip_window_s: float = 0.3
+    flip_walk_s: float = 1.0
+    """A flip counts only where the phone walks for this long before and after it."""
+    flip_dv_share: float = 1 / 3
+    """...and where the body's velocity changed over that time by less than this share of
+    what the turn needs of a walk (:meth:`PhoneMotion._flips`): the PDR's speed may be half
+    off (an unknown step, a 3 s cadence window), and the walk's own turns within the window
+    add some (PETS footage with phones: phones turned in their pockets 0.10-0.29 of it, paths
+    that reverse 0.9-1.3, a simulated walker's corner 0.43)."""
 
 
 class PhoneMotion:
@@ -111,27 +128,38 @@ class PhoneMotion:
         # "up" in the device frame: the orientation's world z, else the mean specific force
         up = acc / np.maximum(np.linalg.norm(acc, axis=1, keepdims=True), 1e-9)
         axis = np.zeros(len(t), int)
+        # the horizontal specific force in the world frame (the body's acceleration)
+        level = np.full((len(t), 2), np.nan)
         if known.any():
             rot = Rotation.from_quat(quat[known]).as_matrix()  # device -> world, (n, 3, 3)
             vert[known] = np.einsum("nj,nj->n", rot[:, 2, :], acc[known]) - G
+            level[known] = np.einsum("nij,nj->ni", rot[:, :2, :], acc[known])
             heading[known], axis[known] = self._axis_heading(ts[known], rot)
             up[known] = rot[:, 2, :]
-        self.carry_changes = t[self._carry_changes(ts, up, axis)]
+        speed = self._speeds(ts, vert, rate)
+        # a heading only while walking on for a second each side: one that stops or starts
+        # turns where its walk does (a path reversed on the spot)
+        n = max(1, int(round(2 * self.config.flip_walk_s * rate))) | 1
+        walking = pd.Series(speed > 0).rolling(n, center=True, min_periods=1).min().to_numpy()
+        flips = self._flips(ts, np.where(walking > 0, heading, np.nan), speed, level)
+        self.carry_changes = t[self._carry_changes(ts, up, axis, flips)]
         if np.isnan(heading).any():
             gz = np.asarray(self._gyro_z)
             integrated = np.concatenate(([0.0], np.cumsum(np.diff(ts) * gz[1:])))
             heading = np.where(np.isnan(heading), integrated, heading)
-        speed = self._speeds(ts, vert, rate)
         self.t_ns = t
         self.heading = heading
         self.speed = speed
         self.v = np.column_stack([speed * np.cos(heading), speed * np.sin(heading)])
         self._t, self._acc, self._quat, self._gyro_z = [], [], [], []
 
-    def _carry_changes(self, ts: np.ndarray, up: np.ndarray, axis: np.ndarray) -> np.ndarray:
-        """Sample indices where the phone changed carry: its heading axis changed, or its
+    def _carry_changes(
+        self, ts: np.ndarray, up: np.ndarray, axis: np.ndarray, flips: np.ndarray
+    ) -> np.ndarray:
+        """Sample indices where the phone changed carry: its heading axis changed, its
         device-frame "up" (``up``, (n, 3) unit vectors) turned by more than
-        ``attitude_change_deg`` between the windows before and after (one index per change)."""
+        ``attitude_change_deg`` between the windows before and after, or it was turned in
+        its carry (``flips``, per sample: :meth:`_flips`); one index per change."""
         cfg = self.config
         if len(ts) < 3:
             return np.empty(0, int)
@@ -148,9 +176,39 @@ class PhoneMotion:
         # a window cut short by the log's start or end compares a few samples: no evidence
         moved &= (ts >= ts[0] + half) & (ts <= ts[-1] - half)
         moved[1:] |= axis[1:] != axis[:-1]
+        moved |= flips
         # one change per run of flagged samples: its middle
         edges = np.flatnonzero(np.diff(np.r_[0, moved.astype(np.int8), 0]))
         return ((edges[0::2] + edges[1::2] - 1) // 2).astype(int)
+
+    def _flips(
+        self, ts: np.ndarray, heading: np.ndarray, speed: np.ndarray, level: np.ndarray
+    ) -> np.ndarray:
+        """Samples where the phone was turned in its carry: its heading (NaN where unknown or
+        standing: a standing phone's heading says nothing of a walk) is more than
+        ``flip_deg`` from that of the first sample within ``flip_window_s`` before (the sample
+        before, at least), and the body did not turn with it. A walker who turns by theta at
+        speed v changes velocity by 2 v sin(theta / 2), which the accelerometer feels (the
+        horizontal specific force ``level``, world frame, integrated over ``flip_walk_s``
+        either side): a turn that changes it by much less (``flip_dv_share``) is the phone's,
+        not the walk's (a simulated path that reverses in a fraction of a second turns as fast)."""
+        cfg = self.config
+        k = np.arange(len(ts))
+        lo = np.maximum(np.minimum(np.searchsorted(ts, ts - cfg.flip_window_s), k - 1), 0)
+        turn = np.abs(np.angle(np.exp(1j * (heading - heading[lo]))))
+        close = ts - ts[lo] <= cfg.flip_window_s + 1e-6
+        out = (np.nan_to_num(turn, nan=0.0) > math.radians(cfg.flip_deg)) & close
+        if not out.any():
+            return out
+        a = np.nan_to_num(level[:, 0] + 1j * level[:, 1])
+        v = np.r_[0, np.cumsum(np.diff(ts) * (a[1:] + a[:-1]) / 2)]  # velocity change so far
+        w = cfg.flip_walk_s
+        ks = np.flatnonzero(out)
+        dv = np.interp(ts[ks] + w, ts, v.real) - np.interp(ts[ks] - w, ts, v.real)
+        dv = dv + 1j * (np.interp(ts[ks] + w, ts, v.imag) - np.interp(ts[ks] - w, ts, v.imag))
+        need = 2 * speed[ks] * np.sin(turn[ks] / 2)
+        out[ks] = np.abs(dv) < cfg.flip_dv_share * need
+        return out
 
     def _axis_heading(self, ts: np.ndarray, rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Heading (rad) of the device axis that lies most level over a centred window: the

@@ -1524,6 +1524,7 @@ def retrack(
         _exclusive(follow, out, final)
         _off_others(follow, out, final)
     _all_through_gaps(follow, out)
+    _all_through_ends(follow, out)
     return out
 
 
@@ -1681,6 +1682,100 @@ def _continues(
         return True
     ahead = _nearest(here, there[mine], math.inf)
     return back == mine and ahead is not None and bool(np.allclose(here[ahead], nxt))
+
+
+def _all_through_ends(follow: _Follower, out: Retracked) -> None:
+    """Each phone's carrier followed over the detections beyond the phone's samples
+    (:func:`_through_ends`), in place."""
+    for mid, found in out.items():
+        out[mid] = _through_ends(follow, mid, found, _held_by_others(out, mid))
+
+
+def _through_ends(
+    follow: _Follower, mid: str, found: PhoneTrack, held: dict[int, list[tuple[float, float]]]
+) -> PhoneTrack:
+    """``found`` carried along the detections that continue the carrier's (:func:`_chain`:
+    mutual nearest neighbours, no miss over :data:`GAP_LINK_S`) before the phone's first
+    sample and after its last, where the carrier is seen up to that edge.
+
+    A phone's samples need not span the camera's log: its clock is off by seconds (PETS
+    footage with phones: a phone whose clock runs 1.6 s ahead has no walk for the log's last
+    1.6 s, and its carrier, seen to the last frame, went unnamed there). Where the phone says
+    nothing, the detections alone carry the identity, as the visual tracker carries it
+    through a phone's silence: the person the phone was bound to at its edge is the one who
+    walks on from there."""
+    u = _displacements(follow.frame_t, follow.walks[mid], found.lag_s, found.a)
+    walks = np.flatnonzero(~np.isnan(u))
+    if not len(walks) or not found.seen:
+        return found
+    n, t = len(u), follow.frame_t / 1e9
+    # the phone's first frame is a restart (no step into it) but has its walk
+    first, last = int(walks[0]) - 1, int(walks[-1])
+    xy, seen = dict(found.xy), set(found.seen)
+    for edge, bound, order in (
+        (min(found.seen), first, np.arange(min(found.seen) - 1, -1, -1)),
+        (max(found.seen), last, np.arange(max(found.seen) + 1, n)),
+    ):
+        # a phone silent there, and its carrier seen up to where it falls silent
+        if not 0 < bound < n - 1 or abs(t[edge] - t[bound]) > GAP_LINK_S:
+            continue
+        v = _edge_velocity(found.xy, edge, int(order[0]) - edge, t)
+        for k, p in _chain(follow, edge, (np.asarray(xy[edge]), v), order, held).items():
+            if k < first or k > last:
+                xy[k] = p
+                seen.add(k)
+    return replace(found, xy=xy, seen=seen)
+
+
+def _edge_velocity(
+    xy: dict[int, tuple[float, float]], edge: int, way: int, t: np.ndarray
+) -> np.ndarray:
+    """The published track's velocity (m/s) into frame ``edge`` over the :data:`GAP_LINK_S`
+    before it, in the direction of time ``way`` (+1: forwards, -1: backwards); zero when
+    nothing is published there."""
+    inner = [k for k in xy if 0 < (edge - k) * way and abs(t[k] - t[edge]) <= GAP_LINK_S]
+    k0 = max(inner, key=lambda k: abs(k - edge), default=edge)
+    return np.subtract(xy[edge], xy[k0]) / max(abs(t[edge] - t[k0]), 1e-9)
+
+
+CHAIN_GAIN = 0.3
+"""How much each detection taken moves a chain's velocity (:func:`_chain`): an average over
+the last few, steadier than one frame's step through the detections' scatter."""
+
+
+def _chain(
+    follow: _Follower,
+    edge: int,
+    start: tuple[np.ndarray, np.ndarray],
+    order: np.ndarray,
+    held: dict[int, list[tuple[float, float]]],
+) -> dict[int, tuple[float, float]]:
+    """The detections (free of other carriers', ``held``) that continue the carrier's at frame
+    ``edge`` over the frames ``order``; ``start``: their position there and velocity (m/s, in
+    the order's direction of time). Each is the nearest, within ``gate_m``, to where the one
+    before it moves at that velocity, and its mutual nearest neighbour there
+    (:func:`_continues`, the frame before moved alike); no miss longer than
+    :data:`GAP_LINK_S`."""
+    t = follow.frame_t / 1e9
+    gate = follow.cfg.gate_m
+    (anchor, v), there, last = start, follow.points[edge], float(t[edge])
+    out: dict[int, tuple[float, float]] = {}
+    for k in order.tolist():
+        dt = abs(t[k] - last)
+        if dt > GAP_LINK_S:
+            break
+        here = _free(follow.points[k], held.get(k, []), gate)
+        ahead = anchor + v * dt
+        j = _nearest(here, ahead, gate)
+        if j is None:
+            continue
+        nxt = (float(here[j][0]), float(here[j][1]))
+        if not _continues((float(ahead[0]), float(ahead[1])), there + v * dt, nxt, here):
+            break
+        out[k] = nxt
+        v = (1 - CHAIN_GAIN) * v + CHAIN_GAIN * (here[j] - anchor) / dt
+        anchor, there, last = here[j], here, float(t[k])
+    return out
 
 
 def _free(points: np.ndarray, held: list[tuple[float, float]], gate_m: float) -> np.ndarray:
