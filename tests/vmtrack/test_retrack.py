@@ -351,6 +351,23 @@ def test_a_trusted_phones_clock_offset_is_walked_downhill_to_its_carriers(true_l
     assert _share_on(checked.xy, people[3], n) >= 0.9
 
 
+def test_a_trusted_phone_whose_path_belies_its_identity_is_searched():
+    # the identity names the phone's carrier, but its alignment's yaw is 180 deg off: the path
+    # followed from it walks away from the carrier, so the phone is searched as well
+    frame_t, points, people = _scene(2)
+    n = len(frame_t)
+    phone = _phone(people[3], frame_t, 40.0)
+    wrong = (0.0, np.full(n, np.exp(1j * math.radians(40.0 + 180.0))))
+    out = retrack(frame_t, points, {"m": phone}, {"m": wrong}, AlignConfig(), CFG, trusted={"m": n})
+    assert out.searched == ["m"]
+    assert _share_on(out["m"].xy, people[3], n) > 0.9
+    # from its right alignment it is followed, not searched
+    right = (0.0, np.full(n, np.exp(1j * math.radians(40.0))))
+    out = retrack(frame_t, points, {"m": phone}, {"m": right}, AlignConfig(), CFG, trusted={"m": n})
+    assert out.searched == []
+    assert _share_on(out["m"].xy, people[3], n) > 0.9
+
+
 @pytest.mark.parametrize(
     "yaw",  # one yaw by default; the others under -m slow (7 s each on one core)
     [

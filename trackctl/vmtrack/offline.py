@@ -135,13 +135,14 @@ def offline_stages(
     return Offline(plan, ids, retracked)
 
 
-def _trusted(ids: Identities, share: float | None) -> set[str]:
+def _trusted(ids: Identities, share: float | None) -> dict[str, int]:
     """The phones whose offline identity is clear in at least ``share`` of the frames it puts
-    them on a chain, with an alignment fitted (:attr:`RetrackConfig.trust_clear_share`)."""
+    them on a chain, with an alignment fitted (:attr:`RetrackConfig.trust_clear_share`), and
+    the frames it is clear in."""
     if share is None:
-        return set()
+        return {}
     return {
-        mid
+        mid: clear
         for mid, (on, clear) in ids.clear.items()
         if on and clear >= share * on and mid in ids.known
     }

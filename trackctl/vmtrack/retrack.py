@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
@@ -1468,7 +1468,7 @@ def retrack(
     aligned: bool = False,
     radio: RadioEvidence | None = None,
     progress: Progress | None = None,
-    trusted: Collection[str] = frozenset(),
+    trusted: Mapping[str, int] | None = None,
 ) -> Retracked:
     """Each phone's carrier re-tracked through the raw detections ``points`` (one (n, 2) array
     per frame at ``frame_t``). ``start``: a first clock offset and ``a`` per frame per phone (the
@@ -1478,8 +1478,9 @@ def retrack(
     the site's APs (:mod:`~trackctl.vmtrack.radio`), weighed with the detections; with its
     ``fit``, each AP's path loss is fitted where the paths put the carriers and the paths are
     found again under it (:func:`_calibrated_pass`). ``trusted``: phones whose ``start`` is
-    their carrier's (:attr:`RetrackConfig.trust_clear_share`): followed from it, refitted, not
-    searched."""
+    their carrier's (:attr:`RetrackConfig.trust_clear_share`), with the frames their identity
+    is clear in: followed from it, refitted, not searched, unless the path followed belies it
+    (:func:`_belied`: then searched too, and the cheaper path kept)."""
     out = Retracked()
     n = len(frame_t)
     if n < 2:
@@ -1500,6 +1501,34 @@ def retrack(
         )
         return out
     follow = _Follower(frame_t, points, phones, grid, acfg, cfg, aligned)
+    trust = dict(trusted or {})
+    _first_paths(follow, out, start, trust, radio, progress)
+    final = radio
+    if radio is not None and _calibrates(radio) and out:
+        final = _calibrated_pass(follow, out, radio, frame_t, cfg, progress, trust)
+    for mid, found in out.items():
+        out[mid] = follow.settle(mid, found, final)
+    if cfg.exclusive:
+        _exclusive(follow, out, final)
+        _off_others(follow, out, final)
+    _all_through_gaps(follow, out)
+    _all_through_ends(follow, out)
+    return out
+
+
+def _first_paths(
+    follow: _Follower,
+    out: Retracked,
+    start: dict[str, tuple[float, np.ndarray]],
+    trust: dict[str, int],
+    radio: RadioEvidence | None,
+    progress: Progress | None,
+) -> None:
+    """Each phone's first-pass path (:func:`_first_path`) into ``out``: searched, or followed
+    from its identity's alignment when ``trust`` holds it. A trusted phone whose path belies
+    its identity (:func:`_belied`) is searched too, the cheaper path kept, and leaves
+    ``trust``."""
+    n = len(follow.frame_t)
     for k, (mid, track) in enumerate(follow.walks.items()):
         if progress is not None:
             progress(k, len(follow.walks), "re-tracking phones")
@@ -1509,23 +1538,44 @@ def retrack(
         # in a crowd the chains' scale is another walker's as often as not, and the refit
         # finds the phone's own; a trusted one from the chains' whole alignment
         lag, a0 = start.get(mid, (0.0, np.full(n, 1.0 + 0j)))
-        search = not aligned and mid not in trusted
+        search = not follow.aligned and mid not in trust
         if search:
             out.searched.append(mid)
         got = _first_path(follow, mid, (lag, a0), search, mid in start, radio)
+        if not search and not follow.aligned and got is not None and _belied(got, trust[mid]):
+            got = _searched_instead(follow, out, mid, got, (lag, a0), trust, radio)
         if got is not None:
             out[mid] = got
-    final = radio
-    if radio is not None and _calibrates(radio) and out:
-        final = _calibrated_pass(follow, out, radio, frame_t, cfg, progress, trusted)
-    for mid, found in out.items():
-        out[mid] = follow.settle(mid, found, final)
-    if cfg.exclusive:
-        _exclusive(follow, out, final)
-        _off_others(follow, out, final)
-    _all_through_gaps(follow, out)
-    _all_through_ends(follow, out)
-    return out
+
+
+def _searched_instead(
+    follow: _Follower,
+    out: Retracked,
+    mid: str,
+    got: PhoneTrack,
+    begin: tuple[float, np.ndarray],
+    trust: dict[str, int],
+    radio: RadioEvidence | None,
+) -> PhoneTrack:
+    """A trusted phone whose path ``got`` belies its identity (:func:`_belied`), searched: the
+    searched path where it costs less and does not belie the identity too (then the phone is
+    searched, and leaves ``trust``), else ``got`` and the search forgotten. A search that
+    finds the carrier in fewer frames than the identity claimed has found somebody else as
+    often as not: the identity is then wrong about the alignment and the frames both (PETS
+    footage with phones: P08, 10 s in view, clear in 85-283 frames of the identity on 9 of 20
+    logs, their paths on him nowhere; searched, on 2 of 5 logs it published 6 s on another
+    carrier or on strangers, and 0 s on him)."""
+    searched = follow(mid, *begin, True, radio)
+    if (
+        searched is None
+        or _belied(searched, trust[mid])
+        or follow.cost(mid, searched, radio) >= follow.cost(mid, got, radio)
+    ):
+        follow.alternatives.pop(mid, None)
+        return got
+    out.searched.append(mid)
+    del trust[mid]
+    return searched
 
 
 def _held_by_others(out: Retracked, mid: str) -> dict[int, list[tuple[float, float]]]:
@@ -1811,12 +1861,40 @@ def _first_path(
         return _lag_checked(follow, mid, got, radio)
     if not (search and identified) or _calibrates(radio):
         return got
-    kept = follow(mid, lag, a0, False, radio)
-    if kept is not None and (
-        got is None or follow.cost(mid, kept, radio) < follow.cost(mid, got, radio)
+    return _cheaper(follow, mid, radio, got, follow(mid, lag, a0, False, radio))
+
+
+def _cheaper(
+    follow: _Follower,
+    mid: str,
+    radio: RadioEvidence | None,
+    first: PhoneTrack | None,
+    other: PhoneTrack | None,
+) -> PhoneTrack | None:
+    """``other`` where it costs less than ``first`` (:meth:`_Follower.cost`) or ``first`` is
+    None, else ``first``."""
+    if other is not None and (
+        first is None or follow.cost(mid, other, radio) < follow.cost(mid, first, radio)
     ):
-        return kept
-    return got
+        return other
+    return first
+
+
+TRUST_SEEN_SHARE = 0.5
+"""A trusted phone's followed path that sees its carrier in fewer than this share of the
+frames its identity is clear in belies the identity's alignment (:func:`_belied`)."""
+
+
+def _belied(got: PhoneTrack, clear_frames: int) -> bool:
+    """Whether a trusted phone's path ``got`` (followed from its identity's alignment) belies
+    it: it sees the carrier in fewer than :data:`TRUST_SEEN_SHARE` of the ``clear_frames``
+    the identity put the phone on one chain. The identity says whose phone it is; its
+    alignment is fitted from windows of the chain's velocity, and a yaw 180 deg off there
+    (a 5 Hz phone in the hand, its walk's heading read backwards) walks the path away from the
+    carrier it named (PETS footage with phones, seed 14: P05 clear in the identity, her path
+    from its alignment, yaw 178 deg, on her in no frame; searched afterwards from the frames
+    the others left, on her for 25 s). The search is then the phone's only way to her."""
+    return len(got.seen) < TRUST_SEEN_SHARE * clear_frames
 
 
 def _lag_checked(
