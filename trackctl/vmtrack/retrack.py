@@ -1480,7 +1480,7 @@ def retrack(
     found again under it (:func:`_calibrated_pass`). ``trusted``: phones whose ``start`` is
     their carrier's (:attr:`RetrackConfig.trust_clear_share`), with the frames their identity
     is clear in: followed from it, refitted, not searched, unless the path followed belies it
-    (:func:`_belied`: then searched too, and the cheaper path kept)."""
+    (:func:`_belied`: then searched too, :func:`_searched_instead`)."""
     out = Retracked()
     n = len(frame_t)
     if n < 2:
@@ -1526,8 +1526,7 @@ def _first_paths(
 ) -> None:
     """Each phone's first-pass path (:func:`_first_path`) into ``out``: searched, or followed
     from its identity's alignment when ``trust`` holds it. A trusted phone whose path belies
-    its identity (:func:`_belied`) is searched too, the cheaper path kept, and leaves
-    ``trust``."""
+    its identity (:func:`_belied`) is searched too (:func:`_searched_instead`)."""
     n = len(follow.frame_t)
     for k, (mid, track) in enumerate(follow.walks.items()):
         if progress is not None:
@@ -1563,8 +1562,8 @@ def _searched_instead(
     finds the carrier in fewer frames than the identity claimed has found somebody else as
     often as not: the identity is then wrong about the alignment and the frames both (PETS
     footage with phones: P08, 10 s in view, clear in 85-283 frames of the identity on 9 of 20
-    logs, their paths on him nowhere; searched, on 2 of 5 logs it published 6 s on another
-    carrier or on strangers, and 0 s on him)."""
+    logs, their paths on him nowhere; searched and kept where cheaper, on 2 of the 4 such logs
+    run so it was published on another carrier (6 s) or on strangers, and on him nowhere)."""
     searched = follow(mid, *begin, True, radio)
     if (
         searched is None
@@ -1888,12 +1887,12 @@ frames its identity is clear in belies the identity's alignment (:func:`_belied`
 def _belied(got: PhoneTrack, clear_frames: int) -> bool:
     """Whether a trusted phone's path ``got`` (followed from its identity's alignment) belies
     it: it sees the carrier in fewer than :data:`TRUST_SEEN_SHARE` of the ``clear_frames``
-    the identity put the phone on one chain. The identity says whose phone it is; its
-    alignment is fitted from windows of the chain's velocity, and a yaw 180 deg off there
-    (a 5 Hz phone in the hand, its walk's heading read backwards) walks the path away from the
-    carrier it named (PETS footage with phones, seed 14: P05 clear in the identity, her path
-    from its alignment, yaw 178 deg, on her in no frame; searched afterwards from the frames
-    the others left, on her for 25 s). The search is then the phone's only way to her."""
+    the identity put the phone on one chain. The identity says whose phone it is, but its
+    alignment can be far off, and a path followed from a yaw 180 deg off walks away from the
+    carrier it named (PETS footage with phones, seed 14: P05's hand phone at 5 Hz, clear in
+    57 of the 64 frames its identity put it on a chain, followed from yaw 178 deg and step
+    scale 0.70, on her in no frame; found only later, by `_off_others`, for 25 s; searched
+    at once, on her in 97 % of her frames)."""
     return len(got.seen) < TRUST_SEEN_SHARE * clear_frames
 
 
