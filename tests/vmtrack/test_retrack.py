@@ -1207,6 +1207,24 @@ def test_an_alternative_is_weighed_when_near_under_the_paths_walk_or_both_walks(
         assert settled.ambiguous_s == len(other.xy)
 
 
+@pytest.mark.parametrize("y, adopted", [(0.0, False), (5.0, True)])
+def test_a_part_of_the_path_does_not_replace_it(y, adopted):
+    """The path sees its carrier on two visits (frames 0-39 and 60-99); an alternative sees
+    them on the first only, where the path does, and is cheaper under the two walks summed:
+    the tight walk prices the second visit, left out of view, at nothing (PETS footage, `n`
+    seed 30: P05's bag phone at 5 Hz, the costs below). The path stays. The same alternative
+    on somebody else (5 m away) is another account of the phone, and is adopted."""
+    found = _path([*range(40), *range(60, 100)], 0.0)
+    other = dataclasses.replace(_path(range(40), y), lag_s=1.0)
+    follow = _Costed({0.0: (found, 859.0, 741.0), 1.0: (other, 830.0, 768.0)})
+    settled = follow.settle("m", found, None)
+    if adopted:
+        assert settled.lag_s == 1.0 and settled.xy.keys() <= other.xy.keys()
+    else:
+        assert settled.xy == found.xy and settled.seen == found.seen
+        assert settled.ambiguous_s == 0.0
+
+
 @pytest.mark.parametrize(
     "lag_s, yaw, fills",
     [
@@ -1314,6 +1332,25 @@ def test_a_path_riding_a_stranger_where_it_withholds_is_followed_without_them(br
     assert sorted(taken) == list(range(40))
     assert all(len(taken[k]) == 1 and taken[k][0][1] == 3.0 for k in taken)
     assert out["b"] is (moved if bridges else b)
+
+
+def test_a_path_that_publishes_nothing_is_not_followed_off_what_it_rides():
+    """Phone b's path publishes nothing: it is withheld on a pair walking 1 m apart (frames
+    0-39), neither of them b's carrier. Followed again without the detections it rides, it
+    would land on the other of the pair, see 40 frames and lose none it published; it is not
+    followed again, and its path stays as it was."""
+    points = [np.array([[0.1 * k, 0.0], [0.1 * k, 1.0], [0.1 * k, 5.0]]) for k in range(100)]
+    b = _path([], 5.0)
+    b.riding = {k: points[k][0] for k in range(40)}
+    b.withheld_s = 40.0
+    follow = _Holding(points, _path(range(40), 1.0), b)
+    follow.moved = follow.same = _path(range(40), 1.0)
+    out = Retracked()
+    out["b"] = b
+    _off_others(follow, out, None)
+    assert follow.calls == []
+    assert out["b"] is b
+    assert not follow.taken.get("b")
 
 
 def test_a_stretch_withheld_as_a_twin_is_named_for_the_refit():
