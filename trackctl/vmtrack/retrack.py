@@ -2339,10 +2339,7 @@ class _Follower:
         adopt = cfg.settle_walk_sigma_mps is not None
         weighed = self._weighed(mid, found, radio, cfg.ambiguity_margin)
         # the first of equals: the search's own path; a part of it cannot replace it
-        # (:func:`_part_of`)
-        first = found
-        contenders = [w for w in weighed if w[1] is first or not _part_of(w[1], first, cfg)]
-        best, found = min(contenders, key=lambda w: w[0]) if adopt else weighed[0]
+        best, found = min(_contenders(weighed, cfg), key=lambda w: w[0]) if adopt else weighed[0]
         near = [o for c, o in weighed if o is not found and c - best <= cfg.ambiguity_margin]
         alike = [o for o in near if _alike(o, found, ALIKE, self.acfg.lag_step_s)]
         found = _filled(found, alike, self.dt, cfg.min_stretch_s)
@@ -2384,6 +2381,16 @@ def _part_of(other: PhoneTrack, found: PhoneTrack, cfg: RetrackConfig) -> bool:
     last 42 s lost). It can still dispute a frame (:func:`_settle_disputes`), where it puts
     the carrier elsewhere."""
     return len(other.seen) < len(found.seen) and _lost(other, found, cfg.gate_m) <= PART_LOST
+
+
+def _contenders(
+    weighed: list[tuple[float, PhoneTrack]], cfg: RetrackConfig
+) -> list[tuple[float, PhoneTrack]]:
+    """``weighed`` (the phone's path first, then its alternatives, each with its cost) without
+    the alternatives that are a part of the path (:func:`_part_of`): those that may replace it
+    in :meth:`_Follower.settle`."""
+    path = weighed[0][1]
+    return [w for w in weighed if w[1] is path or not _part_of(w[1], path, cfg)]
 
 
 def _alike(a: PhoneTrack, b: PhoneTrack, share: float, lag_step_s: float) -> bool:
