@@ -1565,9 +1565,11 @@ def _searched_instead(
     logs, their paths on him nowhere; searched and kept where cheaper, on 2 of the 4 such logs
     run so it was published on another carrier (6 s) or on strangers, and on him nowhere)."""
     searched = follow(mid, *begin, True, radio)
-    if searched is not None and _belied(searched, trust[mid]):
-        searched = None
-    if _cheaper(follow, mid, radio, got, searched) is got:
+    if (
+        searched is None
+        or _belied(searched, trust[mid])
+        or _cheaper(follow, mid, radio, got, searched) is got
+    ):
         follow.alternatives.pop(mid, None)
         return got
     out.searched.append(mid)
