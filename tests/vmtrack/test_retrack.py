@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import types
 from collections.abc import Iterable
 
 import numpy as np
@@ -36,13 +37,16 @@ from trackctl.vmtrack.retrack import (
     _layer_costs,
     _off_others,
     _one_carrier,
+    _per_carry,
     _publish,
+    _published_frames,
     _refit,
     _Returns,
     _search,
     _search_every,
     _settle_disputes,
     _shared,
+    _smoothed_offsets,
     _step_costs,
     _through_ends,
     _through_gaps,
@@ -1160,10 +1164,15 @@ class _Costed(_Follower):
     the alternatives are weighed under and under the walk paths are found under:
     ``{lag: (path, tight, loose)}``."""
 
-    def __init__(self, table: dict[float, tuple[PhoneTrack, float, float]]) -> None:
+    def __init__(
+        self, table: dict[float, tuple[PhoneTrack, float, float]], carry_changes=()
+    ) -> None:
         self.table, self.cfg, self.acfg, self.dt = table, CFG, AlignConfig(), 1.0
         self.steps, self.settle_steps = np.zeros(1), np.ones(1)
         self.alternatives = {"m": [(lag, np.ones(1, complex)) for lag in table if lag]}
+        self.frame_t = np.arange(100, dtype=np.int64) * 10**9  # 1 s a frame, as dt
+        changes = np.asarray(carry_changes, np.int64) * 10**9
+        self.phones = {"m": types.SimpleNamespace(carry_changes=changes)}
 
     def __call__(self, mid, lag, a, search, radio):
         return self.table[lag][0]
@@ -1223,6 +1232,86 @@ def test_a_part_of_the_path_does_not_replace_it(y, adopted):
     else:
         assert settled.xy == found.xy and settled.seen == found.seen
         assert settled.ambiguous_s == 0.0
+
+
+class _Joined(_Costed):
+    """A :class:`_Costed` whose path under a combination of its alignments is ``joined``
+    (``joined_costs``: under the tight walk and the paths')."""
+
+    def __init__(self, table, carry_changes, joined, joined_costs) -> None:
+        super().__init__(table, carry_changes)
+        self.joined, self.joined_costs = joined, joined_costs
+
+    def __call__(self, mid, lag, a, search, radio):
+        if len(a) == 1:  # an alternative of the search (_Costed.alternatives)
+            return super().__call__(mid, lag, a, search, radio)
+        return self.joined
+
+    def cost(self, mid, found, radio, steps=None):
+        if found is not self.joined:
+            return super().cost(mid, found, radio, steps)
+        return self.joined_costs[0 if steps is self.settle_steps else 1]
+
+
+def _yawed(path: PhoneTrack, lag_s: float, deg: float) -> PhoneTrack:
+    return dataclasses.replace(path, lag_s=lag_s, a=np.full(100, np.exp(1j * np.radians(deg))))
+
+
+BOTH = [*range(50), *range(60, 100)]
+
+
+@pytest.mark.parametrize(
+    "found_seen, changes, joined_seen, joined_loose, outcome",
+    [
+        (range(50), [50], BOTH, 790.0, "joined"),
+        # dearer under the paths' walk than the path: not another account of the phone
+        (range(50), [50], BOTH, 810.0, "kept"),
+        # sees the carrier less than the path does
+        (range(50), [50], range(45), 700.0, "kept"),
+        # no carry change the phone saw: one alignment for the whole log
+        (range(50), [], BOTH, 790.0, "kept"),
+        # leaves frames the path published (30 of its 50)
+        (range(50), [50], [*range(20), *range(60, 100)], 790.0, "kept"),
+        # the path sees nobody: no account to build on (`n` seed 29: P08's phone, the
+        # candidate on P05's companion)
+        ((), [50], range(60, 100), 790.0, "kept"),
+    ],
+)
+def test_each_carry_is_aligned_as_the_candidate_that_sees_the_carrier_most_in_it(
+    found_seen, changes, joined_seen, joined_loose, outcome
+):
+    """The phone's carry changes at frame 50, and its yaw with it. The settled path fits the
+    first carry and sees the carrier there only; an alternative fits the second and sees them
+    there only (PETS footage with phones, `n` seed 32: P05's hand phone at 5 Hz, 275 frames
+    against 385 combined). Neither fits both, and the settling weighs whole alignments. The
+    path followed with each carry's alignment from the candidate that sees the carrier most
+    in it sees both, and is kept where it sees more than the path, still publishes what the
+    path did, and costs no more under the walk paths are found under."""
+    found = _yawed(_path(found_seen, 0.0), 0.0, -123.0)
+    other = _yawed(_path(range(60, 100), 0.0), 1.0, 9.0)
+    joined = _yawed(_path(joined_seen, 0.0), 0.0, 0.0)
+    table = {0.0: (found, 900.0, 800.0), 1.0: (other, 905.0, 805.0)}
+    follow = _Joined(table, changes, joined, (895.0, joined_loose))
+    settled = follow.settle("m", found, None)
+    if outcome == "joined":
+        assert settled.xy == joined.xy and settled.seen == joined.seen
+        assert settled.ambiguous_s == 0.0
+    else:
+        assert settled.xy == found.xy and settled.seen == found.seen
+
+
+def test_the_combined_alignment_takes_a_carry_only_where_a_candidate_sees_more_there():
+    """:func:`_per_carry`: each carry's frames from the candidate that sees the carrier in
+    most of them; the path's own where none sees more; None where nothing changes."""
+    found = _yawed(_path([*range(30), *range(70, 80)], 0.0), 0.0, 0.0)
+    second = _yawed(_path(range(50, 90), 0.0), 1.0, 90.0)
+    third = _yawed(_path(range(55, 65), 0.0), 2.0, 180.0)
+    segments = np.repeat([0, 1], 50)
+    a = _per_carry(found, [found, second, third], segments)
+    assert a is not None
+    assert np.allclose(a[:50], 1.0) and np.allclose(a[50:], 1j)
+    assert _per_carry(found, [found, third], segments) is None
+    assert _per_carry(found, [found, second], np.zeros(100, int)) is None
 
 
 @pytest.mark.parametrize(
@@ -1417,6 +1506,46 @@ def test_a_gap_out_of_view_is_filled_by_the_walk_turned_onto_both_ends():
     off = back[seen] - walk_back[seen]
     line = walk_back + np.interp(every, seen, off.real) + 1j * np.interp(every, seen, off.imag)
     np.testing.assert_array_equal(_turned_gaps(every, line, seen, walk_back, t), line)
+
+
+@pytest.mark.parametrize(
+    "yaw_deg, back, published",
+    [(0.0, False, True), (20.0, False, True), (60.0, False, False), (45.0, True, False)],
+)
+def test_a_gap_out_of_view_is_published_where_the_walk_turned_onto_both_ends_joins_them(
+    yaw_deg, back, published
+):
+    """A carrier seen for 5 s walks 15 s unseen and is seen again (PETS footage with phones,
+    `n` seed 21: P05). Their phone's walk reads the gap's heading 20 deg off (the yaw of a
+    carry taken up shortly before): it lands 5.7 m aside, beyond the drift a
+    distance walked allows (1 m + 15 % of 16.5 m), and the turned walk meets both ends. The
+    gap is published, on the carrier's route. A turn of 60 deg is no heading error, and a
+    walk out and back (45 deg off, landing 4.3 m aside, beyond its 3.6 m) goes nowhere to turn
+    by: those gaps stay out of view."""
+    t = np.arange(0.0, 30.0, 0.5)
+    true = 1.1 * t + 0j
+    if back:  # 10 s east, then back west 1 m north of the way out
+        true = np.where(t < 10, 1.1 * t, 1.1 * (20 - t)) + 1j * np.clip(t - 10, 0, 1)
+    gap = (t > 5) & (t <= 20)  # the steps taken out of view
+    step = np.diff(true, prepend=0j) * np.where(gap, np.exp(-1j * np.radians(yaw_deg)), 1)
+    walk = np.cumsum(step)
+    before, after = np.arange(0, 10), np.arange(40, 60)
+    hits = {int(k): np.array([true[k].real, true[k].imag]) for k in (*before, *after)}
+    seen = np.r_[before, after]
+    seg = np.zeros(len(t), int)
+    smooth = _smoothed_offsets(seen, hits, walk, t, seg, CFG.smooth_s)
+    frames = np.unique(
+        np.concatenate(_published_frames([before, after], smooth, walk, t, seg, CFG))
+    )
+    assert (len(frames) == len(t)) is published
+    drift = abs(smooth[len(before)] - smooth[len(before) - 1])
+    assert (yaw_deg == 0.0) or drift > CFG.unseen_m + 0.15 * float(
+        np.abs(np.diff(walk[9:41])).sum()
+    )
+    if published:
+        offsets = np.interp(frames, seen, smooth.real) + 1j * np.interp(frames, seen, smooth.imag)
+        placed = _turned_gaps(frames, walk[frames] + offsets, seen, walk, t)
+        assert np.abs(placed - true).max() < 0.2
 
 
 def _gap_scene(stranger: tuple[int, int] | None, unseen: tuple[int, int] = (60, 76)):
