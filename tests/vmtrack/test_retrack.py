@@ -31,6 +31,7 @@ from trackctl.vmtrack.retrack import (
     _come_in,
     _displacements,
     _exclusive,
+    _first_path,
     _Follower,
     _held,
     _lag_checked,
@@ -353,6 +354,42 @@ def test_a_trusted_phones_clock_offset_is_walked_downhill_to_its_carriers(true_l
     assert follow.cost("m", checked, None) < follow.cost("m", got, None)
     assert _share_on(checked.xy, people[3], n) > _share_on(got.xy, people[3], n)
     assert _share_on(checked.xy, people[3], n) >= 0.9
+
+
+class _Both:
+    """A follower whose searched path and identity-followed path are given, with their costs
+    (:meth:`_Follower.cost`)."""
+
+    aligned = False
+
+    def __init__(self, searched: PhoneTrack, followed: PhoneTrack, costs: tuple[float, float]):
+        self.paths = {True: searched, False: followed}
+        self.costs = {id(searched): costs[0], id(followed): costs[1]}
+        self.alternatives = {"m": [(0.5, np.ones(100, complex))]}  # the search's own
+
+    def __call__(self, mid, lag, a, search, radio):
+        return self.paths[search]
+
+    def cost(self, mid, found, radio, steps=None):
+        return self.costs[id(found)]
+
+
+@pytest.mark.parametrize("costs", [(733.8, 734.0), (734.0, 733.8)])
+def test_the_path_a_searched_phone_with_an_identity_does_not_keep_is_an_alternative(costs):
+    """A searched phone with an identity is also followed from the identity's alignment, and
+    the cheaper path is kept; the other is another account of the phone, and the settling
+    weighs it beside the search's own alternatives (PETS footage with phones, `n` seed 47:
+    P05's phone, the search's path 733.8, the identity's 734.0, which alone follows her after
+    a carry change in her last 6 s)."""
+    searched = _yawed(_path(range(70), 0.0), 0.25, 86.0)
+    followed = _yawed(_path(range(80), 0.0), -0.25, 72.0)
+    follow = _Both(searched, followed, costs)
+    kept = _first_path(follow, "m", (0.0, np.ones(100, complex)), True, True, None)
+    other = followed if costs[0] < costs[1] else searched
+    assert kept is (searched if costs[0] < costs[1] else followed)
+    lags = [lag for lag, _ in follow.alternatives["m"]]
+    assert lags == [0.5, other.lag_s]
+    assert np.array_equal(follow.alternatives["m"][-1][1], other.a)
 
 
 def test_a_trusted_phone_whose_path_belies_its_identity_is_searched():
@@ -836,6 +873,72 @@ def test_the_refit_does_not_reach_across_a_carry_change_the_phone_saw():
 
     assert yaw_err(np.array([frame_t[change]])) < 5.0
     assert yaw_err(None) > 20.0  # a window across the change blends the two yaws
+
+
+def test_a_carry_the_path_sees_too_little_of_keeps_the_alignment_it_was_followed_under():
+    """A carry whose frames hold fewer detections on the path than a refit needs (the carrier
+    out of view in it, or lost) keeps the alignment the path was followed under there: the
+    path's detections say nothing of it, and the other carries' fit is another carry's yaw.
+    An alignment the path was followed under that has none at a frame (an identity's chains
+    not there) leaves the fit there."""
+    frame_t, _, people = _scene(5, n_people=1, seconds=120.0)
+    walk = people[0]
+    n = len(frame_t)
+    change = n // 2
+    yaw = np.where(np.arange(n) < change, 0.0, 90.0)
+    track = dead_reckoned(_phone(walk, frame_t, yaw))
+    hits = {k: walk[k] for k in range(change - int(40 * FPS), change)}  # seen in carry 1 only
+    changes = np.array([frame_t[change]])
+    prior = np.exp(1j * np.radians(yaw + 10.0))  # what the path was followed under
+
+    def yaw_after(prior: np.ndarray | None) -> np.ndarray:
+        fit = _refit(frame_t, hits, track, AlignConfig(), CFG, changes, prior)
+        assert fit is not None
+        return np.degrees(np.angle(fit[1][change + 5 :]))
+
+    assert np.allclose(yaw_after(prior), 100.0)
+    assert np.all(np.abs(yaw_after(None)) < 5.0)  # the seen carry's yaw, 90 deg off
+    one = _refit(frame_t, hits, track, AlignConfig(), CFG, None, prior)  # one carry: the fit
+    far = one[1][change + int(20 * FPS) :] if one is not None else None  # beyond every window
+    assert far is not None and np.all(np.abs(np.degrees(np.angle(far))) < 5.0)
+    unknown = np.where(np.arange(n) < change, prior, np.nan + 0j)  # no alignment there
+    assert np.all(np.abs(yaw_after(unknown)) < 5.0)
+
+
+class _Priced(_Follower):
+    """A follower whose paths cost 0 under an alignment turned by more than 45 deg at the
+    log's end when ``turned_cheaper``, else 1 (and the other way round)."""
+
+    def __init__(self, frame_t, track, changes, turned_cheaper: bool) -> None:
+        self.frame_t, self.acfg, self.cfg = frame_t, AlignConfig(), CFG
+        self.walks = {"m": track}
+        self.phones = {"m": types.SimpleNamespace(carry_changes=changes)}
+        self.turned_cheaper = turned_cheaper
+
+    def _cost(self, track, lag, a, phone_em, visit, steps=None):
+        turned = abs(float(np.degrees(np.angle(a[-1])))) > 45.0
+        return 0.0 if turned == self.turned_cheaper else 1.0
+
+
+@pytest.mark.parametrize("turned_cheaper", [True, False])
+def test_a_carry_the_path_sees_too_little_of_takes_the_alignment_whose_path_costs_less(
+    turned_cheaper: bool,
+):
+    """Between the alignment the path was followed under and the fit to the other carries'
+    detections, a carry the path hardly sees takes the one whose path over the whole log
+    costs less: neither is read from its own detections."""
+    frame_t, _, people = _scene(5, n_people=1, seconds=120.0)
+    walk = people[0]
+    n = len(frame_t)
+    change = n // 2
+    yaw = np.where(np.arange(n) < change, 0.0, 90.0)
+    track = dead_reckoned(_phone(walk, frame_t, yaw))
+    hits = {k: walk[k] for k in range(change - int(40 * FPS), change)}
+    follower = _Priced(frame_t, track, np.array([frame_t[change]]), turned_cheaper)
+    fit = follower._refit("m", hits, np.exp(1j * np.radians(yaw)), [], None)
+    assert fit is not None
+    after = np.degrees(np.angle(fit[1][change + 5 :]))
+    assert np.allclose(after, 90.0) if turned_cheaper else np.all(np.abs(after) < 5.0)
 
 
 def _twin_scene(seed: int, twin: bool):
@@ -1515,9 +1618,9 @@ def test_a_gap_out_of_view_is_filled_by_the_walk_turned_onto_both_ends():
 def test_a_gap_out_of_view_is_published_where_the_walk_turned_onto_both_ends_joins_them(
     yaw_deg, back, published
 ):
-    """A carrier seen for 5 s walks 15 s unseen and is seen again (PETS footage with phones,
-    `n` seed 21: P05). Their phone's walk reads the gap's heading 20 deg off (the yaw of a
-    carry taken up shortly before): it lands 5.7 m aside, beyond the drift a
+    """A carrier seen for 5 s walks 15 s out of view and is seen again (PETS footage with
+    phones, `n` seeds 21 and 35: P05). Their phone's walk reads the gap's heading 20 deg off
+    (a bag's yaw refitted after a carry change): it lands 5.6 m aside, beyond the drift a
     distance walked allows (1 m + 15 % of 16.5 m), and the turned walk meets both ends. The
     gap is published, on the carrier's route. A turn of 60 deg is no heading error, and a
     walk out and back (45 deg off, landing 4.3 m aside, beyond its 3.6 m) goes nowhere to turn

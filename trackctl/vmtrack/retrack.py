@@ -943,13 +943,15 @@ def _refit(
     acfg: AlignConfig,
     cfg: RetrackConfig,
     carry_changes: np.ndarray | None = None,
+    prior: np.ndarray | None = None,
 ) -> tuple[float, np.ndarray] | None:
     """Clock offset and ``a`` per frame refitted from the detections on the path (each frame's
     centred ``align_window_s`` window; one offset, the one these fits explain best). A window
     does not reach across a carry change the phone saw (``carry_changes``, phone-clock
     times): the yaw changes there at once, and a window across it would fit neither yaw (on
     `students001` seed 2 a phone taken out of a back pocket turned 83 deg; the smeared yaw
-    lost the carrier for another walker)."""
+    lost the carrier for another walker). ``prior``: the alignment the path was followed
+    under, kept in a carry too few of the path's detections fall in (:func:`_whole_fit`)."""
     ks = np.array(sorted(hits))
     if len(ks) < cfg.min_align_frames:
         return None
@@ -983,27 +985,42 @@ def _refit(
             continue
         resid = float((r * nw)[use].sum() / nw[use].sum())
         if best is None or resid < best[0]:
-            whole = _whole_fit(cum, seg, first, acfg, cfg.min_align_frames)
+            whole = _whole_fit(cum, seg, first, acfg, cfg.min_align_frames, prior)
             best = (resid, float(lag), np.where(use, a, whole))
     return None if best is None else (best[1], best[2])
 
 
 def _whole_fit(
-    cum: list[np.ndarray], seg: np.ndarray, first: np.ndarray, acfg: AlignConfig, least: int
+    cum: list[np.ndarray],
+    seg: np.ndarray,
+    first: np.ndarray,
+    acfg: AlignConfig,
+    least: int,
+    prior: np.ndarray | None = None,
 ) -> np.ndarray:
     """Per frame, the alignment fitted to all the detections of its carry (``seg``: the carry
     of each frame, ``first``: each carry's first frame; ``cum``: the refit's cumulative sums),
-    or to all of the path's where its carry holds fewer than ``least``. It stands where no
-    refit window holds enough detections (before a visit, after it, across a long absence):
-    the nearest window's fit there rests on the visit's first or last few frames, and a
-    carrier standing there says nothing of the step or the yaw (PETS footage, seed 6: P05 came
-    back standing, her phone read 70 deg off over her first visit, which was never found)."""
+    or, where its carry holds fewer than ``least``, ``prior`` (the alignment the path was
+    followed under, where it has one) when the phone saw its carry change, else the fit to all
+    of the path's (:meth:`_Follower._refit` keeps whichever path costs less). It
+    stands where no refit window holds enough detections (before a visit, after it, across a
+    long absence): the nearest window's fit there rests on the visit's first or last few
+    frames, and a carrier standing there says nothing of the step or the yaw (PETS footage,
+    seed 6: P05 came back standing, her phone read 70 deg off over her first visit, which was
+    never found). A carry the path hardly sees says nothing of its own alignment either, and
+    another carry's is another yaw: the phone was turned as it went into a pocket or a bag
+    (PETS footage with phones, `n` seed 3: P05's phone changed carry at 9.3 s, the path saw
+    her in fewer than 10 frames before; the fit of the rest put the first carry at 23 deg,
+    the search at 45 deg, whose path cost 18 less)."""
     n = len(seg)
     ends = np.r_[first[1:], n]
     sw, pw, tw, nw = (c[ends[seg]] - c[first[seg]] for c in cum)
     per_carry, _ = best_fit(sw, pw, tw, nw, acfg)
     whole, _ = best_fit(cum[0][-1:], cum[1][-1:], cum[2][-1:], cum[3][-1:], acfg)
-    return np.where(nw >= least, per_carry, whole[0])
+    if prior is not None and len(first) > 1:
+        # a prior with no alignment at a frame (an identity's chains not there) has none to keep
+        whole = np.where(np.isfinite(prior), prior, whole[0])
+    return np.where(nw >= least, per_carry, whole)
 
 
 def _nearest(points: np.ndarray, xy: Sequence[float] | np.ndarray, within_m: float) -> int | None:
@@ -1899,7 +1916,16 @@ def _first_path(
         return _lag_checked(follow, mid, got, radio)
     if not (search and identified) or _calibrates(radio):
         return got
-    return _cheaper(follow, mid, radio, got, follow(mid, lag, a0, False, radio))
+    followed = follow(mid, lag, a0, False, radio)
+    kept = _cheaper(follow, mid, radio, got, followed)
+    # the other is another account of the phone, as the search's alternatives are: the
+    # settling weighs it, and may take a carry's alignment from it (PETS footage with phones,
+    # `n` seed 47: P05's hand phone, the search's path 733.8, the identity's 734.0, which
+    # alone follows her through the last 6 s, after a carry change)
+    other = followed if kept is got else got
+    if other is not None and kept is not None:
+        follow.alternatives.setdefault(mid, []).append((other.lag_s, other.a))
+    return kept
 
 
 def _cheaper(
@@ -2279,13 +2305,49 @@ class _Follower:
                 if len(seen) >= cfg.min_align_frames
                 else hits
             )
-            fit = _refit(frame_t, on, track, self.acfg, cfg, self.phones[mid].carry_changes)
+            fit = self._refit(mid, on, a, phone_em, visit)
             if fit is None:
                 break
             lag, a = fit
         velocity = np.column_stack([u.real, u.imag]) / self.dt
         riding = {k: h for k, h in hits.items() if k not in seen}
         return PhoneTrack(xy, seen, velocity, lag, a, withheld, riding=riding)
+
+    def _refit(
+        self,
+        mid: str,
+        on: dict[int, np.ndarray],
+        a: np.ndarray,
+        phone_em: Sequence[np.ndarray | float],
+        visit: Visit | None,
+    ) -> tuple[float, np.ndarray] | None:
+        """The alignment refitted from the detections ``on`` (:func:`_refit`). A carry too
+        few of them fall in takes the whole fit or the alignment ``a`` the path was followed
+        under, whichever path costs less (:func:`_whole_fit`): the detections say nothing of
+        such a carry, and the path over the whole log tells the two apart."""
+        changes = self.phones[mid].carry_changes
+        track = self.walks[mid]
+        fit = _refit(self.frame_t, on, track, self.acfg, self.cfg, changes)
+        kept = _refit(self.frame_t, on, track, self.acfg, self.cfg, changes, a)
+        if fit is None or kept is None or np.array_equal(fit[1], kept[1]):
+            return fit
+        costs = [self._cost(track, f[0], f[1], phone_em, visit) for f in (fit, kept)]
+        return kept if costs[1] < costs[0] else fit
+
+    def _cost(
+        self,
+        track: np.ndarray,
+        lag: float,
+        a: np.ndarray,
+        phone_em: Sequence[np.ndarray | float],
+        visit: Visit | None,
+        steps: np.ndarray | None = None,
+    ) -> float:
+        """The cost of the cheapest path of the walk ``track`` under (``lag``, ``a``)."""
+        u = _displacements(self.frame_t, track, lag, a)
+        steps = self.steps if steps is None else steps
+        costs = _layer_costs(self.grid, phone_em, u[:, None], steps, visit=visit, absolute=True)
+        return float(costs[-1, 0])
 
     def _search(
         self, mid: str, lag: float, points: Sequence[np.ndarray], radio: RadioEvidence | None
@@ -2322,11 +2384,8 @@ class _Follower:
     ) -> float:
         """The cost of the cheapest path under ``found``'s alignment (paths of two alignments
         of one phone compare), with the random walk's ``steps`` (None: the paths')."""
-        u = _displacements(self.frame_t, self.walks[mid], found.lag_s, found.a)
         phone_em, visit = _with_radio(radio, mid, self.grid, self._frames(mid)[1])
-        steps = self.steps if steps is None else steps
-        costs = _layer_costs(self.grid, phone_em, u[:, None], steps, visit=visit, absolute=True)
-        return float(costs[-1, 0])
+        return self._cost(self.walks[mid], found.lag_s, found.a, phone_em, visit, steps)
 
     def _weighed(
         self, mid: str, found: PhoneTrack, radio: RadioEvidence | None, margin: float
