@@ -875,19 +875,27 @@ def test_the_refit_does_not_reach_across_a_carry_change_the_phone_saw():
     assert yaw_err(None) > 20.0  # a window across the change blends the two yaws
 
 
+def _two_carries():
+    """A phone turned by 90 deg at half time (a carry change it saw), its carrier's detections
+    on the path over the 40 s before the change only: (frame times, the change's frame, yaw
+    per frame, the dead-reckoned walk, the detections)."""
+    frame_t, _, people = _scene(5, n_people=1, seconds=120.0)
+    walk = people[0]
+    change = len(frame_t) // 2
+    yaw = np.where(np.arange(len(frame_t)) < change, 0.0, 90.0)
+    track = dead_reckoned(_phone(walk, frame_t, yaw))
+    hits = {k: walk[k] for k in range(change - int(40 * FPS), change)}
+    return frame_t, change, yaw, track, hits
+
+
 def test_a_carry_the_path_sees_too_little_of_keeps_the_alignment_it_was_followed_under():
     """A carry whose frames hold fewer detections on the path than a refit needs (the carrier
     out of view in it, or lost) keeps the alignment the path was followed under there: the
     path's detections say nothing of it, and the other carries' fit is another carry's yaw.
     An alignment the path was followed under that has none at a frame (an identity's chains
     not there) leaves the fit there."""
-    frame_t, _, people = _scene(5, n_people=1, seconds=120.0)
-    walk = people[0]
+    frame_t, change, yaw, track, hits = _two_carries()
     n = len(frame_t)
-    change = n // 2
-    yaw = np.where(np.arange(n) < change, 0.0, 90.0)
-    track = dead_reckoned(_phone(walk, frame_t, yaw))
-    hits = {k: walk[k] for k in range(change - int(40 * FPS), change)}  # seen in carry 1 only
     changes = np.array([frame_t[change]])
     prior = np.exp(1j * np.radians(yaw + 10.0))  # what the path was followed under
 
@@ -927,13 +935,7 @@ def test_a_carry_the_path_sees_too_little_of_takes_the_alignment_whose_path_cost
     """Between the alignment the path was followed under and the fit to the other carries'
     detections, a carry the path hardly sees takes the one whose path over the whole log
     costs less: neither is read from its own detections."""
-    frame_t, _, people = _scene(5, n_people=1, seconds=120.0)
-    walk = people[0]
-    n = len(frame_t)
-    change = n // 2
-    yaw = np.where(np.arange(n) < change, 0.0, 90.0)
-    track = dead_reckoned(_phone(walk, frame_t, yaw))
-    hits = {k: walk[k] for k in range(change - int(40 * FPS), change)}
+    frame_t, change, yaw, track, hits = _two_carries()
     follower = _Priced(frame_t, track, np.array([frame_t[change]]), turned_cheaper)
     fit = follower._refit("m", hits, np.exp(1j * np.radians(yaw)), [], None)
     assert fit is not None
