@@ -40,6 +40,7 @@ from trackctl.vmtrack.retrack import (
     _one_carrier,
     _per_carry,
     _publish,
+    _Published,
     _published_frames,
     _refit,
     _Returns,
@@ -778,6 +779,46 @@ def test_a_straight_walk_is_published_on_the_evidence_of_the_phones_rssi():
     against = deaf.gain("m", grid.xy(cells))
     xy, _, _, _, _ = _publish(frame_t, points, grid, cells, u, CFG, against)
     assert against.sum() < 0 and not xy
+
+
+def _start_beside(stander: tuple[float, float] | None, stop: bool) -> _Published:
+    """A phone stands 10 s, then walks 15 s east at 1.2 m/s (``stop``: the same backwards in
+    time, it walks, then stands); its path stands on the detections at (0, 0), then goes with
+    a walker passing 0.6 m north of there as the phone starts (or stops). ``stander``:
+    somebody who stands there the whole time, beside the detections the path stands on (None:
+    nobody). Only the start (or stop) turns: the walks are straight."""
+    fps = 7.0
+    n = int(25 * fps)
+    t = np.arange(n) / fps
+    frame_t = (t * 1e9).astype(np.int64)
+    moving = np.clip(t - 10.0, 0.0, None) * 1.2
+    if stop:
+        moving = moving[::-1]
+    path = np.column_stack([moving, np.where(moving > 0.0, 0.6, 0.0)])
+    rng = np.random.default_rng(31)
+    points = []
+    for k in range(n):
+        seen = [path[k]] + ([np.array(stander)] if stander is not None else [])
+        points.append(np.array(seen) + rng.normal(0, 0.05, (len(seen), 2)))
+    grid = SiteGrid([np.array([[-5.0, -5.0], [25.0, 5.0]])], CFG.cell_m)
+    cells = np.round((path - grid.lo) / grid.cell).astype(int)[:, ::-1]
+    u = np.r_[0, np.diff(moving)] + 0j
+    return _publish(frame_t, points, grid, cells, u, CFG)
+
+
+@pytest.mark.parametrize("stop", [False, True])
+def test_a_start_made_by_going_from_somebody_standing_to_a_walker_is_no_evidence(stop):
+    """A path that goes from somebody standing to a walker passing them as the phone starts
+    to walk has started, and neither of the two has: the stander stays where they stood
+    (PETS footage with phones, `n` seed 54: P08's phone on P02 at the sign, then on P04 as
+    she passed him, published on her for 9 s). Backwards, a stop: the path comes from a
+    walker to somebody who stood there before it came. The same path where nobody stays is
+    published on the start's evidence, and so is one where the stander stays a step aside
+    (two people standing together)."""
+    assert len(_start_beside(None, stop).seen) > 100
+    assert len(_start_beside((0.8, 0.0), stop).seen) > 100
+    hopped = _start_beside((0.1, -0.1), stop)
+    assert not hopped.xy and hopped.withheld > 20.0
 
 
 # -m slow (25 s on one core); by default test_a_yaw_change_the_phone_saw_is_not_charged checks

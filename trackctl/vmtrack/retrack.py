@@ -1080,14 +1080,20 @@ def _publish(
     t = frame_t / 1e9
     kept = _stretches(np.array(sorted(hits)), t, seg, cfg)
     withheld = 0.0
+    hops = _hops(points, hits, frame_t, cfg) if cfg.min_evidence is not None else None
     if cfg.jump_m is not None:
         track = _walk_track(frame_t, walk)
         kept, withheld = _one_carrier(
-            kept, hits, walk, t, cfg, lambda r: _evidence(frame_t, r, hits, track, cfg, radio_gain)
+            kept,
+            hits,
+            walk,
+            t,
+            cfg,
+            lambda r: _evidence(frame_t, r, hits, track, cfg, radio_gain, hops),
         )
     if cfg.min_evidence is not None:
         kept, unproven = _with_evidence(
-            kept, frame_t, hits, walk, cfg, radio_gain, cfg.min_evidence
+            kept, frame_t, hits, walk, cfg, radio_gain, cfg.min_evidence, hops
         )
         withheld += unproven
     twins: list[np.ndarray] = []
@@ -1352,12 +1358,13 @@ def _with_evidence(
     cfg: RetrackConfig,
     radio_gain: np.ndarray | None,
     least: float,
+    hops: np.ndarray | None = None,
 ) -> tuple[list[np.ndarray], float]:
-    """The stretches with at least ``least`` evidence (:func:`_evidence`), and the seconds of
-    those without."""
+    """The stretches with at least ``least`` evidence (:func:`_evidence`, the path's ``hops``
+    counting nothing), and the seconds of those without."""
     t = frame_t / 1e9
     track = _walk_track(frame_t, walk)
-    judged = [(r, _evidence(frame_t, r, hits, track, cfg, radio_gain) >= least) for r in kept]
+    judged = [(r, _evidence(frame_t, r, hits, track, cfg, radio_gain, hops) >= least) for r in kept]
     withheld = float(sum(t[r[-1]] - t[r[0]] for r, ok in judged if not ok))
     return [r for r, ok in judged if ok], withheld
 
@@ -1463,6 +1470,75 @@ def _walked(walk: np.ndarray, a: int, b: int) -> float:
     return float(np.abs(np.diff(walk[a : b + 1])).sum())
 
 
+HOP_STILL_S, HOP_STAY_M, HOP_LEAVE_M, HOP_STAY_SHARE = 1.0, 0.5, 1.0, 0.8
+"""A path hops off somebody standing (:func:`_hops`) where its detections have stood within
+``HOP_STAY_M`` for ``HOP_STILL_S``, are ``HOP_LEAVE_M`` or more from there ``evidence_lag_s``
+later, and another detection stands within ``HOP_STAY_M`` of the spot in ``HOP_STAY_SHARE``
+of the frames between that the path is seen away from it."""
+
+
+def _hops(
+    points: Sequence[np.ndarray],
+    hits: dict[int, np.ndarray],
+    frame_t: np.ndarray,
+    cfg: RetrackConfig,
+) -> np.ndarray:
+    """The times (ns) at which the path on ``hits`` leaves somebody who stays where they stood,
+    or comes to somebody who stood there before it came: it went from one person to another.
+    A carrier who starts walking leaves the spot they stood on empty, and one who stops
+    comes to a spot nobody stands on (two people do not stand within ``HOP_STAY_M``); a
+    path that goes from a stander to a walker passing them makes a start of its own, which
+    neither of them made (PETS footage with phones, `n` seed 54: P08's phone searched onto
+    P02, standing at the sign, then onto P04 walking past him as the phone starts to walk:
+    17 of the stretch's 19 of evidence from that start, P02 standing on; P08's phone published
+    on P04 for 9 s, 1.5 s more on P02)."""
+    ks = np.array(sorted(hits), int)
+    if len(ks) < 2:
+        return np.empty(0)
+    x = np.array([hits[k] for k in ks], float)
+    t = frame_t[ks] / 1e9
+    found = _hops_one_way(points, hits, ks, x, t, cfg) + _hops_one_way(
+        points, hits, ks[::-1], x[::-1], -t[::-1], cfg
+    )
+    return np.unique(frame_t[np.array(found, int)]) if found else np.empty(0)
+
+
+def _hops_one_way(
+    points: Sequence[np.ndarray],
+    hits: dict[int, np.ndarray],
+    ks: np.ndarray,
+    x: np.ndarray,
+    t: np.ndarray,
+    cfg: RetrackConfig,
+) -> list[int]:
+    """The frames at which the path on ``hits`` (at frames ``ks``, positions ``x``, times ``t``
+    increasing: a path read backwards has its times negated) first leaves a spot somebody
+    stays on (:func:`_hops`)."""
+    before = np.searchsorted(t, t - HOP_STILL_S)
+    later = np.searchsorted(t, t + cfg.evidence_lag_s)
+    still = np.hypot(*(x - x[before]).T) < HOP_STAY_M
+    ok = later < len(t)
+    left = np.zeros(len(t), bool)
+    left[ok] = np.hypot(*(x[later[ok]] - x[ok]).T) >= HOP_LEAVE_M
+    found = []
+    step = 1 if len(ks) < 2 or ks[1] > ks[0] else -1
+    for i in np.flatnonzero(still & left & (before < np.arange(len(t)))):
+        away = [
+            f
+            for f in range(ks[i] + step, ks[later[i]] + step, step)
+            if f in hits and np.hypot(*(hits[f] - x[i])) > HOP_STAY_M
+        ]
+        if not away:
+            continue
+        stays = sum(
+            bool(len(points[f])) and np.hypot(*(points[f] - x[i]).T).min() <= HOP_STAY_M
+            for f in away
+        )
+        if stays >= HOP_STAY_SHARE * len(away):
+            found.append(away[0])
+    return found
+
+
 def _evidence(
     frame_t: np.ndarray,
     stretch: np.ndarray,
@@ -1470,6 +1546,7 @@ def _evidence(
     track: np.ndarray,
     cfg: RetrackConfig,
     radio_gain: np.ndarray | None = None,
+    hops: np.ndarray | None = None,
 ) -> float:
     """The evidence that a stretch's detections are the phone's carrier: the motion changes
     they share with the phone, plus (with ``radio_gain``, per frame) its sum over the
@@ -1480,7 +1557,9 @@ def _evidence(
     whatever the phone does, and the detections' noise averages out: motion evidence comes
     only from turns, stops and starts made together; a straight walk through the view (a
     hotel's entrance) is told by the RSSI alone. ``track``: the phone's aligned walk
-    (t_ns, x, y) at every frame."""
+    (t_ns, x, y) at every frame. ``hops``: times (ns) the path went from one person to
+    another (:func:`_hops`); a change measured across one is theirs together, nobody's own,
+    and counts nothing."""
     ks = stretch
     det = np.array([[frame_t[k], *hits[k]] for k in ks], float)
     at = frame_t[ks].astype(float)
@@ -1489,6 +1568,10 @@ def _evidence(
     dv = visual_velocity(det, at, half) - visual_velocity(det, before, half)
     dp = visual_velocity(track, at, half) - visual_velocity(track, before, half)
     ok = ~(np.isnan(dv) | np.isnan(dp))
+    if hops is not None and len(hops):
+        # the two velocities are each fitted over +-half: the change reaches that far
+        lo = np.searchsorted(hops, before - half * 1e9, "left")
+        ok &= lo == np.searchsorted(hops, at + half * 1e9, "right")
     radio = float(radio_gain[ks[0] : ks[-1] + 1].sum()) if radio_gain is not None else 0.0
     if not ok.any():
         return radio
@@ -2328,6 +2411,8 @@ class _Follower:
         changes = self.phones[mid].carry_changes
         track = self.walks[mid]
         fit = _refit(self.frame_t, on, track, self.acfg, self.cfg, changes)
+        if fit is None or changes is None or not len(changes):
+            return fit  # one carry: the prior is never kept (:func:`_whole_fit`)
         kept = _refit(self.frame_t, on, track, self.acfg, self.cfg, changes, a)
         if fit is None or kept is None or np.array_equal(fit[1], kept[1]):
             return fit
