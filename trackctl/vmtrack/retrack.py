@@ -138,7 +138,9 @@ class RetrackConfig:
     which tells them apart by distance). None: no check (docs/vmtrack.md, Parameters)."""
     min_stretch_s: float = 5.0
     """A stretch (seen frames and the gaps filled between them) shorter than this is not
-    published: a path that passes a stranger picks up a few detections on the way."""
+    published: a path that passes a stranger picks up a few detections on the way. Unless a
+    waypoint: between two published stretches the phone's walk does not join directly, and
+    joined by it to both (:func:`_with_waypoints`)."""
     smooth_s: float = 1.5
     """Gaussian time constant of the offset between the phone's walk and its detections."""
     jump_m: float | None = 1.5
@@ -1078,7 +1080,7 @@ def _publish(
     walk = np.cumsum(np.nan_to_num(u, nan=0.0))
     seg = np.cumsum(np.isnan(u))  # the walk restarts where the phone has none
     t = frame_t / 1e9
-    kept = _stretches(np.array(sorted(hits)), t, seg, cfg)
+    kept, short = _stretches(np.array(sorted(hits)), t, seg, cfg)
     withheld = 0.0
     hops = _hops(points, hits, frame_t, cfg) if cfg.min_evidence is not None else None
     if cfg.jump_m is not None:
@@ -1103,6 +1105,7 @@ def _publish(
     twinned = [int(k) for r in twins for k in r]
     if not kept:
         return _Published({}, set(), hits, withheld, twinned)
+    kept = _with_waypoints(kept, short, hits, walk, t, seg, cfg)
     seen = np.concatenate(kept)
     smooth = _smoothed_offsets(seen, hits, walk, t, seg, cfg.smooth_s)
     every = np.unique(np.concatenate(_published_frames(kept, smooth, walk, t, seg, cfg)))
@@ -1179,11 +1182,58 @@ def _path_hits(
 
 def _stretches(
     ks: np.ndarray, t: np.ndarray, seg: np.ndarray, cfg: RetrackConfig
-) -> list[np.ndarray]:
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """The seen frames ``ks`` cut into stretches (gaps over ``fill_s`` or a restart of the
-    walk), those shorter than ``min_stretch_s`` dropped."""
+    walk): those of ``min_stretch_s`` or more, and the shorter ones."""
     cut = np.flatnonzero((np.diff(t[ks]) > cfg.fill_s) | (np.diff(seg[ks]) != 0)) + 1
-    return [r for r in np.split(ks, cut) if t[r[-1]] - t[r[0]] >= cfg.min_stretch_s]
+    parts = np.split(ks, cut)
+    long = {i for i, r in enumerate(parts) if t[r[-1]] - t[r[0]] >= cfg.min_stretch_s}
+    return [r for i, r in enumerate(parts) if i in long], [
+        r for i, r in enumerate(parts) if i not in long
+    ]
+
+
+def _with_waypoints(
+    kept: list[np.ndarray],
+    short: list[np.ndarray],
+    hits: dict[int, np.ndarray],
+    walk: np.ndarray,
+    t: np.ndarray,
+    seg: np.ndarray,
+    cfg: RetrackConfig,
+) -> list[np.ndarray]:
+    """``kept`` (in time order) with each ``short`` stretch between two of them that the
+    phone's walk does not join directly, but joins to both (:func:`_joined`): a waypoint. A
+    short stretch alone is what a path passing a stranger picks up (``min_stretch_s``); one
+    that the carrier's dead reckoning reaches from the stretch before and leaves for the one
+    after, each within the drift the gaps allow, is the carrier, seen briefly between two long
+    absences, and it shortens the gaps (PETS footage with phones, `n` seeds 18 and 59: P05
+    back in view for 4-5 s between her 16 s out of view and a 4 s miss, the two gaps 25 s
+    together, over ``unseen_s``, so the 25 s were left unpublished)."""
+    out = list(kept)
+    for w in short:
+        j = int(np.searchsorted([int(r[0]) for r in out], int(w[0])))
+        if j == 0 or j == len(out) or int(out[j - 1][-1]) > int(w[0]):
+            continue
+        a, b = out[j - 1], out[j]
+        if _joined([a, b], hits, walk, t, seg, cfg) == [True]:
+            continue
+        if _joined([a, w, b], hits, walk, t, seg, cfg) == [True, True]:
+            out.insert(j, w)
+    return out
+
+
+def _joined(
+    kept: list[np.ndarray],
+    hits: dict[int, np.ndarray],
+    walk: np.ndarray,
+    t: np.ndarray,
+    seg: np.ndarray,
+    cfg: RetrackConfig,
+) -> list[bool]:
+    """:func:`_joins` of ``kept``, their offsets smoothed over them alone."""
+    smooth = _smoothed_offsets(np.concatenate(kept), hits, walk, t, seg, cfg.smooth_s)
+    return _joins(kept, smooth, walk, t, seg, cfg)
 
 
 def _offsets(r: np.ndarray, hits: dict[int, np.ndarray], walk: np.ndarray) -> np.ndarray:
@@ -1400,15 +1450,32 @@ def _published_frames(
     ``unseen_s`` long, in one stretch of walk, landing within ``unseen_m`` (+ 15 % of the
     distance walked) of where the next stretch starts."""
     frames = [np.arange(r[0], r[-1] + 1) for r in kept]
+    joins = _joins(kept, smooth, walk, t, seg, cfg)
+    pairs = zip(kept, kept[1:], joins, strict=False)
+    gaps = [np.arange(a[-1] + 1, b[0]) for a, b, ok in pairs if ok]
+    return frames + gaps
+
+
+def _joins(
+    kept: list[np.ndarray],
+    smooth: np.ndarray,
+    walk: np.ndarray,
+    t: np.ndarray,
+    seg: np.ndarray,
+    cfg: RetrackConfig,
+) -> list[bool]:
+    """Whether the phone's walk bridges each gap between consecutive stretches of ``kept``
+    (``smooth``: the offsets at their frames): :func:`_bridged` or :func:`_turned`."""
     pos = np.cumsum([0] + [len(r) for r in kept])
+    out = []
     for j in range(len(kept) - 1):
         a_, b_ = int(kept[j][-1]), int(kept[j + 1][0])
         before, after = smooth[pos[j + 1] - 1], smooth[pos[j + 1]]
-        if _bridged(a_, b_, float(abs(after - before)), walk, t, seg, cfg) or _turned(
-            a_, b_, walk[a_] + before, walk[b_] + after, walk, t, seg, cfg
-        ):
-            frames.append(np.arange(a_ + 1, b_))
-    return frames
+        out.append(
+            _bridged(a_, b_, float(abs(after - before)), walk, t, seg, cfg)
+            or _turned(a_, b_, walk[a_] + before, walk[b_] + after, walk, t, seg, cfg)
+        )
+    return out
 
 
 def _turned(
@@ -1523,20 +1590,37 @@ def _hops_one_way(
     found = []
     step = 1 if len(ks) < 2 or ks[1] > ks[0] else -1
     for i in np.flatnonzero(still & left & (before < np.arange(len(t)))):
-        away = [
-            f
-            for f in range(ks[i] + step, ks[later[i]] + step, step)
-            if f in hits and np.hypot(*(hits[f] - x[i])) > HOP_STAY_M
-        ]
-        if not away:
-            continue
-        stays = sum(
-            bool(len(points[f])) and np.hypot(*(points[f] - x[i]).T).min() <= HOP_STAY_M
-            for f in away
-        )
-        if stays >= HOP_STAY_SHARE * len(away):
+        spot = x[before[i] : i + 1].mean(axis=0)
+        away = _seen_away(hits, spot, int(ks[i]), int(ks[later[i]]), step, len(points))
+        if away and _stays(points, spot, away):
             found.append(away[0])
     return found
+
+
+def _seen_away(
+    hits: dict[int, np.ndarray], spot: np.ndarray, at: int, later: int, step: int, n: int
+) -> list[int]:
+    """The frames the path is seen more than ``HOP_STAY_M`` from ``spot``, over as many frames
+    as from ``at`` to ``later`` (``step``: 1 forwards, -1 backwards in time), from the first
+    such frame after ``at`` (none when it does not leave by ``later``); ``n`` frames in all."""
+
+    def far(f: int) -> bool:
+        return f in hits and bool(np.hypot(*(hits[f] - spot)) > HOP_STAY_M)
+
+    first = next((f for f in range(at + step, later + step, step) if far(f)), None)
+    if first is None:
+        return []
+    span = abs(later - at)
+    return [f for f in range(first, first + step * span, step) if 0 <= f < n and far(f)]
+
+
+def _stays(points: Sequence[np.ndarray], spot: np.ndarray, away: list[int]) -> bool:
+    """Whether a detection stays within ``HOP_STAY_M`` of ``spot`` in ``HOP_STAY_SHARE`` of
+    the frames ``away``."""
+    stays = sum(
+        bool(len(points[f])) and np.hypot(*(points[f] - spot).T).min() <= HOP_STAY_M for f in away
+    )
+    return stays >= HOP_STAY_SHARE * len(away)
 
 
 def _evidence(
