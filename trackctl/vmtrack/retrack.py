@@ -1540,8 +1540,9 @@ def _walked(walk: np.ndarray, a: int, b: int) -> float:
 HOP_STILL_S, HOP_STAY_M, HOP_LEAVE_M, HOP_STAY_SHARE = 1.0, 0.5, 1.0, 0.8
 """A path hops off somebody standing (:func:`_hops`) where its detections have stood within
 ``HOP_STAY_M`` for ``HOP_STILL_S``, are ``HOP_LEAVE_M`` or more from there ``evidence_lag_s``
-later, and another detection stands within ``HOP_STAY_M`` of the spot in ``HOP_STAY_SHARE``
-of the frames between that the path is seen away from it."""
+later, and another detection stands within ``HOP_STAY_M`` of the spot (the mean of the path's
+detections over the still second) in ``HOP_STAY_SHARE`` of the frames the path is seen away
+from it, over ``evidence_lag_s`` from the first such frame (:func:`_seen_away`)."""
 
 
 def _hops(
