@@ -1409,6 +1409,26 @@ def test_an_alternative_is_weighed_when_near_under_the_paths_walk_or_both_walks(
         assert settled.ambiguous_s == len(other.xy)
 
 
+@pytest.mark.parametrize("other_frames, adopted", [(range(3, 20), False), (range(30, 47), True)])
+def test_a_visit_apart_is_weighed_under_the_paths_walk_alone(other_frames, adopted):
+    """The path sees its carrier in frames 22-69, where the phone's walk strays after a carry
+    change: far dearer under the tight walk than under the paths' walk. An alternative on a
+    stranger (5 m away) sees somebody in frames 3-19, while the path's carrier is out of
+    view: cheaper under the tight walk, which prices a shorter visit lower whoever it is on,
+    and under the two walks summed, 75 dearer under the paths' walk (PETS footage with phones,
+    `n` seed 49: P10's bag phone, the costs below). The path stays. The same alternative in
+    frames 30-46, inside the path's visit, is another account of the same frames and is
+    weighed as before: adopted."""
+    found = _path(range(22, 70), 0.0)
+    other = dataclasses.replace(_path(other_frames, 5.0), lag_s=1.0)
+    follow = _Costed({0.0: (found, 1032.0, 835.0), 1.0: (other, 910.0, 910.0)})
+    settled = follow.settle("m", found, None)
+    if adopted:
+        assert settled.lag_s == 1.0 and settled.xy.keys() <= other.xy.keys()
+    else:
+        assert settled is found
+
+
 @pytest.mark.parametrize("y, adopted", [(0.0, False), (5.0, True)])
 def test_a_part_of_the_path_does_not_replace_it(y, adopted):
     """The path sees its carrier on two visits (frames 0-39 and 60-99); an alternative sees

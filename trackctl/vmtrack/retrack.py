@@ -185,11 +185,11 @@ class RetrackConfig:
     ambiguity_margin: float | None = 10.0
     """A phone's path is weighed against up to ``ambiguity_candidates`` other refined
     alignments (those within this of the path's cost under ``walk_sigma_mps``, or under
-    both walks summed: :meth:`_Follower._weighed`): where one whose path costs at most this
-    more (or less) under ``settle_walk_sigma_mps`` puts the carrier more than ``gate_m``
-    away, the frame is not published (:meth:`_Follower.settle`), unless
-    the middle of them all is within ``gate_m`` of each (a group: published there). None: no
-    alternatives weighed (docs/vmtrack.md, Parameters)."""
+    both walks summed when they see the carrier at the same time: :meth:`_Follower._weighed`):
+    where one whose path costs at most this more (or less) under ``settle_walk_sigma_mps``
+    puts the carrier more than ``gate_m`` away, the frame is not published
+    (:meth:`_Follower.settle`), unless the middle of them all is within ``gate_m`` of each (a
+    group: published there). None: no alternatives weighed (docs/vmtrack.md, Parameters)."""
     settle_walk_sigma_mps: float | None = 0.1
     """The random walk, m per sqrt(s), under which a phone's refined alignments are weighed
     against each other (:meth:`_Follower.settle`); the cheapest becomes the phone's path. None:
@@ -2564,7 +2564,8 @@ class _Follower:
         paths' costs under ``settle_walk_sigma_mps`` (``found`` first). An alternative that
         costs more than ``margin`` more than ``found`` there can neither become the path nor
         dispute a frame; one that could is left out when it costs more than ``margin`` more
-        under the walk paths are found under, and under both walks summed too."""
+        under the walk paths are found under, and under both walks summed too or on a visit
+        apart from ``found``'s (:func:`_apart`)."""
         tight = self.cost(mid, found, radio, self.settle_steps)
         weighed = [(tight, found)]
         loose: float | None = None
@@ -2588,7 +2589,7 @@ class _Follower:
                 # much less under the tight one (`students001` seed 2: 6-10 more, 24-30 less)
                 loose = self.cost(mid, found, radio) if loose is None else loose
                 worse = self.cost(mid, other, radio) - loose
-                if worse > margin and cost - tight + worse > margin:
+                if worse > margin and (_apart(found, other) or cost - tight + worse > margin):
                     continue
             weighed.append((cost, other))
         return weighed
@@ -2686,6 +2687,24 @@ def _part_of(other: PhoneTrack, found: PhoneTrack, cfg: RetrackConfig) -> bool:
     last 42 s lost). It can still dispute a frame (:func:`_settle_disputes`), where it puts
     the carrier elsewhere."""
     return len(other.seen) < len(found.seen) and _lost(other, found, cfg.gate_m) <= PART_LOST
+
+
+def _apart(found: PhoneTrack, other: PhoneTrack) -> bool:
+    """Whether ``other`` sees the carrier mostly while ``found`` does not: less than half of
+    the shorter of the two visits (first to last seen frame) falls within the other. Two such
+    paths do not explain the same frames: out of view the tight walk
+    (``settle_walk_sigma_mps``) costs nothing, in view every frame pays for how far the
+    detections stray from the phone's walk, so under it the shorter visit is cheaper whoever
+    it is on, and only the walk paths are found under tells the two apart
+    (:meth:`_Follower._weighed`; PETS footage with phones, `n` seed 49: P10's bag phone on
+    him 21.9-69.3 s, 310 frames, at 835 under the paths' walk and 1032 under the tight one,
+    where the dead reckoning strays after his carry change at 42 s; a stranger 3.6-19.6 s,
+    109 frames, at 910 under both: P10 never named)."""
+    if not found.seen or not other.seen:
+        return False
+    a, b = (min(found.seen), max(found.seen)), (min(other.seen), max(other.seen))
+    shared = min(a[1], b[1]) - max(a[0], b[0])
+    return shared < 0.5 * min(a[1] - a[0], b[1] - b[0])
 
 
 def _per_carry(
