@@ -1416,9 +1416,9 @@ def test_a_visit_apart_is_weighed_under_the_paths_walk_alone(other_frames, adopt
     stranger (5 m away) sees somebody in frames 3-19, while the path's carrier is out of
     view: cheaper under the tight walk, which prices a shorter visit lower whoever it is on,
     and under the two walks summed, 75 dearer under the paths' walk (PETS footage with phones,
-    `n` seed 49: P10's bag phone, the costs below). The path stays. The same alternative in
-    frames 30-46, inside the path's visit, is another account of the same frames and is
-    weighed as before: adopted."""
+    `n` seed 49: P10's phone in his hand at 5 Hz, the costs below). The path stays. The same
+    alternative in frames 30-46, inside the path's visit, is another account of the same
+    frames and is weighed as before: adopted."""
     found = _path(range(22, 70), 0.0)
     other = dataclasses.replace(_path(other_frames, 5.0), lag_s=1.0)
     follow = _Costed({0.0: (found, 1032.0, 835.0), 1.0: (other, 910.0, 910.0)})

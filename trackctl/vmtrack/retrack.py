@@ -2693,13 +2693,13 @@ def _apart(found: PhoneTrack, other: PhoneTrack) -> bool:
     """Whether ``other`` sees the carrier mostly while ``found`` does not: less than half of
     the shorter of the two visits (first to last seen frame) falls within the other. Two such
     paths do not explain the same frames: out of view the tight walk
-    (``settle_walk_sigma_mps``) costs nothing, in view every frame pays for how far the
-    detections stray from the phone's walk, so under it the shorter visit is cheaper whoever
-    it is on, and only the walk paths are found under tells the two apart
-    (:meth:`_Follower._weighed`; PETS footage with phones, `n` seed 49: P10's bag phone on
-    him 21.9-69.3 s, 310 frames, at 835 under the paths' walk and 1032 under the tight one,
-    where the dead reckoning strays after his carry change at 42 s; a stranger 3.6-19.6 s,
-    109 frames, at 910 under both: P10 never named)."""
+    (``settle_walk_sigma_mps``) costs no more than the paths' walk, in view every frame pays
+    for how far the detections stray from the phone's walk, so under it the shorter visit is
+    cheaper whoever it is on, and only the walk paths are found under tells the two apart
+    (:meth:`_Follower._weighed`; PETS footage with phones, `n` seed 49: P10's phone, in his
+    hand at 5 Hz, on him 21.9-69.3 s, 310 frames, at 835 under the paths' walk and 1032 under
+    the tight one, where the dead reckoning strays after his carry change at 42 s; a stranger
+    3.6-19.6 s, 109 frames, at 910 under both: P10 never named)."""
     if not found.seen or not other.seen:
         return False
     a, b = (min(found.seen), max(found.seen)), (min(other.seen), max(other.seen))
