@@ -1187,9 +1187,9 @@ def _stretches(
     walk): those of ``min_stretch_s`` or more, and the shorter ones."""
     cut = np.flatnonzero((np.diff(t[ks]) > cfg.fill_s) | (np.diff(seg[ks]) != 0)) + 1
     parts = np.split(ks, cut)
-    long = {i for i, r in enumerate(parts) if t[r[-1]] - t[r[0]] >= cfg.min_stretch_s}
-    return [r for i, r in enumerate(parts) if i in long], [
-        r for i, r in enumerate(parts) if i not in long
+    long = [t[r[-1]] - t[r[0]] >= cfg.min_stretch_s for r in parts]
+    return [r for r, k in zip(parts, long, strict=True) if k], [
+        r for r, k in zip(parts, long, strict=True) if not k
     ]
 
 
@@ -1212,8 +1212,10 @@ def _with_waypoints(
     together, over ``unseen_s``, so the 25 s were left unpublished)."""
     out = list(kept)
     for w in short:
+        # the stretches part the seen frames in time (:func:`_stretches`): ``w`` lies wholly
+        # between the ``j``-th kept stretch and the one before it
         j = int(np.searchsorted([int(r[0]) for r in out], int(w[0])))
-        if j == 0 or j == len(out) or int(out[j - 1][-1]) > int(w[0]):
+        if j == 0 or j == len(out):
             continue
         a, b = out[j - 1], out[j]
         if _joined([a, b], hits, walk, t, seg, cfg) == [True]:
