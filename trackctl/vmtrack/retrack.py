@@ -1767,7 +1767,12 @@ def _first_paths(
         if search:
             out.searched.append(mid)
         got = _first_path(follow, mid, (lag, a0), search, mid in start, radio)
-        if not search and not follow.aligned and got is not None and _belied(got, trust[mid]):
+        if (
+            not search
+            and not follow.aligned
+            and got is not None
+            and (_belied(got, trust[mid]) or _lost_at_change(follow, mid, got))
+        ):
             got = _searched_instead(follow, out, mid, got, (lag, a0), trust, radio)
         if got is not None:
             out[mid] = got
@@ -2129,6 +2134,36 @@ def _belied(got: PhoneTrack, clear_frames: int) -> bool:
     scale 0.70, on her in no frame; found only later, by `_off_others`, for 25 s; searched
     at once, on her in 97 % of her frames)."""
     return len(got.seen) < TRUST_SEEN_SHARE * clear_frames
+
+
+def _lost_at_change(follow: _Follower, mid: str, got: PhoneTrack) -> bool:
+    """Whether a trusted phone's path ``got`` (followed from its identity's alignment) loses
+    its carrier at a carry change the phone saw: it sees them within ``min_stretch_s`` before
+    the change and in no frame of the carry after it, a carry of ``min_stretch_s`` or more.
+    The identity's alignment of a carry is learnt from the chains the phone was on in it,
+    and a carry taken up late in a visit has few; the refit cannot mend it from a path that
+    left the carrier there, for that path has no detections in the carry to refit from
+    (PETS footage with phones, `n` seed 43: P02's phone moved from a front pocket to a bag at
+    29 s, 12 s before he left the view; followed, the path went out of view at the change and
+    he was unnamed for those 12 s; searched, it follows him to the end)."""
+    cfg = follow.cfg
+    carry = np.cumsum(_carry_frames(follow.frame_t, follow.phones[mid].carry_changes, got.lag_s))
+    if not got.seen or not carry[-1]:
+        return False
+    t = follow.frame_t / 1e9
+    seen = np.zeros(len(t), bool)
+    seen[sorted(got.seen)] = True
+    for c in range(1, int(carry[-1]) + 1):
+        ks = np.flatnonzero(carry == c)
+        before = np.flatnonzero(seen[: ks[0]])
+        if (
+            t[ks[-1]] - t[ks[0]] >= cfg.min_stretch_s
+            and not seen[ks].any()
+            and len(before)
+            and t[ks[0]] - t[before[-1]] <= cfg.min_stretch_s
+        ):
+            return True
+    return False
 
 
 def _lag_checked(
