@@ -36,6 +36,7 @@ from trackctl.vmtrack.retrack import (
     _held,
     _lag_checked,
     _layer_costs,
+    _lost_at_change,
     _off_others,
     _one_carrier,
     _per_carry,
@@ -1856,3 +1857,34 @@ def test_a_carrier_unseen_before_the_phone_falls_silent_is_not_carried_on():
     assert max(found.seen) < 135
     out = _through_ends(follow, "m", found, {})
     assert not any(k >= 150 for k in out.xy)
+
+
+@pytest.mark.parametrize(
+    "seen, change, lost",
+    [
+        # seen up to the change, in no frame of the 15 s carry after it: the identity's yaw
+        # of that carry took the path out of view (PETS footage with phones, `n` seed 43)
+        (range(0, 50), 50, True),
+        # seen after the change too: the carry's alignment holds
+        (list(range(0, 50)) + list(range(70, 80)), 50, False),
+        # seen from just after the change, in no frame of the 15 s carry before it (`n` 52)
+        (range(51, 100), 50, True),
+        # out of view 9 s before the change: the carrier left, the change says nothing
+        (range(0, 20), 50, False),
+        # came into view 9 s after the change: nothing lost before it
+        (range(80, 100), 50, False),
+        # the carry after the change is 3 s: too short to have lost anybody in
+        (range(0, 90), 90, False),
+        # no change the phone saw
+        (range(0, 50), None, False),
+    ],
+)
+def test_a_trusted_path_that_loses_its_carrier_at_a_carry_change_is_searched(seen, change, lost):
+    frame_t = (np.arange(100) * 0.3e9).astype(np.int64)
+    changes = np.array([] if change is None else [frame_t[change]], np.int64)
+    follow = types.SimpleNamespace(
+        cfg=CFG, frame_t=frame_t, phones={"m": types.SimpleNamespace(carry_changes=changes)}
+    )
+    xy = {k: (0.0, 0.0) for k in seen}
+    got = PhoneTrack(xy, set(xy), np.zeros((100, 2)), 0.0, np.ones(100, complex))
+    assert _lost_at_change(follow, "m", got) is lost

@@ -1706,7 +1706,8 @@ def retrack(
     found again under it (:func:`_calibrated_pass`). ``trusted``: phones whose ``start`` is
     their carrier's (:attr:`RetrackConfig.trust_clear_share`), with the frames their identity
     is clear in: followed from it, refitted, not searched, unless the path followed belies it
-    (:func:`_belied`: then searched too, :func:`_searched_instead`)."""
+    or loses its carrier at a carry change (:func:`_belied`, :func:`_lost_at_change`: then
+    searched too, :func:`_searched_instead`)."""
     out = Retracked()
     n = len(frame_t)
     if n < 2:
@@ -1739,6 +1740,7 @@ def retrack(
         _off_others(follow, out, final)
     _all_through_gaps(follow, out)
     _all_through_ends(follow, out)
+    _all_through_visits(follow, out)
     return out
 
 
@@ -1752,7 +1754,8 @@ def _first_paths(
 ) -> None:
     """Each phone's first-pass path (:func:`_first_path`) into ``out``: searched, or followed
     from its identity's alignment when ``trust`` holds it. A trusted phone whose path belies
-    its identity (:func:`_belied`) is searched too (:func:`_searched_instead`)."""
+    its identity (:func:`_belied`) or loses its carrier at a carry change the phone saw
+    (:func:`_lost_at_change`) is searched too (:func:`_searched_instead`)."""
     n = len(follow.frame_t)
     for k, (mid, track) in enumerate(follow.walks.items()):
         if progress is not None:
@@ -1767,13 +1770,11 @@ def _first_paths(
         if search:
             out.searched.append(mid)
         got = _first_path(follow, mid, (lag, a0), search, mid in start, radio)
-        if (
-            not search
-            and not follow.aligned
-            and got is not None
-            and (_belied(got, trust[mid]) or _lost_at_change(follow, mid, got))
-        ):
-            got = _searched_instead(follow, out, mid, got, (lag, a0), trust, radio)
+        if not search and not follow.aligned and got is not None:
+            if _belied(got, trust[mid]):
+                got = _searched_instead(follow, out, mid, got, (lag, a0), trust, radio)
+            elif _lost_at_change(follow, mid, got):
+                got = _carries_searched(follow, mid, got, radio)
         if got is not None:
             out[mid] = got
 
@@ -1787,7 +1788,8 @@ def _searched_instead(
     trust: dict[str, int],
     radio: RadioEvidence | None,
 ) -> PhoneTrack:
-    """A trusted phone whose path ``got`` belies its identity (:func:`_belied`), searched: the
+    """A trusted phone whose path ``got`` belies its identity (:func:`_belied`) or loses its
+    carrier at a carry change (:func:`_lost_at_change`), searched: the
     searched path where it costs less and does not belie the identity too (then the phone is
     searched, and leaves ``trust``), else ``got`` and the search forgotten. A search that
     finds the carrier in fewer frames than the identity claimed has found somebody else as
@@ -2007,6 +2009,104 @@ def _through_ends(
     return replace(found, xy=xy, seen=seen)
 
 
+def _all_through_visits(follow: _Follower, out: Retracked) -> None:
+    """Each phone's carrier followed over the detections before its first seen frame and after
+    its last while the phone walks there (:func:`_through_visit`), in place."""
+    for mid, found in out.items():
+        out[mid] = _through_visit(follow, mid, found, _held_by_others(out, mid))
+
+
+def _through_visit(
+    follow: _Follower, mid: str, found: PhoneTrack, held: dict[int, list[tuple[float, float]]]
+) -> PhoneTrack:
+    """``found`` carried along the detections that continue the carrier's (:func:`_chain`)
+    before its first seen frame and after its last, over frames it publishes nothing in, as
+    far as the phone's walk goes where they go (:func:`_walked_alike`).
+
+    The path holds a carrier where the phone's aligned walk stays within the random walk of
+    their detections, and the alignment is refitted from the detections the path is on. Where
+    a visit's first or last seconds need another yaw (the indoor field turns a compass by
+    10-20 deg from place to place, a heading drifts), the path leaves the carrier there for
+    out of view and nothing is left to refit the yaw from (PETS footage with phones, `n`
+    seed 54: P06 walked in at 4.5 s, the path took her only at 14.9 s, her phone's walk
+    10-20 deg off hers before). The detections that continue hers are hers, as the visual
+    tracker would carry them, while they go where the phone says she goes: turned by a
+    plausible heading error and step, as a gap out of view is walked (:func:`_gap_turn`)."""
+    if not found.seen:
+        return found
+    u = _displacements(follow.frame_t, follow.walks[mid], found.lag_s, found.a)
+    walk = np.cumsum(np.nan_to_num(u, nan=0.0))
+    seg = np.cumsum(np.isnan(u))
+    t = follow.frame_t / 1e9
+    xy, seen = dict(found.xy), set(found.seen)
+    first, last = min(found.seen), max(found.seen)
+    for edge, way in ((first, -1), (last, 1)):
+        order = np.arange(edge + way, -1 if way < 0 else len(u), way)
+        free = np.array([int(k) not in xy and seg[k] == seg[edge] for k in order], bool)
+        order = order[: int(np.argmin(free)) if not free.all() else len(order)]
+        if not len(order):
+            continue
+        start = (np.asarray(found.xy[edge], float), _edge_velocity(found.xy, edge, way, t))
+        chain = _chain(follow, edge, start, order, held)
+        for k in _walked_alike(chain, edge, walk, t) if len(chain) >= 2 else ():
+            xy[k] = chain[k]
+            seen.add(k)
+    return replace(found, xy=xy, seen=seen)
+
+
+ALIKE_HALF_S, ALIKE_SLACK_S, ALIKE_STILL_MPS = 1.0, 1.5, 0.3
+"""The detections and the phone's walk are compared by their velocities over +-``ALIKE_HALF_S``,
+the walk's taken up to ``ALIKE_SLACK_S`` earlier or later; below ``ALIKE_STILL_MPS`` a walker
+stands (:func:`_walked_alike`)."""
+
+
+def _walked_alike(
+    chain: dict[int, tuple[float, float]], edge: int, walk: np.ndarray, t: np.ndarray
+) -> list[int]:
+    """The frames of ``chain`` (detections going away from frame ``edge``) where the phone's
+    walk moves as they do, up to the first run of :data:`GAP_LINK_S` or more where it does
+    not. Alike: both stand (:data:`ALIKE_STILL_MPS`), or both move, at most
+    :data:`TURN_MAX_DEG` apart and at speeds within a factor of 2, the walk's velocity taken
+    within :data:`ALIKE_SLACK_S` of the detections' (a turn a step late, a clock off by a
+    second: the alignment there is what is in doubt). A detection off for a frame or two is
+    a blob's scatter."""
+    kt = np.array(sorted(chain), int)
+    pos = np.array([complex(*chain[int(k)]) for k in kt])
+    tc = t[kt]
+
+    def velocity(times: np.ndarray, at: np.ndarray, z: np.ndarray) -> np.ndarray:
+        lo, hi = at - ALIKE_HALF_S, at + ALIKE_HALF_S
+        zr = lambda q: np.interp(q, times, z.real) + 1j * np.interp(q, times, z.imag)  # noqa: E731
+        return (zr(hi) - zr(lo)) / (2 * ALIKE_HALF_S)
+
+    vc = velocity(tc, tc, pos)
+    shifts = np.arange(-ALIKE_SLACK_S, ALIKE_SLACK_S + 1e-9, 0.25)
+    vw = np.array([velocity(t, tc + s, walk) for s in shifts])  # (shifts, chain frames)
+    still_c, still_w = np.abs(vc) < ALIKE_STILL_MPS, np.abs(vw) < ALIKE_STILL_MPS
+    ratio = vc / np.where(still_w, 1.0, vw)
+    moving = (
+        ~still_c
+        & ~still_w
+        & (np.abs(np.angle(ratio, deg=True)) <= TURN_MAX_DEG)
+        & (np.abs(ratio) >= 0.5)
+        & (np.abs(ratio) <= 2.0)
+    )
+    ok = dict(zip(kt.tolist(), ((still_c & still_w) | moving).any(axis=0).tolist(), strict=True))
+    out: list[int] = []
+    off_since: float | None = None
+    for k in sorted(chain, key=lambda k: abs(k - edge)):
+        if ok[k]:
+            out.append(k)
+            off_since = None
+        elif off_since is None:
+            off_since = float(t[k])
+        elif abs(t[k] - off_since) >= GAP_LINK_S:
+            break
+    if off_since is not None:  # the chain ended off the walk: its last frames are not kept
+        out = [k for k in out if abs(t[k] - t[edge]) < abs(off_since - t[edge])]
+    return out
+
+
 def _edge_velocity(
     xy: dict[int, tuple[float, float]], edge: int, way: int, t: np.ndarray
 ) -> np.ndarray:
@@ -2138,32 +2238,60 @@ def _belied(got: PhoneTrack, clear_frames: int) -> bool:
 
 def _lost_at_change(follow: _Follower, mid: str, got: PhoneTrack) -> bool:
     """Whether a trusted phone's path ``got`` (followed from its identity's alignment) loses
-    its carrier at a carry change the phone saw: it sees them within ``min_stretch_s`` before
-    the change and in no frame of the carry after it, a carry of ``min_stretch_s`` or more.
-    The identity's alignment of a carry is learnt from the chains the phone was on in it,
-    and a carry taken up late in a visit has few; the refit cannot mend it from a path that
-    left the carrier there, for that path has no detections in the carry to refit from
-    (PETS footage with phones, `n` seed 43: P02's phone moved from a front pocket to a bag at
-    29 s, 12 s before he left the view; followed, the path went out of view at the change and
-    he was unnamed for those 12 s; searched, it follows him to the end)."""
-    cfg = follow.cfg
+    its carrier at a carry change the phone saw: it sees them within ``min_stretch_s`` of the
+    change on one side and in no frame of the carry on the other, a carry of
+    ``min_stretch_s`` or more. The identity's alignment of a carry is learnt from the chains
+    the phone was on in it, and a carry taken up late in a visit (or put down early in it)
+    has few; the refit cannot mend it from a path that left the carrier there, for that path
+    has no detections in the carry to refit from (PETS footage with phones, `n` seed 43: P02's
+    phone moved from a front pocket to a bag at 29 s, 12 s before he left the view; followed,
+    the path went out of view at the change and he was unnamed for those 12 s; searched, it
+    follows him to the end; seed 52: P06's phone changed carry at 15.3 s, 11 s into her visit,
+    and the path took her only after it)."""
+    min_s = follow.cfg.min_stretch_s
     carry = np.cumsum(_carry_frames(follow.frame_t, follow.phones[mid].carry_changes, got.lag_s))
     if not got.seen or not carry[-1]:
         return False
     t = follow.frame_t / 1e9
     seen = np.zeros(len(t), bool)
     seen[sorted(got.seen)] = True
-    for c in range(1, int(carry[-1]) + 1):
+    at = np.flatnonzero(seen)
+    for c in range(int(carry[-1]) + 1):
         ks = np.flatnonzero(carry == c)
-        before = np.flatnonzero(seen[: ks[0]])
-        if (
-            t[ks[-1]] - t[ks[0]] >= cfg.min_stretch_s
-            and not seen[ks].any()
-            and len(before)
-            and t[ks[0]] - t[before[-1]] <= cfg.min_stretch_s
+        if not len(ks) or t[ks[-1]] - t[ks[0]] < min_s or seen[ks].any():
+            continue
+        before, after = at[at < ks[0]], at[at > ks[-1]]
+        if (c > 0 and len(before) and t[ks[0]] - t[before[-1]] <= min_s) or (
+            c < carry[-1] and len(after) and t[after[0]] - t[ks[-1]] <= min_s
         ):
             return True
     return False
+
+
+def _carries_searched(
+    follow: _Follower, mid: str, got: PhoneTrack, radio: RadioEvidence | None
+) -> PhoneTrack:
+    """A trusted phone's path ``got`` that lost its carrier at a carry change
+    (:func:`_lost_at_change`) followed again with the yaw of each carry it sees nobody in
+    searched (one yaw per carry, at its clock offset and step: :meth:`_Follower.carry_yaws`),
+    and kept where cheaper (:meth:`_Follower.cost`). The identity's alignment holds where
+    the path saw the carrier; only the carry it lost is in doubt, and a whole search can land
+    elsewhere (PETS footage with phones, `n` seed 52: searched, P06's phone went on strangers
+    at a cost of 1005 against the followed path's 723)."""
+    scale = float(np.nanmedian(np.abs(got.a))) if np.isfinite(got.a).any() else 1.0
+    yaw = follow.carry_yaws(mid, got.lag_s, scale, radio)
+    if yaw is None:
+        return got
+    carry = np.cumsum(_carry_frames(follow.frame_t, follow.phones[mid].carry_changes, got.lag_s))
+    seen = np.zeros(len(carry), bool)
+    seen[sorted(got.seen)] = True
+    a = got.a.copy()
+    for c in range(int(carry[-1]) + 1):
+        ks = carry == c
+        if not seen[ks].any():
+            a[ks] = yaw[ks]
+    again = follow(mid, got.lag_s, a, False, radio)
+    return _cheaper(follow, mid, radio, got, again) or got
 
 
 def _lag_checked(
@@ -2581,6 +2709,36 @@ class _Follower:
         n = len(self.frame_t)
         self.alternatives[mid] = [(lg, _held(a, self.every, n)) for lg, a in alternatives]
         return None if found is None else (found[0], _held(found[1], self.every, n))
+
+    def carry_yaws(
+        self, mid: str, lag: float, scale: float, radio: RadioEvidence | None
+    ) -> np.ndarray | None:
+        """Phone ``mid``'s yaw per carry (between the carry changes it saw) at clock offset
+        ``lag`` and step ``scale``: the yaw whose paths cost least over each carry
+        (:func:`_yaw_search` with ``steady``, on the search's grid and frames), per frame
+        (complex, with the scale); None without a walk."""
+        if self.space is None:
+            self.space = _search_field(self.points, self.cfg, self.every)
+        grid = self.space[0]
+        coarse_em, coarse_visit = _with_radio(radio, mid, *self.space, every=self.every)
+        frame_t = self.frame_t[:: self.every]
+        dt = float(np.median(np.diff(frame_t))) / 1e9 if len(frame_t) > 1 else 1.0
+        steps = _step_costs(grid.cell, dt, self.cfg, self.cfg.search_walk_sigma_mps)
+        changes = self.phones[mid].carry_changes
+        yaw = _yaw_search(
+            frame_t,
+            grid,
+            coarse_em,
+            steps,
+            self.walks[mid],
+            lag,
+            scale,
+            self.cfg,
+            changes,
+            coarse_visit,
+            steady=True,
+        )
+        return None if yaw is None else _held(yaw, self.every, len(self.frame_t))
 
     def cost(
         self,
