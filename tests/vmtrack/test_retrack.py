@@ -28,6 +28,7 @@ from trackctl.vmtrack.retrack import (
     RetrackConfig,
     Retracked,
     _bridged,
+    _carries_searched,
     _come_in,
     _displacements,
     _exclusive,
@@ -53,6 +54,7 @@ from trackctl.vmtrack.retrack import (
     _step_costs,
     _through_ends,
     _through_gaps,
+    _through_visit,
     _turned_gaps,
     _untwinned,
     _viterbi_path,
@@ -1888,3 +1890,62 @@ def test_a_trusted_path_that_loses_its_carrier_at_a_carry_change_is_searched(see
     xy = {k: (0.0, 0.0) for k in seen}
     got = PhoneTrack(xy, set(xy), np.zeros((100, 2)), 0.0, np.ones(100, complex))
     assert _lost_at_change(follow, "m", got) is lost
+
+
+@pytest.mark.parametrize("yaw_deg, carried", [(20.0, True), (80.0, False)])
+def test_a_visits_first_seconds_are_carried_on_their_detections_where_the_walk_goes_their_way(
+    yaw_deg, carried
+):
+    # seed 1's first walker; the path sees them from frame 60 (20 s) on, and before it the
+    # phone's walk is `yaw_deg` off theirs (the indoor field, a heading drift: `n` seed 54)
+    frame_t, points, people = _scene(1, n_people=6, seconds=60.0)
+    carrier = people[0]
+    yaw = np.where(np.arange(len(frame_t)) < 60, yaw_deg, 0.0)
+    cfg = dataclasses.replace(CFG, min_evidence=None)
+    grid = SiteGrid(points, cfg.cell_m).with_visits(points, cfg)
+    phone = _phone(carrier, frame_t, yaw)
+    follow = _Follower(frame_t, points, {"m": phone}, grid, AlignConfig(), cfg, True)
+    whole = follow("m", 0.0, np.ones(len(frame_t), complex), False, None)
+    assert whole is not None
+    xy = {k: p for k, p in whole.xy.items() if k >= 60}
+    found = dataclasses.replace(whole, xy=xy, seen={k for k in whole.seen if k >= 60})
+    out = _through_visit(follow, "m", found, {})
+    added = sorted(set(out.xy) - set(found.xy))
+    assert {k: out.xy[k] for k in found.xy} == found.xy
+    if carried:
+        # back to where another walker comes within 1 m of the carrier (frames 3-4)
+        assert sum(k < 60 for k in added) >= 40
+        assert all(math.dist(out.xy[k], carrier[k]) < 1.2 for k in added)
+        assert set(added) <= out.seen
+    else:
+        # a walk 80 deg off the detections' way: they are not known to be the carrier (the
+        # velocities compared reach ALIKE_HALF_S + ALIKE_SLACK_S, 2.5 s, past a frame: the
+        # frames that close to the edge see the walk after it)
+        assert not any(k < 60 - 2.5 * 3 for k in added)
+
+
+def test_a_trusted_path_lost_at_a_carry_change_is_followed_again_with_that_carrys_yaw_searched():
+    # seed 1's first walker; their phone changes carry at frame 90 (30 s), its yaw from 0 to
+    # 100 deg, and the path followed from the first carry's yaw sees them up to the change
+    frame_t, points, people = _scene(1, n_people=6, seconds=60.0)
+    carrier, n = people[0], len(frame_t)
+    cfg = dataclasses.replace(CFG, min_evidence=None)
+    grid = SiteGrid(points, cfg.cell_m).with_visits(points, cfg)
+    phone = _phone(carrier, frame_t, np.where(np.arange(n) < 90, 0.0, 100.0))
+    phone.carry_changes = np.array([frame_t[90]], np.int64)
+    follow = _Follower(frame_t, points, {"m": phone}, grid, AlignConfig(), cfg, False)
+    whole = follow("m", 0.0, np.ones(n, complex), False, None)
+    assert whole is not None
+    got = dataclasses.replace(
+        whole,
+        xy={k: p for k, p in whole.xy.items() if k < 90},
+        seen={k for k in whole.seen if k < 90},
+    )
+    assert _lost_at_change(follow, "m", got)
+
+    def on(track: PhoneTrack) -> int:
+        return sum(k in track.xy and math.dist(track.xy[k], carrier[k]) < 1.0 for k in range(n))
+
+    again = _carries_searched(follow, "m", got, None)
+    assert sum(k >= 90 for k in again.seen) >= 60
+    assert on(again) >= on(got) + 60
