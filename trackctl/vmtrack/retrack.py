@@ -1706,8 +1706,9 @@ def retrack(
     found again under it (:func:`_calibrated_pass`). ``trusted``: phones whose ``start`` is
     their carrier's (:attr:`RetrackConfig.trust_clear_share`), with the frames their identity
     is clear in: followed from it, refitted, not searched, unless the path followed belies it
-    or loses its carrier at a carry change (:func:`_belied`, :func:`_lost_at_change`: then
-    searched too, :func:`_searched_instead`)."""
+    (:func:`_belied`: then searched too, :func:`_searched_instead`) or loses its carrier at a
+    carry change (:func:`_lost_at_change`: then that carry's yaw is searched,
+    :func:`_carries_searched`)."""
     out = Retracked()
     n = len(frame_t)
     if n < 2:
@@ -1754,8 +1755,9 @@ def _first_paths(
 ) -> None:
     """Each phone's first-pass path (:func:`_first_path`) into ``out``: searched, or followed
     from its identity's alignment when ``trust`` holds it. A trusted phone whose path belies
-    its identity (:func:`_belied`) or loses its carrier at a carry change the phone saw
-    (:func:`_lost_at_change`) is searched too (:func:`_searched_instead`)."""
+    its identity (:func:`_belied`) is searched too (:func:`_searched_instead`); one whose path
+    loses its carrier at a carry change the phone saw (:func:`_lost_at_change`) is followed
+    again with that carry's yaw searched (:func:`_carries_searched`)."""
     n = len(follow.frame_t)
     for k, (mid, track) in enumerate(follow.walks.items()):
         if progress is not None:
@@ -1788,8 +1790,7 @@ def _searched_instead(
     trust: dict[str, int],
     radio: RadioEvidence | None,
 ) -> PhoneTrack:
-    """A trusted phone whose path ``got`` belies its identity (:func:`_belied`) or loses its
-    carrier at a carry change (:func:`_lost_at_change`), searched: the
+    """A trusted phone whose path ``got`` belies its identity (:func:`_belied`), searched: the
     searched path where it costs less and does not belie the identity too (then the phone is
     searched, and leaves ``trust``), else ``got`` and the search forgotten. A search that
     finds the carrier in fewer frames than the identity claimed has found somebody else as
@@ -2028,8 +2029,9 @@ def _through_visit(
     a visit's first or last seconds need another yaw (the indoor field turns a compass by
     10-20 deg from place to place, a heading drifts), the path leaves the carrier there for
     out of view and nothing is left to refit the yaw from (PETS footage with phones, `n`
-    seed 54: P06 walked in at 4.5 s, the path took her only at 14.9 s, her phone's walk
-    10-20 deg off hers before). The detections that continue hers are hers, as the visual
+    seed 17: P06's hand phone turned by some 30 deg in her hand at 16.9 s, which the phone
+    did not see; before it her aligned walk ran 25-35 deg off hers, and the path took her
+    only after it, 12 s into her visit). The detections that continue hers are hers, as the visual
     tracker would carry them, while they go where the phone says she goes: turned by a
     plausible heading error and step, as a gap out of view is walked (:func:`_gap_turn`)."""
     if not found.seen:
