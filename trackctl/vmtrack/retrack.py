@@ -2251,12 +2251,10 @@ def _lost_at_change(follow: _Follower, mid: str, got: PhoneTrack) -> bool:
     follows him to the end; seed 52: P06's phone changed carry at 15.3 s, 11 s into her visit,
     and the path took her only after it)."""
     min_s = follow.cfg.min_stretch_s
-    carry = np.cumsum(_carry_frames(follow.frame_t, follow.phones[mid].carry_changes, got.lag_s))
+    carry, seen = _carries(follow, mid, got)
     if not got.seen or not carry[-1]:
         return False
     t = follow.frame_t / 1e9
-    seen = np.zeros(len(t), bool)
-    seen[sorted(got.seen)] = True
     at = np.flatnonzero(seen)
     for c in range(int(carry[-1]) + 1):
         ks = np.flatnonzero(carry == c)
@@ -2268,6 +2266,15 @@ def _lost_at_change(follow: _Follower, mid: str, got: PhoneTrack) -> bool:
         ):
             return True
     return False
+
+
+def _carries(follow: _Follower, mid: str, got: PhoneTrack) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame, the carry of phone ``mid`` (0, then 1 after the first change it saw, ...,
+    at ``got``'s clock offset) and whether ``got`` sees its carrier there."""
+    carry = np.cumsum(_carry_frames(follow.frame_t, follow.phones[mid].carry_changes, got.lag_s))
+    seen = np.zeros(len(carry), bool)
+    seen[sorted(got.seen)] = True
+    return carry, seen
 
 
 def _carries_searched(
@@ -2284,9 +2291,7 @@ def _carries_searched(
     yaw = follow.carry_yaws(mid, got.lag_s, scale, radio)
     if yaw is None:
         return got
-    carry = np.cumsum(_carry_frames(follow.frame_t, follow.phones[mid].carry_changes, got.lag_s))
-    seen = np.zeros(len(carry), bool)
-    seen[sorted(got.seen)] = True
+    carry, seen = _carries(follow, mid, got)
     a = got.a.copy()
     for c in range(int(carry[-1]) + 1):
         ks = carry == c
