@@ -134,6 +134,26 @@ def test_a_phone_put_back_in_its_pocket_the_other_way_round_changes_carry() -> N
         assert abs(changes[0] - 30.0) < 0.5
 
 
+def test_a_phone_turned_a_quarter_in_its_pocket_changes_carry() -> None:
+    # moved from a back pocket to a front one in the same attitude, a quarter turn and a bit
+    # (100 deg from one sample to the next): still faster than any walker's turn
+    for hz in (5.0, 16.0, 50.0):
+        phone = _walk([(30.0, POCKET), (30.0, _turned(100.0))], hz=hz)
+        changes = phone.carry_changes / S
+        assert len(changes) == 1
+        assert abs(changes[0] - 30.0) < 0.5
+
+
+def test_a_walker_turning_a_sharp_corner_does_not_change_carry() -> None:
+    # a 90 deg corner in half a second (180 deg/s, a walker's sharpest), the phone kept in its
+    # pocket, with no help from the body's swing (no ``level`` force): the turn is too slow
+    for hz in (5.0, 16.0, 50.0):
+        n = max(1, round(0.5 * hz))
+        corner = [(1.0 / hz, _turned(90.0 * (i + 1) / n)) for i in range(n)]
+        phone = _walk([(30.0, POCKET), *corner, (30.0, _turned(90.0))], hz=hz)
+        assert len(phone.carry_changes) == 0
+
+
 def test_a_walker_who_turns_back_at_once_does_not_change_carry() -> None:
     # a path reversed at once (as simulated paths reverse; no walker does), the phone turning
     # with it: the body's velocity swings from +1.26 to -1.26 m/s east, which the accelerometer
