@@ -1797,7 +1797,13 @@ def _searched_instead(
     often as not: the identity is then wrong about the alignment and the frames both (PETS
     footage with phones: P08, 10 s in view, clear in 85-283 frames of the identity on 9 of 20
     logs, their paths on him nowhere; searched and kept where cheaper, on 2 of the 4 such logs
-    run so it was published on another carrier (6 s) or on strangers, and on him nowhere)."""
+    run so it was published on another carrier (6 s) or on strangers, and on him nowhere).
+
+    A search kept is combined with ``got`` carry by carry (:meth:`_Follower._combined`): the
+    identity's alignment may hold for one carry and the search's for another, and each path
+    then sees the carrier in its own carry only (`n` seed 25: P05's hand phone moved to a bag
+    at 56 s; followed from her identity, on her only after it, 106 frames; searched, only
+    before it, 244 frames, unnamed for her last 42 s; combined, on her in both)."""
     searched = follow(mid, *begin, True, radio)
     if (
         searched is None
@@ -1808,7 +1814,7 @@ def _searched_instead(
         return got
     out.searched.append(mid)
     del trust[mid]
-    return searched
+    return follow._combined(mid, searched, [got], radio)
 
 
 def _held_by_others(out: Retracked, mid: str) -> dict[int, list[tuple[float, float]]]:
