@@ -48,6 +48,7 @@ from trackctl.vmtrack.retrack import (
     _Returns,
     _search,
     _search_every,
+    _searched_instead,
     _settle_disputes,
     _shared,
     _smoothed_offsets,
@@ -1514,6 +1515,44 @@ def test_each_carry_is_aligned_as_the_candidate_that_sees_the_carrier_most_in_it
         assert settled.ambiguous_s == 0.0
     else:
         assert settled.xy == found.xy and settled.seen == found.seen
+
+
+class _Instead(_Costed):
+    """A :class:`_Costed` for :func:`_searched_instead`: the search's path is ``searched``, and
+    the path followed from any other alignment is ``joined``."""
+
+    def __init__(self, table, carry_changes, searched: PhoneTrack, joined: PhoneTrack) -> None:
+        super().__init__(table, carry_changes)
+        self.searched, self.joined = searched, joined
+
+    def __call__(self, mid, lag, a, search, radio):
+        return self.searched if search else self.joined
+
+
+@pytest.mark.parametrize("joined_loose, outcome", [(790.0, "joined"), (810.0, "searched")])
+def test_a_search_that_replaces_a_trusted_path_is_combined_with_it_carry_by_carry(
+    joined_loose, outcome
+):
+    """The phone's carry changes at frame 50. Followed from its identity, its path sees the
+    carrier after the change only (40 of the 100 frames the identity was clear in: it belies
+    the identity); searched, before it only, and cheaper: the search is kept, and each carry
+    takes the alignment of the path that sees the carrier in it (PETS footage with phones, `n`
+    seed 25: P05's phone moved from her hand to a bag at 56 s; the search alone left her
+    unnamed for her last 42 s). The combination is kept where it costs no more than the
+    search (:meth:`_Follower._combined`)."""
+    followed = _yawed(_path(range(60, 100), 0.0), 0.0, 9.0)
+    searched = _yawed(_path(range(50), 0.0), 0.5, -123.0)
+    joined = _yawed(_path(BOTH, 0.0), 0.5, 0.0)
+    table = {
+        0.0: (followed, 0.0, 805.0),
+        0.5: (searched, 0.0, 800.0),
+        1.0: (joined, 0.0, joined_loose),
+    }
+    follow = _Instead(table, [50], searched, joined)
+    out, trust = Retracked(), {"m": 100}
+    kept = _searched_instead(follow, out, "m", followed, (0.0, np.ones(100, complex)), trust, None)
+    assert kept is (joined if outcome == "joined" else searched)
+    assert out.searched == ["m"] and "m" not in trust
 
 
 def test_the_combined_alignment_takes_a_carry_only_where_a_candidate_sees_more_there():
