@@ -1803,7 +1803,7 @@ def _searched_instead(
     identity's alignment may hold for one carry and the search's for another, and each path
     then sees the carrier in its own carry only (`n` seed 25: P05's hand phone moved to a bag
     at 56 s; followed from her identity, on her only after it, 106 frames; searched, only
-    before it, 244 frames, unnamed for her last 42 s; combined, on her in both)."""
+    before it, 243 frames, unnamed for her last 42 s; combined, 372 frames)."""
     searched = follow(mid, *begin, True, radio)
     if (
         searched is None
