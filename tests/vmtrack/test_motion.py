@@ -124,21 +124,18 @@ def _turned(deg: float) -> Rotation:
     return Rotation.from_euler("z", deg, degrees=True) * POCKET
 
 
-def test_a_phone_put_back_in_its_pocket_the_other_way_round_changes_carry() -> None:
+@pytest.mark.parametrize(
+    "deg",
+    [
+        160.0,  # put back in its pocket the other way round
+        100.0,  # moved from a back pocket to a front one: a quarter turn and a bit
+    ],
+)
+def test_a_phone_turned_in_its_pocket_changes_carry(deg: float) -> None:
     # the same attitude before and after ("up" unchanged): only the heading tells, turning by
-    # 160 deg from one sample to the next, which no walker's body does
-    for hz in (5.0, 50.0):
-        phone = _walk([(30.0, POCKET), (30.0, _turned(160.0))], hz=hz)
-        changes = phone.carry_changes / S
-        assert len(changes) == 1
-        assert abs(changes[0] - 30.0) < 0.5
-
-
-def test_a_phone_turned_a_quarter_in_its_pocket_changes_carry() -> None:
-    # moved from a back pocket to a front one in the same attitude, a quarter turn and a bit
-    # (100 deg from one sample to the next): still faster than any walker's turn
+    # ``deg`` from one sample to the next, faster than any walker's body turns
     for hz in (5.0, 16.0, 50.0):
-        phone = _walk([(30.0, POCKET), (30.0, _turned(100.0))], hz=hz)
+        phone = _walk([(30.0, POCKET), (30.0, _turned(deg))], hz=hz)
         changes = phone.carry_changes / S
         assert len(changes) == 1
         assert abs(changes[0] - 30.0) < 0.5
