@@ -2703,9 +2703,7 @@ class _Follower:
         """Phone ``mid``'s alignment searched (:func:`_search`) on every k-th frame
         (:attr:`RetrackConfig.search_max_hz`), held over the frames between; its other
         alignments kept in :attr:`alternatives` the same way."""
-        if self.space is None:
-            self.space = _search_field(self.points, self.cfg, self.every)
-        coarse_em, coarse_visit = _with_radio(radio, mid, *self.space, every=self.every)
+        grid, coarse_em, coarse_visit = self._coarse(mid, radio)
         alternatives: list[tuple[float, np.ndarray]] = []
         found = _search(
             self.frame_t[:: self.every],
@@ -2715,13 +2713,23 @@ class _Follower:
             self.acfg,
             self.cfg,
             self.phones[mid].carry_changes,
-            (self.space[0], coarse_em),
+            (grid, coarse_em),
             coarse_visit,
             alternatives,
         )
         n = len(self.frame_t)
         self.alternatives[mid] = [(lg, _held(a, self.every, n)) for lg, a in alternatives]
         return None if found is None else (found[0], _held(found[1], self.every, n))
+
+    def _coarse(
+        self, mid: str, radio: RadioEvidence | None
+    ) -> tuple[SiteGrid, Sequence[np.ndarray | float], Visit | None]:
+        """The search's coarse grid (built once), with phone ``mid``'s emissions and visit
+        on it (its RSSI weighed in: :func:`_with_radio`), every ``every``-th frame."""
+        if self.space is None:
+            self.space = _search_field(self.points, self.cfg, self.every)
+        coarse_em, coarse_visit = _with_radio(radio, mid, *self.space, every=self.every)
+        return self.space[0], coarse_em, coarse_visit
 
     def carry_yaws(
         self, mid: str, lag: float, scale: float, radio: RadioEvidence | None
@@ -2730,10 +2738,7 @@ class _Follower:
         ``lag`` and step ``scale``: the yaw whose paths cost least over each carry
         (:func:`_yaw_search` with ``steady``, on the search's grid and frames), per frame
         (complex, with the scale); None without a walk."""
-        if self.space is None:
-            self.space = _search_field(self.points, self.cfg, self.every)
-        grid = self.space[0]
-        coarse_em, coarse_visit = _with_radio(radio, mid, *self.space, every=self.every)
+        grid, coarse_em, coarse_visit = self._coarse(mid, radio)
         frame_t = self.frame_t[:: self.every]
         dt = float(np.median(np.diff(frame_t))) / 1e9 if len(frame_t) > 1 else 1.0
         steps = _step_costs(grid.cell, dt, self.cfg, self.cfg.search_walk_sigma_mps)
